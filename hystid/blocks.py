@@ -1,0 +1,212 @@
+"""The sandwich's blocks as python-control objects, and the way back.
+
+* :func:`linear_block` -- L1 or L2 of eqs. (1)-(2) as a discrete :class:`control.TransferFunction`.
+* :func:`linear_coefficients` -- the inverse: (a, b, q) read back from a transfer function.
+* :func:`duhem_block` -- the discrete Duhem operator of eq. (7) as a :class:`control.NonlinearIOSystem`
+  with states ``w1(k-1), w2(k-1)`` and pure update/output functions.
+* :func:`state_from_past` -- the state of a state-space realisation that reproduces a given past.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import control as ct
+import numpy as np
+
+__all__ = [
+    "DUHEM_PARAMS",
+    "duhem_block",
+    "duhem_output",
+    "linear_block",
+    "linear_coefficients",
+    "state_from_past",
+]
+
+DUHEM_PARAMS = ("alpha", "f0", "f1", "g0")
+
+
+def linear_block(
+    a: Sequence[float],
+    b: Sequence[float],
+    q: int,
+    dt: float,
+    *,
+    inputs: str,
+    outputs: str,
+    name: str,
+) -> ct.TransferFunction:
+    """Discrete transfer function of ``x(k) = sum_j b_j v(k-q-j) + v(k-q) - sum_i a_i x(k-i)``.
+
+    Parameters
+    ----------
+    a : sequence of float
+        Denominator coefficients ``a_1 .. a_na`` (``a_0 = 1``).
+    b : sequence of float
+        Numerator coefficients ``b_1 .. b_nb`` (``b_0 = 1`` for uniqueness, Assumption 1).
+    q : int
+        Input delay in samples.
+    dt : float
+        Sampling period in seconds.
+    inputs, outputs, name : str
+        Signal and system names.
+
+    Returns
+    -------
+    control.TransferFunction
+        ``z^-q (1 + b_1 z^-1 + ...) / (1 + a_1 z^-1 + ...)`` written in powers of ``z``.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.concatenate([[1.0], np.asarray(b, dtype=float)])
+    m = max(len(a), q + len(b) - 1)
+    num = np.zeros(m + 1)
+    num[q : q + len(b)] = b
+    den = np.zeros(m + 1)
+    den[0] = 1.0
+    den[1 : 1 + len(a)] = a
+    return ct.tf(num, den, dt, inputs=inputs, outputs=outputs, name=name)
+
+
+def linear_coefficients(
+    tf: ct.TransferFunction, na: int | None = None, nb: int | None = None
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Read ``(a, b, q)`` of :func:`linear_block` back from a discrete SISO transfer function.
+
+    Parameters
+    ----------
+    tf : control.TransferFunction
+        Proper SISO transfer function in powers of ``z``.
+    na, nb : int, optional
+        Orders to return (padding with zeros); inferred from the coefficients when omitted.
+
+    Returns
+    -------
+    a, b : ndarray
+        Denominator ``a_1..a_na`` and numerator ``b_1..b_nb`` with ``a_0 = b_0 = 1``.
+    q : int
+        Input delay.
+
+    Raises
+    ------
+    ValueError
+        If ``tf`` is not SISO, not proper, or its first numerator coefficient is not 1.
+    """
+    if not isinstance(tf, ct.TransferFunction) or tf.ninputs != 1 or tf.noutputs != 1:
+        raise ValueError(f"expected a SISO control.TransferFunction, got {tf!r}")
+    num = np.atleast_1d(np.squeeze(np.asarray(tf.num[0][0], dtype=float)))
+    den = np.atleast_1d(np.squeeze(np.asarray(tf.den[0][0], dtype=float)))
+    if len(num) > len(den):
+        raise ValueError(f"transfer function {tf.name!r} is not proper")
+    num = np.concatenate([np.zeros(len(den) - len(num)), num]) / den[0]
+    den = den / den[0]
+    nonzero = np.flatnonzero(num)
+    if nonzero.size == 0:
+        raise ValueError(f"transfer function {tf.name!r} has a zero numerator")
+    q = int(nonzero[0])
+    if not np.isclose(num[q], 1.0, rtol=1e-12, atol=0.0):
+        raise ValueError(
+            f"transfer function {tf.name!r}: leading numerator coefficient is {num[q]:g}; "
+            "the sandwich model fixes b_0 = 1 (scale it into the next block)"
+        )
+    b = num[q + 1 : nonzero[-1] + 1]
+    a = np.trim_zeros(den[1:], "b")
+    if na is not None:
+        a = np.pad(a, (0, max(0, na - len(a))))[:na]
+    if nb is not None:
+        b = np.pad(b, (0, max(0, nb - len(b))))[:nb]
+    return a, b, q
+
+
+def duhem_output(x: np.ndarray, w1: float, params: dict) -> float:
+    """w2(k) of eq. (7) from the state ``x = [w1(k-1), w2(k-1)]`` and the input ``w1(k)``."""
+    w1p, w2p = x[0], x[1]
+    dw1 = w1 - w1p
+    f = params["f0"] * np.sign(w1p) + params["f1"] * w1p
+    return w2p + params["alpha"] * (f - w2p) * abs(dw1) + params["g0"] * dw1
+
+
+def _duhem_update(t, x, u, params):
+    w1 = u[0]
+    return np.array([w1, duhem_output(x, w1, params)])
+
+
+def _duhem_outfcn(t, x, u, params):
+    return np.array([duhem_output(x, u[0], params)])
+
+
+def duhem_block(
+    alpha: float,
+    f1: float,
+    g0: float,
+    f0: float = 0.0,
+    *,
+    dt: float,
+    inputs: str = "w1",
+    outputs: str = "w2",
+    name: str = "H",
+) -> ct.NonlinearIOSystem:
+    """The discrete Duhem hysteresis operator (eq. 7) as a python-control system.
+
+    Parameters
+    ----------
+    alpha, f1, g0, f0 : float
+        Duhem coefficients: ``f(w1) = f0 sgn(w1) + f1 w1`` (eq. 5), ``g(w1) = g0`` (eq. 6).
+    dt : float
+        Sampling period in seconds.
+    inputs, outputs, name : str
+        Signal and system names.
+
+    Returns
+    -------
+    control.NonlinearIOSystem
+        States ``w1_prev, w2_prev``; direct feed-through from ``w1(k)`` to ``w2(k)``. The
+        parameters ``alpha, f0, f1, g0`` are system ``params`` and can be overridden in
+        :func:`control.input_output_response`.
+    """
+    params = {"alpha": float(alpha), "f0": float(f0), "f1": float(f1), "g0": float(g0)}
+    return ct.nlsys(
+        _duhem_update,
+        _duhem_outfcn,
+        inputs=[inputs],
+        outputs=[outputs],
+        states=[f"{inputs}_prev", f"{outputs}_prev"],
+        params=params,
+        dt=dt,
+        name=name,
+    )
+
+
+def state_from_past(ss: ct.StateSpace, u_past: np.ndarray, y_past: np.ndarray) -> np.ndarray:
+    """State ``x(k)`` of a discrete realisation whose last ``n`` inputs and outputs were given.
+
+    Solves ``y(k-n+i) = C A^i x(k-n) + sum_j C A^(i-1-j) B u(k-n+j) + D u(k-n+i)`` for
+    ``x(k-n)`` (the realisation must be observable) and propagates it ``n`` steps.
+
+    Parameters
+    ----------
+    ss : control.StateSpace
+        SISO discrete realisation of order ``n``.
+    u_past, y_past : ndarray
+        Past inputs and outputs, most recent last, at least ``n`` long (zeros are prepended if
+        shorter).
+    """
+    A, B, C, D = (np.asarray(m, dtype=float) for m in (ss.A, ss.B, ss.C, ss.D))
+    n = A.shape[0]
+    if n == 0:
+        return np.zeros(0)
+    u = np.pad(np.asarray(u_past, float), (max(0, n - len(u_past)), 0))[-n:]
+    y = np.pad(np.asarray(y_past, float), (max(0, n - len(y_past)), 0))[-n:]
+    obs = np.zeros((n, n))
+    forced = np.zeros(n)
+    Ai = np.eye(n)
+    for i in range(n):
+        obs[i] = (C @ Ai)[0]
+        acc = D[0, 0] * u[i]
+        for j in range(i):
+            acc += (C @ np.linalg.matrix_power(A, i - 1 - j) @ B)[0, 0] * u[j]
+        forced[i] = acc
+        Ai = Ai @ A
+    x = np.linalg.lstsq(obs, y - forced, rcond=None)[0]
+    for j in range(n):
+        x = A @ x + B[:, 0] * u[j]
+    return x
