@@ -1,0 +1,97 @@
+"""The admissible parameter set: stable, minimum-phase L1 and L2 (Assumption 1) and alpha > 0.
+
+A monic polynomial ``1 + c_1 z^-1 + ... + c_n z^-n`` has all its roots strictly inside the unit
+circle iff its reflection (Schur-Cohn) coefficients ``k_1..k_n`` all lie in (-1, 1). The
+identifiers search in reflection coefficients, where the admissible set is a box.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Structure
+
+__all__ = [
+    "K_MAX",
+    "ALPHA_MIN",
+    "is_admissible",
+    "poly_to_reflection",
+    "project_admissible",
+    "reflection_to_poly",
+    "polynomial_groups",
+]
+
+K_MAX = 1.0 - 1e-6
+ALPHA_MIN = 1e-9
+
+
+def reflection_to_poly(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Step-up recursion: coefficients ``c_1..c_n`` and their Jacobian ``dc/dk`` (n x n)."""
+    k = np.asarray(k, dtype=float)
+    n = len(k)
+    c = np.zeros(0)
+    dc = np.zeros((0, n))
+    for m in range(n):
+        # c^(m+1)_i = c^(m)_i + k_m c^(m)_(m+1-i), i = 1..m;  c^(m+1)_(m+1) = k_m
+        rev, drev = c[::-1], dc[::-1]
+        new = np.append(c + k[m] * rev, k[m])
+        dnew = np.vstack([dc + k[m] * drev, np.zeros((1, n))])
+        dnew[:m, m] += rev
+        dnew[m, m] = 1.0
+        c, dc = new, dnew
+    return c, dc
+
+
+def poly_to_reflection(c: np.ndarray) -> np.ndarray:
+    """Step-down recursion: reflection coefficients of ``1 + c_1 z^-1 + ...``.
+
+    Returns values with ``|k| >= 1`` when the polynomial has roots on or outside the unit circle.
+    """
+    c = np.asarray(c, dtype=float).copy()
+    n = len(c)
+    k = np.zeros(n)
+    for m in range(n, 0, -1):
+        km = c[m - 1]
+        k[m - 1] = km
+        if m > 1:
+            denom = 1.0 - km * km
+            if abs(denom) < 1e-300:
+                k[: m - 1] = np.sign(km)
+                break
+            c = (c[: m - 1] - km * c[: m - 1][::-1]) / denom
+    return k
+
+
+def polynomial_groups(structure: Structure) -> list[np.ndarray]:
+    """Indices into theta of the monic polynomials a1, b1, a2, b2 (empty groups dropped)."""
+    names = structure.names
+    groups = []
+    for prefix, n in (("a1", structure.n1a), ("b1", structure.n1b),
+                      ("a2", structure.n2a), ("b2", structure.n2b)):
+        if n:
+            groups.append(np.array([names.index(f"{prefix}{i}") for i in range(1, n + 1)]))
+    return groups
+
+
+def is_admissible(theta: np.ndarray, structure: Structure, margin: float = 0.0) -> bool:
+    """True when alpha > 0 and every polynomial's reflection coefficients are below 1 - margin."""
+    if not np.all(np.isfinite(theta)):
+        return False
+    if theta[structure.names.index("alpha")] <= 0:
+        return False
+    return all(
+        np.all(np.abs(poly_to_reflection(theta[g])) < 1.0 - margin)
+        for g in polynomial_groups(structure)
+    )
+
+
+def project_admissible(theta: np.ndarray, structure: Structure, kmax: float = 0.999) -> np.ndarray:
+    """Nearest-in-reflection-coefficients admissible vector: clip each ``|k|`` to ``kmax``."""
+    theta = np.array(theta, dtype=float)
+    ia = structure.names.index("alpha")
+    theta[ia] = max(theta[ia], ALPHA_MIN)
+    for g in polynomial_groups(structure):
+        k = poly_to_reflection(theta[g])
+        if np.any(~np.isfinite(k)) or np.any(np.abs(k) > kmax):
+            theta[g] = reflection_to_poly(np.clip(np.nan_to_num(k), -kmax, kmax))[0]
+    return theta
