@@ -1,0 +1,786 @@
+"""The Prandtl-Ishlinskii (PI) sandwich of the paper's comparison (eqs. 29-31).
+
+::
+
+    L1:  w1(k) = -a11 w1(k-1) - a12 w1(k-2) + b11 u(k-1) + b12 u(k-2)                  (29)
+    H:   w2(k) = sum_i mu_i p_i(k),
+         p_i(k) = max{w1(k) - r_i, min[w1(k) + r_i, p_i(k-1)]}                           (30)
+    L2:  y(k)  = -a21 y(k-1) - a22 y(k-2) + b21 w2(k-1) + b22 w2(k-2)                    (31)
+
+Each ``p_i`` is a backlash (play) operator of threshold ``r_i``; the hysteresis block is their
+weighted sum. This module holds
+
+* :func:`pi_thresholds` -- the threshold placement rule, ``r_i = i/N (max - min)/2``;
+* :func:`play_operator` and :func:`pi_operator` -- compiled eq. (30) on a whole signal;
+* :func:`pi_inverse_parameters` -- the exact inverse PI operator (thresholds and weights);
+* :func:`pi_block` / :func:`pi_inverse_block` -- both as discrete ``control.NonlinearIOSystem``
+  with the play-operator states as system states;
+* :class:`PIStructure` and :class:`PISandwich` -- the model, with the same API as
+  :class:`hystid.model.DuhemSandwich`.
+
+Uniqueness. Scaling ``w2`` by ``c`` and ``L2`` by ``1/c`` leaves ``y`` unchanged, and because a
+play operator is positively homogeneous (``P_r[c v] = c P_{r/|c|}[v]``), scaling ``w1`` only
+rescales the thresholds. The model therefore fixes **unit DC gain for L1 and for L2**: the first
+numerator coefficient of each is derived, ``b11 = 1 + a11 + a12 - b12`` and
+``b21 = 1 + a21 + a22 - b22``, and the weights ``mu_i`` are free. Then ``w1`` is in input units
+(the thresholds come from the input's range) and ``H`` is the quasi-static input-output loop
+(weights in output units per input unit).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import control as ct
+import numpy as np
+from numba import njit
+
+from . import blocks
+from .model import InitialCondition, SandwichResponse
+
+__all__ = [
+    "PISandwich",
+    "PIStructure",
+    "pi_block",
+    "pi_inverse_block",
+    "pi_inverse_parameters",
+    "pi_inverse_state",
+    "pi_operator",
+    "pi_thresholds",
+    "play_operator",
+    "pi_simulate_into",
+    "N_OPERATORS",
+]
+
+#: The paper's number of backlash operators (Section 4).
+N_OPERATORS = 40
+
+
+# =========================================================================== thresholds
+def pi_thresholds(
+    u: np.ndarray | Sequence[float] | tuple[float, float], n_operators: int = N_OPERATORS
+) -> np.ndarray:
+    """Thresholds of the play operators from an input range.
+
+    The rule: ``r_i = i / N * (max(u) - min(u)) / 2`` for ``i = 0 .. N-1``. The first operator
+    (``r_0 = 0``) is the identity, the last one still moves on an input swinging over the whole
+    range. With the PI sandwich's unit-DC-gain ``L1`` the input range is the range of ``w1`` in
+    steady state.
+
+    Parameters
+    ----------
+    u : array_like
+        Input samples, or a ``(min, max)`` pair.
+    n_operators : int
+        Number of play operators ``N`` (40 in the paper).
+
+    Returns
+    -------
+    ndarray
+        ``N`` thresholds, strictly increasing from 0.
+    """
+    if int(n_operators) != n_operators or n_operators < 1:
+        raise ValueError(f"n_operators: expected a positive integer, got {n_operators!r}")
+    u = np.asarray(u, dtype=float).ravel()
+    if u.size == 0 or not np.all(np.isfinite(u)):
+        raise ValueError("u: expected finite input samples or a (min, max) pair")
+    span = float(u.max() - u.min())
+    if not span > 0:
+        raise ValueError(f"u: the input range is empty (min = max = {u.min():g})")
+    n = int(n_operators)
+    return np.arange(n) / n * span / 2.0
+
+
+def _check_thresholds(r, name: str = "thresholds") -> np.ndarray:
+    r = np.ascontiguousarray(np.asarray(r, dtype=float).ravel())
+    if r.size == 0 or not np.all(np.isfinite(r)) or np.any(r < 0):
+        raise ValueError(f"{name}: expected finite non-negative thresholds, got {r!r}")
+    return r
+
+
+# =========================================================================== compiled kernels
+@njit(cache=True, inline="always")
+def _play(v, p_prev, r):
+    # eq. (30): p(k) = max{v(k) - r, min[v(k) + r, p(k-1)]}
+    return max(v - r, min(v + r, p_prev))
+
+
+@njit(cache=True)
+def _pi_operator_into(v, r, mu, p, out):
+    for k in range(v.shape[0]):
+        acc = 0.0
+        for i in range(r.shape[0]):
+            p[i] = _play(v[k], p[i], r[i])
+            acc += mu[i] * p[i]
+        out[k] = acc
+
+
+@njit(cache=True)
+def _play_operator_into(v, r, p, out):
+    for k in range(v.shape[0]):
+        for i in range(r.shape[0]):
+            p[i] = _play(v[k], p[i], r[i])
+            out[k, i] = p[i]
+
+
+@njit(cache=True)
+def pi_simulate_into(a1, b1, q1, mu, r, a2, b2, q2, U, W1, W2, Y, p, start):
+    """Eqs. (29)-(31) from index ``start`` to the end of the extended arrays.
+
+    ``U, W1, W2, Y`` hold the past in their first ``start`` entries (most recent last);
+    ``b1[j]`` multiplies ``u(k - q1 - j)`` and ``b2[j]`` multiplies ``w2(k - q2 - j)``;
+    ``p`` holds the play-operator states ``p_i(k-1)`` and is updated in place.
+    """
+    for k in range(start, U.shape[0]):
+        # eq. (29)
+        w1 = 0.0
+        for j in range(b1.shape[0]):
+            w1 += b1[j] * U[k - q1 - j]
+        for i in range(a1.shape[0]):
+            w1 -= a1[i] * W1[k - 1 - i]
+        W1[k] = w1
+        # eq. (30)
+        w2 = 0.0
+        for i in range(r.shape[0]):
+            p[i] = _play(w1, p[i], r[i])
+            w2 += mu[i] * p[i]
+        W2[k] = w2
+        # eq. (31)
+        y = 0.0
+        for j in range(b2.shape[0]):
+            y += b2[j] * W2[k - q2 - j]
+        for i in range(a2.shape[0]):
+            y -= a2[i] * Y[k - 1 - i]
+        Y[k] = y
+
+
+def play_operator(
+    v: np.ndarray | Sequence[float], thresholds: np.ndarray | Sequence[float], p0=None
+) -> np.ndarray:
+    """Outputs of the play operators (eq. 30) on a signal.
+
+    Parameters
+    ----------
+    v : array_like
+        Input samples.
+    thresholds : array_like
+        ``N`` non-negative thresholds.
+    p0 : array_like, optional
+        States ``p_i(-1)``; zero (the virgin state) by default.
+
+    Returns
+    -------
+    ndarray
+        Shape ``(len(v), N)``: ``p_i(k)``.
+    """
+    v = _signal(v, "v")
+    r = _check_thresholds(thresholds)
+    p = _initial_states(p0, len(r))
+    out = np.empty((len(v), len(r)))
+    _play_operator_into(v, r, p, out)
+    return out
+
+
+def pi_operator(
+    v: np.ndarray | Sequence[float],
+    thresholds: np.ndarray | Sequence[float],
+    weights: np.ndarray | Sequence[float],
+    p0=None,
+) -> np.ndarray:
+    """The PI operator ``sum_i mu_i p_i(k)`` (eq. 30) on a signal, compiled.
+
+    Parameters
+    ----------
+    v : array_like
+        Input samples.
+    thresholds, weights : array_like
+        ``r_i`` and ``mu_i``, same length ``N``.
+    p0 : array_like, optional
+        States ``p_i(-1)``; zero by default.
+
+    Returns
+    -------
+    ndarray
+        Output samples, same length as ``v``.
+    """
+    v = _signal(v, "v")
+    r = _check_thresholds(thresholds)
+    mu = _weights(weights, len(r))
+    p = _initial_states(p0, len(r))
+    out = np.empty(len(v))
+    _pi_operator_into(v, r, mu, p, out)
+    return out
+
+
+# =========================================================================== inverse
+def pi_inverse_parameters(
+    thresholds: np.ndarray | Sequence[float], weights: np.ndarray | Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Thresholds and weights of the exact inverse PI operator.
+
+    The forward operator's initial loading curve is piecewise linear with corners at ``r_j``
+    and slopes ``W_j = mu_0 + ... + mu_j``; the inverse is the PI operator whose loading curve
+    is its inverse function::
+
+        r'_j  = sum_{i<=j} mu_i (r_j - r_i)
+        mu'_0 = 1 / mu_0,   mu'_j = -mu_j / (W_j W_{j-1})
+
+    Parameters
+    ----------
+    thresholds : array_like
+        ``0 = r_0 < r_1 < ... < r_{N-1}``.
+    weights : array_like
+        ``mu_i`` with ``mu_0 > 0`` and every partial sum ``W_j > 0`` (the loading curve is
+        increasing, so the operator is invertible).
+
+    Returns
+    -------
+    r_inv, mu_inv : ndarray
+        Thresholds and weights of the inverse operator.
+    """
+    r = _check_thresholds(thresholds)
+    mu = _weights(weights, len(r))
+    if r[0] != 0.0 or np.any(np.diff(r) <= 0):
+        raise ValueError("thresholds: the inverse needs 0 = r_0 < r_1 < ... (strictly increasing)")
+    W = np.cumsum(mu)
+    if not mu[0] > 0:
+        raise ValueError(f"weights: the inverse needs a positive first weight, got {mu[0]:g}")
+    if np.any(W <= 0):
+        j = int(np.flatnonzero(W <= 0)[0])
+        raise ValueError(
+            f"weights: the partial sum mu_0 + ... + mu_{j} = {W[j]:g} is not positive; "
+            "the loading curve must be increasing for the inverse to exist"
+        )
+    r_inv = np.array([np.dot(mu[: j + 1], r[j] - r[: j + 1]) for j in range(len(r))])
+    mu_inv = np.empty_like(mu)
+    mu_inv[0] = 1.0 / mu[0]
+    mu_inv[1:] = -mu[1:] / (W[1:] * W[:-1])
+    return r_inv, mu_inv
+
+
+def pi_inverse_state(weights: np.ndarray | Sequence[float], p: np.ndarray) -> np.ndarray:
+    """States of the inverse operator matching forward states ``p`` (both continue as inverses).
+
+    ``p'_j = (mu_0 + ... + mu_j) p_j + sum_{i>j} mu_i p_i``.
+    """
+    mu = np.asarray(weights, dtype=float).ravel()
+    p = np.asarray(p, dtype=float).ravel()
+    if p.shape != mu.shape:
+        raise ValueError(f"p: expected {len(mu)} operator states, got shape {p.shape}")
+    tail = np.concatenate([np.cumsum((mu * p)[::-1])[::-1][1:], [0.0]])
+    return np.cumsum(mu) * p + tail
+
+
+# =========================================================================== python-control
+@lru_cache(maxsize=64)
+def _keys(prefix: str, n: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    return (tuple(f"{prefix}_mu{i}" for i in range(n)), tuple(f"{prefix}_r{i}" for i in range(n)))
+
+
+def _unpack(params: Mapping, prefix: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    kmu, kr = _keys(prefix, n)
+    return (np.fromiter((params[k] for k in kmu), float, n),
+            np.fromiter((params[k] for k in kr), float, n))
+
+
+def _make_pi_functions(prefix: str):
+    def update(t, x, u, params):
+        _, r = _unpack(params, prefix, len(x))
+        return np.maximum(u[0] - r, np.minimum(u[0] + r, x))
+
+    def output(t, x, u, params):
+        mu, r = _unpack(params, prefix, len(x))
+        return np.array([mu @ np.maximum(u[0] - r, np.minimum(u[0] + r, x))])
+
+    return update, output
+
+
+def pi_block(
+    thresholds: np.ndarray | Sequence[float],
+    weights: np.ndarray | Sequence[float],
+    *,
+    dt: float,
+    inputs: str = "w1",
+    outputs: str = "w2",
+    prefix: str = "pi",
+    name: str = "H",
+) -> ct.NonlinearIOSystem:
+    """The PI hysteresis operator (eq. 30) as a discrete python-control system.
+
+    Parameters
+    ----------
+    thresholds, weights : array_like
+        ``r_i`` and ``mu_i``, same length ``N``.
+    dt : float
+        Sampling period in seconds.
+    inputs, outputs, name : str
+        Signal and system names.
+    prefix : str
+        Prefix of the flat parameter names ``<prefix>_mu0 ..`` and ``<prefix>_r0 ..`` (an
+        interconnected system has one flat parameter dict over all its blocks).
+
+    Returns
+    -------
+    control.NonlinearIOSystem
+        States ``p0 .. p{N-1}`` (the play operators' ``p_i(k-1)``); direct feed-through from
+        ``w1(k)`` to ``w2(k)``; pure update and output functions.
+    """
+    r = _check_thresholds(thresholds)
+    mu = _weights(weights, len(r))
+    kmu, kr = _keys(prefix, len(r))
+    params = {**dict(zip(kmu, map(float, mu), strict=True)),
+              **dict(zip(kr, map(float, r), strict=True))}
+    update, output = _make_pi_functions(prefix)
+    return ct.nlsys(
+        update, output, inputs=[inputs], outputs=[outputs],
+        states=[f"p{i}" for i in range(len(r))], params=params, dt=dt, name=name,
+    )
+
+
+def pi_inverse_block(
+    thresholds: np.ndarray | Sequence[float],
+    weights: np.ndarray | Sequence[float],
+    *,
+    dt: float,
+    inputs: str = "w2",
+    outputs: str = "w1",
+    prefix: str = "piinv",
+    name: str = "H_inv",
+) -> ct.NonlinearIOSystem:
+    """The exact inverse PI operator (for compensation) as a discrete python-control system.
+
+    Takes the *forward* thresholds and weights (see :func:`pi_inverse_parameters` for the
+    conditions) and returns a :func:`pi_block` with the inverse thresholds and weights, states
+    ``p0 .. p{N-1}``. Use :func:`pi_inverse_state` to start it from a non-virgin state.
+    """
+    r_inv, mu_inv = pi_inverse_parameters(thresholds, weights)
+    return pi_block(r_inv, mu_inv, dt=dt, inputs=inputs, outputs=outputs, prefix=prefix, name=name)
+
+
+# =========================================================================== the sandwich
+@dataclass(frozen=True)
+class PIStructure:
+    """Orders and delays of the PI sandwich (eqs. 29-31); the defaults are the paper's.
+
+    Parameters
+    ----------
+    n_operators : int
+        Number of play operators ``N``.
+    n1a, n1b : int
+        Denominator order and number of numerator coefficients of L1
+        (``b11 .. b1{n1b}`` multiply ``u(k-q1) .. u(k-q1-n1b+1)``).
+    n2a, n2b : int
+        The same for L2.
+    q1, q2 : int
+        Input delays of L1 and L2 (1 in eqs. 29 and 31).
+    """
+
+    n_operators: int = N_OPERATORS
+    n1a: int = 2
+    n1b: int = 2
+    n2a: int = 2
+    n2b: int = 2
+    q1: int = 1
+    q2: int = 1
+
+    def __post_init__(self) -> None:
+        for key in ("n1a", "n2a", "q1", "q2"):
+            value = getattr(self, key)
+            if not isinstance(value, int | np.integer) or value < 0:
+                raise ValueError(
+                    f"PIStructure: {key} must be a non-negative integer, got {value!r}"
+                )
+        for key in ("n_operators", "n1b", "n2b"):
+            value = getattr(self, key)
+            if not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"PIStructure: {key} must be a positive integer, got {value!r}")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Free parameter names, in the order of ``theta``: L1, H, L2 (signal flow).
+
+        ``b11`` and ``b21`` are not free: they fix unit DC gains (see the module docstring).
+        """
+        return (
+            tuple(f"a1{i}" for i in range(1, self.n1a + 1))
+            + tuple(f"b1{j}" for j in range(2, self.n1b + 1))
+            + tuple(f"mu{i}" for i in range(self.n_operators))
+            + tuple(f"a2{i}" for i in range(1, self.n2a + 1))
+            + tuple(f"b2{j}" for j in range(2, self.n2b + 1))
+        )
+
+    @property
+    def history(self) -> int:
+        """Number of past samples the difference equations reach back (at least 1)."""
+        return max(1, self.n1a, self.q1 + self.n1b - 1, self.n2a, self.q2 + self.n2b - 1)
+
+    def slices(self) -> dict[str, slice]:
+        """Slices of ``theta`` by group: ``a1, b1, mu, a2, b2`` (free coefficients only)."""
+        sizes = (("a1", self.n1a), ("b1", self.n1b - 1), ("mu", self.n_operators),
+                 ("a2", self.n2a), ("b2", self.n2b - 1))
+        out, start = {}, 0
+        for key, size in sizes:
+            out[key] = slice(start, start + size)
+            start += size
+        return out
+
+
+def unit_gain_numerator(a: np.ndarray, b_rest: np.ndarray) -> np.ndarray:
+    """Full numerator ``[b_1, b_2, ...]`` with ``b_1`` set for unit DC gain: sum b = 1 + sum a."""
+    return np.concatenate([[1.0 + np.sum(a) - np.sum(b_rest)], b_rest])
+
+
+class PISandwich:
+    """Sandwich model L1 -> Prandtl-Ishlinskii H -> L2 (eqs. 29-31).
+
+    Parameters
+    ----------
+    params : mapping or sequence of float
+        Free parameters by name (see :attr:`PIStructure.names`: ``a11, a12, b12, mu0 ..
+        mu{N-1}, a21, a22, b22``), or a vector in that order.
+    thresholds : array_like
+        Thresholds ``r_i`` of the play operators (see :func:`pi_thresholds`); their number sets
+        ``N``.
+    structure : PIStructure, optional
+        Orders and delays; the paper's (eqs. 29, 31) with ``N = len(thresholds)`` by default.
+    fs : float
+        Sampling rate in Hz.
+    name : str
+        Model name, used for the python-control systems.
+
+    Attributes
+    ----------
+    theta : ndarray
+        Free parameter vector.
+    thresholds : ndarray
+        Play-operator thresholds (fixed, not identified).
+    """
+
+    def __init__(
+        self,
+        params: Mapping[str, float] | Sequence[float] | np.ndarray,
+        thresholds: np.ndarray | Sequence[float],
+        structure: PIStructure | None = None,
+        fs: float = 30_000.0,
+        name: str = "PI sandwich",
+    ) -> None:
+        self.thresholds = _check_thresholds(thresholds)
+        self.structure = structure or PIStructure(n_operators=len(self.thresholds))
+        if self.structure.n_operators != len(self.thresholds):
+            raise ValueError(
+                f"thresholds: expected {self.structure.n_operators} values for the structure, "
+                f"got {len(self.thresholds)}"
+            )
+        if not (np.isfinite(fs) and fs > 0):
+            raise ValueError(f"fs must be a positive finite number of Hz, got {fs!r}")
+        self.fs = float(fs)
+        self.name = name
+        names = self.structure.names
+        if isinstance(params, Mapping):
+            missing = [n for n in names if n not in params]
+            extra = [n for n in params if n not in names]
+            if missing or extra:
+                raise ValueError(
+                    f"params: expected the names {list(names)}; missing {missing}, unknown {extra}"
+                )
+            theta = np.array([params[n] for n in names], dtype=float)
+        else:
+            theta = np.asarray(params, dtype=float).ravel()
+            if theta.shape != (len(names),):
+                raise ValueError(
+                    f"params: expected {len(names)} values, got shape {theta.shape}"
+                )
+        if not np.all(np.isfinite(theta)):
+            bad = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
+            raise ValueError(f"params: non-finite values for {bad}")
+        self.theta = theta
+
+    # ----------------------------------------------------------------- parameters
+    @property
+    def params(self) -> dict[str, float]:
+        """Free parameter values by name."""
+        return dict(zip(self.structure.names, map(float, self.theta), strict=True))
+
+    def _part(self, key: str) -> np.ndarray:
+        return np.array(self.theta[self.structure.slices()[key]])
+
+    @property
+    def a1(self) -> np.ndarray:
+        """L1 denominator coefficients ``a11 ..``."""
+        return self._part("a1")
+
+    @property
+    def b1(self) -> np.ndarray:
+        """L1 numerator coefficients ``b11, b12 ..`` (``b11`` derived: unit DC gain)."""
+        return unit_gain_numerator(self.a1, self._part("b1"))
+
+    @property
+    def mu(self) -> np.ndarray:
+        """Weights ``mu_i`` of the play operators."""
+        return self._part("mu")
+
+    @property
+    def a2(self) -> np.ndarray:
+        """L2 denominator coefficients ``a21 ..``."""
+        return self._part("a2")
+
+    @property
+    def b2(self) -> np.ndarray:
+        """L2 numerator coefficients ``b21, b22 ..`` (``b21`` derived: unit DC gain)."""
+        return unit_gain_numerator(self.a2, self._part("b2"))
+
+    @property
+    def coefficients(self) -> dict[str, float]:
+        """Every coefficient of eqs. (29) and (31) by name, the derived ``b11, b21`` included."""
+        out = {}
+        for prefix, vec in (("a1", self.a1), ("b1", self.b1), ("a2", self.a2), ("b2", self.b2)):
+            out.update({f"{prefix}{i + 1}": float(v) for i, v in enumerate(vec)})
+        return out
+
+    def is_stable(self) -> bool:
+        """True when the poles of L1 and L2 lie inside the unit circle."""
+        return bool(max(_radius(self.a1), _radius(self.a2)) < 1.0)
+
+    def is_invertible(self) -> bool:
+        """True when the PI operator has an exact inverse (see :func:`pi_inverse_parameters`)."""
+        W = np.cumsum(self.mu)
+        r = self.thresholds
+        return bool(self.mu[0] > 0 and np.all(W > 0) and r[0] == 0 and np.all(np.diff(r) > 0))
+
+    # ----------------------------------------------------------------- python-control bridge
+    @property
+    def dt(self) -> float:
+        """Sampling period in seconds."""
+        return 1.0 / self.fs
+
+    def _tf(self, a, b, q, inputs, outputs, name) -> ct.TransferFunction:
+        m = max(len(a), q + len(b) - 1)
+        num = np.zeros(m + 1)
+        num[q : q + len(b)] = b
+        den = np.zeros(m + 1)
+        den[0] = 1.0
+        den[1 : 1 + len(a)] = a
+        return ct.tf(num, den, self.dt, inputs=inputs, outputs=outputs, name=name)
+
+    @property
+    def L1(self) -> ct.TransferFunction:
+        """Amplifier + filter (eq. 29): discrete transfer function u -> w1, unit DC gain."""
+        return self._tf(self.a1, self.b1, self.structure.q1, "u", "w1", "L1")
+
+    @property
+    def L2(self) -> ct.TransferFunction:
+        """Flexure hinge + load (eq. 31): discrete transfer function w2 -> y, unit DC gain."""
+        return self._tf(self.a2, self.b2, self.structure.q2, "w2", "y", "L2")
+
+    @property
+    def H(self) -> ct.NonlinearIOSystem:
+        """PI hysteresis (eq. 30): discrete nonlinear system w1 -> w2 (see :func:`pi_block`)."""
+        return pi_block(self.thresholds, self.mu, dt=self.dt, name="H")
+
+    @property
+    def H_inverse(self) -> ct.NonlinearIOSystem:
+        """The exact inverse of :attr:`H` (w2 -> w1), for hysteresis compensation."""
+        return pi_inverse_block(self.thresholds, self.mu, dt=self.dt, name="H_inv")
+
+    def to_control(self) -> ct.InterconnectedSystem:
+        """The whole sandwich as a python-control interconnected system.
+
+        Returns
+        -------
+        control.InterconnectedSystem
+            Input ``u``; outputs ``y, w1, w2``; states those of ``L1`` (``tf2ss`` with
+            ``method='scipy'``), the play operators ``p0 ..`` and ``L2``, in that order.
+            Parameters ``pi_mu0 .. pi_r0 ..`` can be overridden in
+            :func:`control.input_output_response`. Use :meth:`control_state` for initial states.
+        """
+        l1 = ct.tf2ss(self.L1, method="scipy", inputs="u", outputs="w1", name="L1")
+        l2 = ct.tf2ss(self.L2, method="scipy", inputs="w2", outputs="y", name="L2")
+        return ct.interconnect(
+            [l1, self.H, l2], inputs="u", outputs=["y", "w1", "w2"], name=self.name
+        )
+
+    def operator_state(self, x0: InitialCondition | None = None, p0=None) -> np.ndarray:
+        """Play-operator states ``p_i(-1)`` for a start from ``x0``.
+
+        ``p0`` when given; otherwise the state reached from the virgin state by a monotone move
+        to ``w1(-1)``: ``p_i = max(w1 - r_i, min(w1 + r_i, 0))`` (zero at rest).
+        """
+        if p0 is not None:
+            return _initial_states(p0, len(self.thresholds))
+        w1 = (x0 or InitialCondition()).window("w1", 1)[0]
+        return np.maximum(w1 - self.thresholds, np.minimum(w1 + self.thresholds, 0.0))
+
+    def control_state(self, x0: InitialCondition | None = None, p0=None) -> np.ndarray:
+        """State vector of :meth:`to_control` that continues from the past ``x0``.
+
+        Parameters
+        ----------
+        x0 : InitialCondition, optional
+            Past values of ``u, w1, w2, y`` (at rest by default).
+        p0 : array_like, optional
+            Play-operator states; see :meth:`operator_state`.
+        """
+        x0 = x0 or InitialCondition()
+        n = self.structure.history + 1
+        l1 = ct.tf2ss(self.L1, method="scipy")
+        l2 = ct.tf2ss(self.L2, method="scipy")
+        x1 = blocks.state_from_past(l1, x0.window("u", n), x0.window("w1", n))
+        x2 = blocks.state_from_past(l2, x0.window("w2", n), x0.window("y", n))
+        return np.concatenate([x1, self.operator_state(x0, p0), x2])
+
+    @classmethod
+    def from_control(
+        cls,
+        L1: ct.TransferFunction | ct.InterconnectedSystem,
+        H: ct.NonlinearIOSystem | None = None,
+        L2: ct.TransferFunction | None = None,
+        *,
+        structure: PIStructure | None = None,
+        prefix: str = "pi",
+        name: str = "PI sandwich",
+    ) -> PISandwich:
+        """Build a model from python-control objects.
+
+        Any DC gains of ``L1`` and ``L2`` are moved into ``H`` exactly: with ``L1 = g1 L1'``
+        and ``L2 = g2 L2'`` (unit-gain ``L1', L2'``) the weights become ``g1 g2 mu_i`` and the
+        thresholds ``r_i / |g1|`` (a play operator is positively homogeneous).
+
+        Parameters
+        ----------
+        L1, H, L2 : control systems
+            Transfer functions for L1 and L2 and a :func:`pi_block` for H, or a single
+            :class:`control.InterconnectedSystem` made by :meth:`to_control`.
+        structure : PIStructure, optional
+            Orders and delays to read; the paper's by default.
+        prefix : str
+            Parameter-name prefix of ``H``.
+        name : str
+            Name of the returned model.
+        """
+        if isinstance(L1, ct.InterconnectedSystem) and H is None and L2 is None:
+            sys = L1
+            subs = {s.name: s for s in sys.syslist}
+            if not {"L1", "H", "L2"} <= subs.keys():
+                raise ValueError(f"expected subsystems L1, H, L2 in {sys.name!r}, got {list(subs)}")
+            L1, H, L2 = ct.ss2tf(subs["L1"]), subs["H"], ct.ss2tf(subs["L2"])
+        if H is None or L2 is None:
+            raise ValueError("from_control needs L1, H and L2, or one InterconnectedSystem")
+        if not (L1.dt and L1.dt == L2.dt == H.dt):
+            raise ValueError(f"blocks must share one discrete dt; got {L1.dt}, {H.dt}, {L2.dt}")
+        n = H.nstates
+        s = structure or PIStructure(n_operators=n)
+        if s.n_operators != n:
+            raise ValueError(f"H has {n} play operators, the structure {s.n_operators}")
+        try:
+            mu, r = _unpack(H.params, prefix, n)
+        except KeyError as err:
+            raise ValueError(f"H: missing parameter {err} (expected {prefix}_mu*, {prefix}_r*)") \
+                from None
+        a1, b1 = _read_tf(L1, s.q1, s.n1a, s.n1b, "L1")
+        a2, b2 = _read_tf(L2, s.q2, s.n2a, s.n2b, "L2")
+        g1 = np.sum(b1) / (1.0 + np.sum(a1))
+        g2 = np.sum(b2) / (1.0 + np.sum(a2))
+        if not (np.isfinite(g1) and np.isfinite(g2)) or g1 == 0 or g2 == 0:
+            raise ValueError(f"L1 and L2 need finite non-zero DC gains, got {g1:g} and {g2:g}")
+        values = {}
+        for prefix_, vec in (("a1", a1), ("a2", a2)):
+            values.update({f"{prefix_}{i + 1}": v for i, v in enumerate(vec)})
+        for prefix_, vec, g in (("b1", b1, g1), ("b2", b2, g2)):
+            values.update({f"{prefix_}{j + 1}": v / g for j, v in enumerate(vec) if j > 0})
+        values.update({f"mu{i}": g1 * g2 * m for i, m in enumerate(mu)})
+        return cls(values, r / abs(g1), s, fs=1.0 / L1.dt, name=name)
+
+    # ----------------------------------------------------------------- simulation
+    def simulate(
+        self, u: np.ndarray | Sequence[float], x0: InitialCondition | None = None, p0=None
+    ) -> SandwichResponse:
+        """Simulate the sandwich with the compiled kernel.
+
+        Parameters
+        ----------
+        u : array_like
+            Input samples u(0) .. u(N-1).
+        x0 : InitialCondition, optional
+            Past signal values; at rest by default.
+        p0 : array_like, optional
+            Play-operator states; see :meth:`operator_state`.
+
+        Returns
+        -------
+        SandwichResponse
+            Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
+        """
+        u = _signal(u, "u")
+        x0 = x0 or InitialCondition()
+        P = self.structure.history
+        U, W1, W2, Y = (
+            np.concatenate([x0.window(k, P), np.zeros(len(u))]) for k in ("u", "w1", "w2", "y")
+        )
+        U[P:] = u
+        p = self.operator_state(x0, p0)
+        s = self.structure
+        pi_simulate_into(self.a1, self.b1, s.q1, self.mu, self.thresholds, self.a2, self.b2,
+                         s.q2, U, W1, W2, Y, p, P)
+        t = np.arange(len(u)) / self.fs
+        return SandwichResponse(t, u, W1[P:], W2[P:], Y[P:], name=self.name)
+
+    def __repr__(self) -> str:
+        lin = ", ".join(f"{k}={v:.6g}" for k, v in self.coefficients.items())
+        return f"PISandwich({lin}, N={len(self.thresholds)}, fs={self.fs:g})"
+
+
+# =========================================================================== helpers
+def _radius(a: np.ndarray) -> float:
+    return float(np.max(np.abs(np.roots(np.r_[1.0, a])))) if len(a) else 0.0
+
+
+def _read_tf(tf, q: int, na: int, nb: int, label: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(a, b)`` of ``sum_j b_j z^-(q+j-1) / (1 + sum_i a_i z^-i)`` from a SISO transfer fn."""
+    if not isinstance(tf, ct.TransferFunction) or tf.ninputs != 1 or tf.noutputs != 1:
+        raise ValueError(f"{label}: expected a SISO control.TransferFunction, got {tf!r}")
+    num = np.atleast_1d(np.asarray(tf.num[0][0], dtype=float))
+    den = np.atleast_1d(np.asarray(tf.den[0][0], dtype=float))
+    if len(num) > len(den):
+        raise ValueError(f"{label}: transfer function is not proper")
+    num = np.concatenate([np.zeros(len(den) - len(num)), num]) / den[0]
+    den = den / den[0]
+    scale = max(1.0, np.max(np.abs(num)))
+    # coefficients of z^-0, z^-1, ... : extend both to cover the structure
+    m = max(len(den) - 1, na, q + nb - 1)
+    num = np.pad(num, (0, m + 1 - len(num)))
+    den = np.pad(den, (0, m + 1 - len(den)))
+    outside = np.r_[num[:q], num[q + nb :]]
+    if np.any(np.abs(outside) > 1e-9 * scale) or np.any(np.abs(den[1 + na :]) > 1e-9):
+        raise ValueError(
+            f"{label}: does not fit the structure (delay {q}, {nb} numerator and {na} "
+            "denominator coefficients)"
+        )
+    return den[1 : 1 + na].copy(), num[q : q + nb].copy()
+
+
+def _signal(u, argname: str) -> np.ndarray:
+    arr = np.asarray(u, dtype=float)
+    if arr.ndim != 1:
+        raise ValueError(f"{argname}: expected a 1-D array of samples, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        k = int(np.flatnonzero(~np.isfinite(arr))[0])
+        raise ValueError(f"{argname}: non-finite value at sample {k}")
+    return np.ascontiguousarray(arr)
+
+
+def _weights(weights, n: int) -> np.ndarray:
+    mu = np.ascontiguousarray(np.asarray(weights, dtype=float).ravel())
+    if mu.shape != (n,) or not np.all(np.isfinite(mu)):
+        raise ValueError(f"weights: expected {n} finite values, got {mu!r}")
+    return mu
+
+
+def _initial_states(p0, n: int) -> np.ndarray:
+    if p0 is None:
+        return np.zeros(n)
+    p = np.array(p0, dtype=float).ravel()
+    if p.shape != (n,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"p0: expected {n} finite operator states, got shape {p.shape}")
+    return p
