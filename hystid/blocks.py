@@ -3,7 +3,8 @@
 * :func:`linear_block` -- L1 or L2 of eqs. (1)-(2) as a discrete :class:`control.TransferFunction`.
 * :func:`linear_coefficients` -- the inverse: (a, b, q) read back from a transfer function.
 * :func:`duhem_block` -- the discrete Duhem operator of eq. (7) as a
-  :class:`control.NonlinearIOSystem` with states ``w1(k-1), w2(k-1)`` and pure update/output functions.
+  :class:`control.NonlinearIOSystem` with states ``w1(k-1), w2(k-1)`` and pure
+  update/output functions.
 * :func:`state_from_past` -- the state of a state-space realisation that reproduces a given past.
 """
 
