@@ -14,7 +14,7 @@ from .result import IdentificationResult, converged_at
 
 __all__ = ["METHODS", "IdentificationResult", "converged_at", "fit_output_error", "identify"]
 
-METHODS = ("batch",)
+METHODS = ("batch", "eria", "online", "ekf")
 
 
 def identify(
@@ -44,5 +44,13 @@ def identify(
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if method == "batch":
+        if progress is not None:
+            progress(0, record.n)
         return fit_output_error(record, structure, **settings)
-    raise AssertionError(method)  # pragma: no cover
+    if method == "eria":
+        from .eria import ERIA as estimator
+    elif method == "online":
+        from .online import OnlineIdentifier as estimator
+    else:
+        from .ekf import KalmanIdentifier as estimator
+    return estimator(structure, record.fs, **settings).fit(record, progress=progress)

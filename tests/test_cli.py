@@ -1,0 +1,118 @@
+"""The hystid command line, as a user runs it."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from hystid.cli import main
+from hystid.reference import PAPER_PARAMS
+
+
+def run(args, capsys):
+    code = main(args)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def records(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("recs")
+    for name, seed in (("train.csv", 0), ("val.npz", 1)):
+        assert main(["simulate", "--seconds", "0.1", "--seed", str(seed), "--quiet",
+                     "--out", str(folder / name)]) == 0
+    return folder
+
+
+def test_simulate_writes_a_loadable_record(records):
+    from hystid.records import load_record
+
+    rec = load_record(records / "train.csv")
+    assert rec.n == 3000 and rec.fs == pytest.approx(30_000.0)
+
+
+@pytest.mark.parametrize("method", ["batch", "online"])
+def test_identify_json_recovers_the_stage(records, capsys, method, tmp_path):
+    hist = tmp_path / "h.csv"
+    args = ["identify", str(records / "train.csv"), "--val", str(records / "val.npz"),
+            "--method", method, "--json", "--out", str(tmp_path / "out")]
+    if method == "online":
+        args += ["--history", str(hist)]
+    code, out, _ = run(args, capsys)
+    assert code == 0
+    report = json.loads(out)
+    assert set(report["validation"]) >= {"err_min", "err_max", "rms", "fit_percent"}
+    for name, value in PAPER_PARAMS.items():
+        assert report["params"][name] == pytest.approx(value, rel=0.02)
+    assert report["validation"]["rms"] < 3e-3  # 1 nm noise: the error sits at the noise
+    assert (tmp_path / "out" / "report.json").exists()
+    assert (tmp_path / "out" / "validation.png").stat().st_size > 1000
+    if method == "online":
+        assert "converged_at" in report and report["settings"]["n_start"] == 400
+        data = np.genfromtxt(hist, delimiter=",", names=True)
+        assert data.dtype.names == ("k", *PAPER_PARAMS)
+        assert len(data) == 3000
+
+
+def exit_code(args) -> int:
+    """Exit status of ``hystid ARGS``, whether argparse exits or main returns."""
+    try:
+        return main(args)
+    except SystemExit as exc:
+        return int(exc.code)
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["identify", "missing.csv"], "missing.csv"),
+        (["simulate", "--seconds", "-1", "--seed", "0", "--out", "x.csv"], "positive"),
+        (["simulate", "--seconds", "0.01", "--seed", "0", "--out", "x.xyz"], ".csv"),
+        (["identify", "REC", "--method", "magic"], "invalid choice"),
+        (["identify", "REC", "--fs", "abc"], "expected a float"),
+    ],
+)
+def test_bad_arguments_exit_2_with_a_clear_message(args, needle, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert exit_code(args) == 2
+    assert needle in capsys.readouterr().err
+
+
+def test_bad_csv_is_reported_with_file_and_line(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,u,y\n0,1,2\n3.3e-5,1,nan\n")
+    code, _, err = run(["identify", str(bad)], capsys)
+    assert code == 2
+    assert "bad.csv" in err and "line 3" in err
+
+
+def test_mismatched_fs_between_records(records, tmp_path, capsys):
+    from hystid.records import load_record
+
+    rec = load_record(records / "val.npz")
+    other = type(rec)(rec.u, rec.y, fs=10_000.0, name="slow")
+    other.save(tmp_path / "slow.npz")
+    code, _, err = run(["identify", str(records / "train.csv"), "--val",
+                        str(tmp_path / "slow.npz")], capsys)
+    assert code == 2 and "differs" in err
+
+
+def test_demo_runs_end_to_end(tmp_path):
+    out = tmp_path / "demo"
+    proc = subprocess.run([sys.executable, "-m", "hystid.cli", "demo", "--seconds", "0.1",
+                           "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "online" in proc.stdout and "alpha" in proc.stdout
+    report = json.loads((out / "report.json").read_text())
+    assert report["methods"]["online"]["max_rel_error"] < 0.02
+    assert (out / "validation.png").exists() and (out / "convergence.png").exists()
+
+
+def test_help_for_each_command(capsys):
+    for cmd in ("demo", "simulate", "identify"):
+        with pytest.raises(SystemExit) as exc:
+            main([cmd, "--help"])
+        assert exc.value.code == 0
+        assert cmd in capsys.readouterr().out
