@@ -86,6 +86,8 @@ class RecursiveIdentifier:
     """
 
     method = "recursive"
+    #: What a restart means, for the warning.
+    divergence_reason = "the estimate diverged"
     #: Samples of signal history kept in the windows beyond the structure's own.
     extra_history = 2
 
@@ -148,10 +150,9 @@ class RecursiveIdentifier:
         self.n_skipped += skipped
         if self.n_recoveries > before:
             warnings.warn(
-                f"{self.method}: the estimate left the admissible set (Assumption 1, "
-                f"condition 8) {self.n_recoveries - before} time(s), first at sample "
-                f"{self.first_recovery}; restarted from the last admissible estimate",
-                RuntimeWarning, stacklevel=3,
+                f"{self.method}: {self.divergence_reason} {self.n_recoveries - before} "
+                f"time(s), first at sample {self.first_recovery}; restarted from the last "
+                "good estimate", RuntimeWarning, stacklevel=3,
             )
 
     def fit(

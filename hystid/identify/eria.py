@@ -202,6 +202,7 @@ class ERIA(RecursiveIdentifier):
     """
 
     method = "eria"
+    divergence_reason = "the estimate left the admissible set (Assumption 1, condition 8)"
     n_diagnostics = len(DIAGNOSTICS)
 
     def __init__(

@@ -46,22 +46,59 @@ __all__ = ["OnlineIdentifier", "DIAGNOSTICS"]
 DIAGNOSTICS = ("e", "sigma", "lambda", "trace_P", "rms_short", "rms_long")
 
 # scal layout
-_K, _LAM, _SIG, _SHORT, _LONG, _NPROJ, _NCLIP, _NREC, _FIRST, _HOLD, _GOODAGE = range(11)
+_K, _LAM, _SIG, _SHORT, _LONG, _NPROJ, _NCLIP, _NREC, _FIRST, _HOLD, _GOODAGE, _NPRESET = range(12)
 
 
 @njit(cache=True)
-def rpem_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, S1, S2, SY, settings,
+def _resync(theta, layout, W1, W2, Yh, Ym, S1, S2, SY, lo, L):
+    """After a restart: the model output takes the measured output, w2 follows from inverting
+    L2 (eq. 2) on it, non-finite w1 are cleared and the sensitivities restart from zero."""
+    n1a, n1b, n2a, n2b, q2 = layout[0], layout[1], layout[2], layout[3], layout[5]
+    i_b2, i_a2 = 0, offsets(layout)[7]
+    for i in range(lo, L + 1):
+        Yh[i] = Ym[i]
+        if not np.isfinite(W1[i]):
+            W1[i] = 0.0
+        S1[i, :] = 0.0
+        S2[i, :] = 0.0
+        SY[i, :] = 0.0
+    for i in range(lo + max(n2a, q2 + n2b), L + 1):
+        w2 = Ym[i]
+        for j in range(1, n2a + 1):
+            w2 += theta[i_a2 + j - 1] * Ym[i - j]
+        for j in range(1, n2b + 1):
+            w2 -= theta[i_b2 + j - 1] * W2[i - q2 - j]
+        W2[i - q2] = w2
+
+
+@njit(cache=True)
+def _covariance_ok(P, trace_max):
+    """P is finite, has a positive diagonal, |P_ij|^2 <= P_ii P_jj and trace below the cap."""
+    n = P.shape[0]
+    tr = 0.0
+    for i in range(n):
+        if not (P[i, i] > 0.0) or not np.isfinite(P[i, i]):
+            return False
+        tr += P[i, i]
+        for j in range(i):
+            if not (P[i, j] * P[i, j] <= P[i, i] * P[j, j]):
+                return False
+    return tr < trace_max
+
+
+@njit(cache=True)
+def rpem_run(theta, P, scal, theta_good, P_good, layout, U, W1, W2, Yh, Ym, S1, S2, SY, settings,
              u_in, y_in, history, diag):
     """The recursion over a chunk; see the module docstring.
 
     ``settings = [lambda0, lambda_inf, lambda_rate, clip, trace_max, diverge_ratio,
-    diverge_hold, P_reset, kmax, short_rate, long_rate]``.
+    diverge_hold, P_reset, kmax, short_rate, long_rate, sigma_rate]``.
     """
     npar = theta.shape[0]
     w = U.shape[0] - u_in.shape[0]
     lam_inf, lam_rate, clip, trace_max = settings[1], settings[2], settings[3], settings[4]
     div_ratio, div_hold, P_reset, kmax = settings[5], settings[6], settings[7], settings[8]
-    a_short, a_long = settings[9], settings[10]
+    a_short, a_long, a_sig = settings[9], settings[10], settings[11]
     i_alpha = offsets(layout)[1]
     PH = np.empty(npar)
     cand = np.empty(npar)
@@ -69,23 +106,28 @@ def rpem_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, S1, S2, SY, sett
     for n in range(u_in.shape[0]):
         L = w + n
         U[L] = u_in[n]
+        Ym[L] = y_in[n] if np.isfinite(y_in[n]) else Yh[L - 1]
+        # 1. model step with theta(k-1) and the exact sensitivities psi(k)
         step_sens(theta, layout, U, W1, W2, Yh, S1, S2, SY, L)
         psi = SY[L]
         scal[_LAM] = lam_inf - (lam_inf - scal[_LAM]) * lam_rate
         lam = scal[_LAM]
         e = np.nan
-        if np.isfinite(y_in[n]):
+        restart = not np.isfinite(Yh[L])
+        if np.isfinite(y_in[n]) and not restart:
             e = y_in[n] - Yh[L]
+            # 2. clipped residual, robust scale, short- and long-term residual levels
             sig = scal[_SIG]
             ec = e
             if abs(e) > clip * sig:
                 ec = clip * sig if e > 0 else -clip * sig
                 scal[_NCLIP] += 1.0
-            # robust running scale (of the clipped residual) and residual levels
-            scal[_SIG] = np.sqrt((1.0 - a_short) * sig * sig + a_short * ec * ec) + 1e-300
+            scal[_SIG] = np.sqrt((1.0 - a_sig) * sig * sig + a_sig * ec * ec) + 1e-300
             scal[_SHORT] = (1.0 - a_short) * scal[_SHORT] + a_short * e * e
-            scal[_LONG] = (1.0 - a_long) * scal[_LONG] + a_long * min(e * e, scal[_SHORT])
-            # Gauss-Newton step with forgetting
+            alarm = scal[_SHORT] > div_ratio * div_ratio * scal[_LONG]
+            if not alarm:
+                scal[_LONG] = (1.0 - a_long) * scal[_LONG] + a_long * scal[_SHORT]
+            # 3. Gauss-Newton step with forgetting
             hPh = 0.0
             for i in range(npar):
                 s = 0.0
@@ -96,23 +138,24 @@ def rpem_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, S1, S2, SY, sett
             denom = lam + hPh
             for i in range(npar):
                 cand[i] = theta[i] + PH[i] * (ec / denom)
+            # 4. projection onto the admissible set (Assumption 1, condition 8)
             dw1 = abs(W1[L] - W1[L - 1])
             if admissible_into(cand, layout, kmax, work) and cand[i_alpha] * dw1 < 2.0:
                 theta[:] = cand
             else:
                 scal[_NPROJ] += 1.0
-            tr = 0.0
             for i in range(npar):
-                for j in range(npar):
-                    P[i, j] = (P[i, j] - PH[i] * PH[j] / denom) / lam
-                tr += P[i, i]
-            if not (tr < trace_max) or not np.isfinite(tr):
-                scale = trace_max / tr if np.isfinite(tr) and tr > 0 else 0.0
+                for j in range(i + 1):
+                    v = (P[i, j] - PH[i] * PH[j] / denom) / lam
+                    P[i, j] = v
+                    P[j, i] = v
+            if not _covariance_ok(P, trace_max):
+                scal[_NPRESET] += 1.0
                 for i in range(npar):
                     for j in range(npar):
-                        P[i, j] = P[i, j] * scale if scale > 0 else (P_reset if i == j else 0.0)
+                        P[i, j] = P_reset if i == j else 0.0
             # divergence watch
-            if scal[_SHORT] > div_ratio * div_ratio * scal[_LONG]:
+            if alarm:
                 scal[_HOLD] += 1.0
             else:
                 scal[_HOLD] = 0.0
@@ -120,17 +163,20 @@ def rpem_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, S1, S2, SY, sett
                     scal[_GOODAGE] += 1.0
                     if scal[_GOODAGE] > div_hold:
                         theta_good[:] = theta
+                        P_good[:, :] = P
                         scal[_GOODAGE] = 0.0
-            if scal[_HOLD] > div_hold:
-                scal[_NREC] += 1.0
-                if scal[_FIRST] < 0:
-                    scal[_FIRST] = scal[_K] + 1.0
-                theta[:] = theta_good
-                for i in range(npar):
-                    for j in range(npar):
-                        P[i, j] = P_reset if i == j else 0.0
-                scal[_HOLD] = 0.0
-                scal[_SHORT] = scal[_LONG]
+            restart = scal[_HOLD] > div_hold
+        if restart:
+            scal[_NREC] += 1.0
+            if scal[_FIRST] < 0:
+                scal[_FIRST] = scal[_K] + 1.0
+            theta[:] = theta_good
+            P[:, :] = P_good
+            _resync(theta, layout, W1, W2, Yh, Ym, S1, S2, SY, max(0, L - w + 1), L)
+            scal[_HOLD] = 0.0
+            scal[_GOODAGE] = 0.0
+            scal[_SHORT] = scal[_LONG]
+            scal[_SIG] = np.sqrt(scal[_LONG])
         scal[_K] += 1.0
         history[n, :] = theta
         tr = 0.0
@@ -189,6 +235,7 @@ class OnlineIdentifier(RecursiveIdentifier):
     """
 
     method = "online"
+    divergence_reason = "the residual diverged (short-term RMS above diverge_ratio x long-term)"
     n_diagnostics = len(DIAGNOSTICS)
 
     def __init__(
@@ -242,13 +289,15 @@ class OnlineIdentifier(RecursiveIdentifier):
         n = len(self.theta)
         w = self.window
         self.P = np.eye(n)
+        self._P_good = self.P.copy()
         self._theta_good = self.theta.copy()
-        self._scal = np.zeros(11)
+        self._scal = np.zeros(12)
         self._scal[_LAM] = self.lambda0
         self._scal[_FIRST] = -1.0
-        self._U, self._W1, self._W2, self._Yh = (np.zeros(w) for _ in range(4))
+        self._U, self._W1, self._W2, self._Yh, self._Ym = (np.zeros(w) for _ in range(5))
         self._S1, self._S2, self._SY = (np.zeros((w, n)) for _ in range(3))
-        self._windows = (self._U, self._W1, self._W2, self._Yh, self._S1, self._S2, self._SY)
+        self._windows = (self._U, self._W1, self._W2, self._Yh, self._Ym,
+                         self._S1, self._S2, self._SY)
         self._buf_u = np.zeros(self.n_start)
         self._buf_y = np.zeros(self.n_start)
         self._diag_last = np.full(len(DIAGNOSTICS), np.nan)
@@ -279,6 +328,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         self.theta = theta.copy()
         self._theta_good = theta.copy()
         self.P = P
+        self._P_good = P.copy()
         # windows at the end of the buffer, from a simulation with the start estimate
         s = self.structure
         n, w = len(rec.u), self.window
@@ -289,8 +339,8 @@ class OnlineIdentifier(RecursiveIdentifier):
         U[Pp:] = rec.u
         S1, S2, SY = (np.zeros((Pp + n, len(theta))) for _ in range(3))
         sensitivities_into(theta, s.layout, U, W1, W2, Y, S1, S2, SY, Pp)
-        for dst, src in ((self._U, U), (self._W1, W1), (self._W2, W2), (self._Yh, Y),
-                         (self._S1, S1), (self._S2, S2), (self._SY, SY)):
+        Ym = np.concatenate([np.zeros(Pp), rec.y])
+        for dst, src in zip(self._windows, (U, W1, W2, Y, Ym, S1, S2, SY), strict=True):
             dst[-min(w, len(src)):] = src[-min(w, len(src)):]
         self._scal[_SIG] = sigma
         self._scal[_SHORT] = self._scal[_LONG] = sigma**2
@@ -315,10 +365,11 @@ class OnlineIdentifier(RecursiveIdentifier):
                 self.lambda0, 1.0 - 1.0 / self.memory, np.exp(-1.0 / self.lambda_time),
                 self.clip, self.trace_max, self.diverge_ratio, float(self.diverge_hold),
                 min(1.0, self.trace_max / len(self.theta)), 1.0 - 1e-6, 1.0 / 50.0,
-                1.0 / 5_000.0])
+                1.0 / 5_000.0, 1.0 / 500.0])
             m = len(u) - done
             arrays = [extended(a, m) for a in self._windows]
-            rpem_run(self.theta, self.P, self._scal, self._theta_good, self.structure.layout,
+            rpem_run(self.theta, self.P, self._scal, self._theta_good, self._P_good,
+                     self.structure.layout,
                      *arrays, settings, np.ascontiguousarray(u[done:], float),
                      np.ascontiguousarray(y[done:], float), history[done:], diagnostics[done:])
             for window, ext in zip(self._windows, arrays, strict=True):
@@ -351,6 +402,11 @@ class OnlineIdentifier(RecursiveIdentifier):
         return int(self._scal[_NPROJ])
 
     @property
+    def n_covariance_resets(self) -> int:
+        """Times P lost positive definiteness (or hit the trace cap) and was reset."""
+        return int(self._scal[_NPRESET])
+
+    @property
     def n_clipped(self) -> int:
         """Residuals clipped as outliers."""
         return int(self._scal[_NCLIP])
@@ -364,6 +420,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         """The current estimate as an IdentificationResult (with start-up and guard counts)."""
         res = super().result(history, diagnostics)
         res.info.update({"n_projections": self.n_projections, "n_clipped": self.n_clipped,
+                         "n_covariance_resets": self.n_covariance_resets,
                          "start_up": self.start_info})
         return res
 
