@@ -76,8 +76,8 @@ def summarise(rows: list[dict]) -> list[list[str]]:
             med("to_2pc") if has_hist else "-", med("to_01pc") if has_hist else "-",
             f"{np.median([r['final_err'] for r in rs]):.2e}",
             f"{max(r['final_err'] for r in rs):.2e}",
-            (f"{min(r['val_min'] for r in vr) * 1e3:.1f} .. {max(r['val_max'] for r in vr) * 1e3:.1f}"
-             if vr else "unstable"),
+            (f"{min(r['val_min'] for r in vr) * 1e3:.1f} .. "
+             f"{max(r['val_max'] for r in vr) * 1e3:.1f}" if vr else "unstable"),
             f"{np.median([r['val_rms'] for r in vr]) * 1e3:.2f}" if vr else "-",
             f"{np.median([r['samples_per_s'] for r in rs]):.3g}",
             str(sum(r["restarts"] for r in rs)),

@@ -53,7 +53,7 @@ _K, _LAM, _SIG, _SHORT, _LONG, _NPROJ, _NCLIP, _NREC, _FIRST, _HOLD, _GOODAGE, _
 def _resync(theta, layout, W1, W2, Yh, Ym, S1, S2, SY, lo, L):
     """After a restart: the model output takes the measured output, w2 follows from inverting
     L2 (eq. 2) on it, non-finite w1 are cleared and the sensitivities restart from zero."""
-    n1a, n1b, n2a, n2b, q2 = layout[0], layout[1], layout[2], layout[3], layout[5]
+    n2a, n2b, q2 = layout[2], layout[3], layout[5]
     i_b2, i_a2 = 0, offsets(layout)[7]
     for i in range(lo, L + 1):
         Yh[i] = Ym[i]
