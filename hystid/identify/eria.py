@@ -65,14 +65,16 @@ def regressor(theta, layout, U, W1, W2, Ym, L, h):
 
 
 @njit(cache=True)
-def eria_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, Ym, h, K, truth, settings,
-             u_in, y_in, history, diag):
+def eria_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, Ym, h, K, truth, theta_int,
+             settings, u_in, y_in, history, diag):
     """ERIA over a chunk. ``scal = [k, lambda_inv, n_recoveries, first_recovery]``;
-    ``settings = [P0, lambda_inv0, rho_exponent, kmax, recover, has_truth]``."""
+    ``settings = [P0, lambda_inv0, rho_exponent, kmax, recover, has_truth, mu_const,
+    lambda_inv_min, fixed_internal]``."""
     npar = theta.shape[0]
     w = U.shape[0] - u_in.shape[0]
     P0, lam0, rexp, kmax = settings[0], settings[1], settings[2], settings[3]
     recover, has_truth = settings[4] > 0, settings[5] > 0
+    mu_const, lam_min, fixed_internal = settings[6], settings[7], settings[8] > 0
     i_alpha = offsets(layout)[1]
     PH = np.empty(npar)
     for n in range(u_in.shape[0]):
@@ -80,8 +82,9 @@ def eria_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, Ym, h, K, truth,
         L = w + n
         U[L] = u_in[n]
         Ym[L] = y_in[n] if np.isfinite(y_in[n]) else Ym[L - 1]
-        step(theta, layout, U, W1, W2, Yh, L)  # internal signals with theta(k-1)
-        regressor(theta, layout, U, W1, W2, Ym, L, h)
+        # internal signals with theta(k-1) (or with a fixed vector, for experiments)
+        step(theta_int if fixed_internal else theta, layout, U, W1, W2, Yh, L)
+        regressor(theta_int if fixed_internal else theta, layout, U, W1, W2, Ym, L, h)
         # (15)
         dy = Ym[L] - Ym[L - 1]
         e = dy
@@ -89,7 +92,7 @@ def eria_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, Ym, h, K, truth,
             e -= h[i] * theta[i]
         rho = (k + 1.0) ** (-rexp)
         rho_prev = k ** (-rexp)
-        mu = rho_prev / rho * (1.0 - rho)
+        mu = rho_prev / rho * (1.0 - rho) if mu_const <= 0 else mu_const
         beta = np.nan
         if has_truth and e != 0.0:
             beta = 0.0
@@ -98,7 +101,7 @@ def eria_run(theta, P, scal, theta_good, layout, U, W1, W2, Yh, Ym, h, K, truth,
             beta /= e
         if np.isfinite(y_in[n]):
             # (19), then (17)
-            scal[1] = scal[1] + rho * (e * e - scal[1])
+            scal[1] = max(scal[1] + rho * (e * e - scal[1]), lam_min)
             hPh = 0.0
             for i in range(npar):
                 s = 0.0
@@ -184,6 +187,13 @@ class ERIA(RecursiveIdentifier):
         except that it never becomes NaN: non-finite values still trigger the restart.
     truth : dict or array, optional
         True parameters, to monitor ``beta(k)`` of Theorem 1 (reference stage).
+    mu : float, optional
+        Constant forgetting factor instead of the paper's ``mu(k)`` (for experiments).
+    lambda_inv_min : float
+        Floor on ``Lambda^-1(k)`` (0 in the paper).
+    internal : dict or array, optional
+        Fixed parameters for the internal signals and the products in ``h`` instead of
+        theta(k-1): the true ones isolate the estimate/internal-signal loop (experiments).
 
     Attributes
     ----------
@@ -217,6 +227,9 @@ class ERIA(RecursiveIdentifier):
         epsilon: float = 1e-4,
         recover: bool = True,
         truth=None,
+        mu: float | None = None,
+        lambda_inv_min: float = 0.0,
+        internal=None,
     ) -> None:
         for name, value in (("P0", P0), ("lambda_inv0", lambda_inv0),
                             ("rho_exponent", rho_exponent)):
@@ -227,6 +240,14 @@ class ERIA(RecursiveIdentifier):
         self.rho_exponent = float(rho_exponent)
         self.recover = bool(recover)
         self._truth = truth
+        if mu is not None and not (0 < mu <= 1):
+            raise ValueError(f"mu: expected a forgetting factor in (0, 1], got {mu!r}")
+        if not (np.isfinite(lambda_inv_min) and lambda_inv_min >= 0):
+            raise ValueError(f"lambda_inv_min: expected a non-negative number, got "
+                             f"{lambda_inv_min!r}")
+        self.mu = mu
+        self.lambda_inv_min = float(lambda_inv_min)
+        self._internal = internal
         super().__init__(structure, fs, theta0, epsilon)
 
     def _allocate(self) -> None:
@@ -242,15 +263,19 @@ class ERIA(RecursiveIdentifier):
         self._U, self._W1, self._W2, self._Yh, self._Ym = (np.zeros(w) for _ in range(5))
         self._truth_vec = (initial_theta(self.structure, self._truth)
                            if self._truth is not None else np.zeros(n))
+        self._internal_vec = (initial_theta(self.structure, self._internal)
+                              if self._internal is not None else np.zeros(n))
         self._diag_last = np.full(len(DIAGNOSTICS), np.nan)
 
     def _run(self, u, y, history, diagnostics) -> None:
         settings = np.array([self.P0, self.lambda_inv0, self.rho_exponent, 1.0 - 1e-9,
-                             float(self.recover), float(self._truth is not None)])
+                             float(self.recover), float(self._truth is not None),
+                             self.mu or 0.0, self.lambda_inv_min,
+                             float(self._internal is not None)])
         windows = (self._U, self._W1, self._W2, self._Yh, self._Ym)
         arrays = [extended(a, len(u)) for a in windows]
         eria_run(self.theta, self.P, self._scal, self._theta_good, self.structure.layout,
-                 *arrays, self.h, self.K, self._truth_vec, settings,
+                 *arrays, self.h, self.K, self._truth_vec, self._internal_vec, settings,
                  np.ascontiguousarray(u, float), np.ascontiguousarray(y, float), history,
                  diagnostics)
         for window, ext in zip(windows, arrays, strict=True):
@@ -278,4 +303,7 @@ class ERIA(RecursiveIdentifier):
     def settings(self) -> dict:
         """The configuration, JSON-ready."""
         return {**super().settings, "P0": self.P0, "lambda_inv0": self.lambda_inv0,
-                "rho": f"(k+1)^-{self.rho_exponent:.6g}", "recover": self.recover}
+                "rho": f"(k+1)^-{self.rho_exponent:.6g}", "recover": self.recover,
+                "mu": self.mu or "rho(k-1)/rho(k) (1 - rho(k))",
+                "lambda_inv_min": self.lambda_inv_min,
+                "internal": "estimate" if self._internal is None else "fixed"}
