@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -182,7 +183,7 @@ def cmd_identify(args) -> int:
     return 0
 
 
-def _write_outputs(out: Path, report: dict, target, yhat, result) -> None:
+def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None) -> None:
     from .metrics import plot_validation
 
     out.mkdir(parents=True, exist_ok=True)
@@ -193,7 +194,8 @@ def _write_outputs(out: Path, report: dict, target, yhat, result) -> None:
     if result.history is not None:
         import matplotlib.pyplot as plt
 
-        axes = result.plot()
+        axes = result.plot(truth=truth)
+        axes[0].figure.tight_layout()
         axes[0].figure.savefig(out / "convergence.png", dpi=110)
         plt.close(axes[0].figure)
 
@@ -211,12 +213,14 @@ def cmd_demo(args) -> int:
     progress.say(f"reference stage: {train.n} samples at {train.fs:g} Hz, "
                  f"noise {args.noise * 1e3:g} nm; identifying")
     methods = [m for m in ("batch", "online", "eria") if m in METHODS]
-    rows, report = [], {"truth": PAPER_PARAMS, "methods": {}}
+    rows, results, report = [], {}, {"truth": PAPER_PARAMS, "methods": {}}
     out = Path(args.out)
     for method in methods:
         t0 = time.perf_counter()
         settings = {} if method == "batch" else {"progress": progress}
-        result = identify(train, method=method, **settings)
+        with warnings.catch_warnings():  # ERIA's restarts are counted in the table instead
+            warnings.simplefilter("ignore", RuntimeWarning)
+            result = identify(train, method=method, **settings)
         elapsed = time.perf_counter() - t0
         yhat = result.model.simulate(val.u).y
         v = validate(val.y, yhat, val.fs)
@@ -227,24 +231,27 @@ def cmd_demo(args) -> int:
             "max_rel_error": max(err.values()), "converged_at": result.converged_at,
         }
         rows.append([method, f"{100 * max(err.values()):.3g} %",
+                     str(result.converged_at if result.history is not None else "-"),
+                     str(result.info.get("n_recoveries", 0)),
                      f"{v.err_min * 1e3:.1f} .. {v.err_max * 1e3:.1f}", f"{v.rms * 1e3:.2f}",
                      f"{v.fit_percent:.2f}", f"{elapsed:.2f}"])
-        if method == methods[-1] or method == "online":
-            best = (result, yhat)
+        results[method] = (result, yhat)
         progress.say(f"{method}: done in {elapsed:.2f} s")
     params = [[k, f"{v:.6g}"] + [f"{report['methods'][m]['params'][k]:.6g}" for m in methods]
               for k, v in PAPER_PARAMS.items()]
     print(_table(params, ["parameter", "truth", *methods]))
     print()
-    print(_table(rows, ["method", "max param err", "val error [nm]", "RMS [nm]", "fit %",
-                        "time [s]"]))
-    result, yhat = best
+    print(_table(rows, ["method", "max param err", "converged at", "restarts",
+                        "val error [nm]", "RMS [nm]", "fit %", "time [s]"]))
+    print("batch: off-line output error; online: hystid's recursive identifier; eria: the "
+          "paper's recursion as published (see README, method)")
+    result, yhat = results.get("online", results["batch"])
     report["validation_of"] = result.method
     report["truth_simulated_rms_um"] = float(np.sqrt(np.mean((truth.simulate(val.u).y
                                                                - val.y) ** 2)))
     _write_outputs(out, {"model": "duhem", "method": result.method,
                          "validation": report["methods"][result.method]["validation"],
-                         **report}, val, yhat, result)
+                         **report}, val, yhat, result, truth=PAPER_PARAMS)
     print(f"\nreport written to {out}/report.json (figures: validation.png"
           f"{', convergence.png' if result.history is not None else ''})")
     return 0
