@@ -86,6 +86,27 @@ def summarise(rows: list[dict]) -> list[list[str]]:
     return out
 
 
+def throughput(method: str, seconds: float) -> dict:
+    """Steady-state samples per second of a recursive method (start-up excluded)."""
+    from hystid.identify.eria import ERIA
+    from hystid.identify.online import OnlineIdentifier
+
+    cls = {"online": OnlineIdentifier, "eria": ERIA}.get(method)
+    if cls is None:
+        from hystid.identify.ekf import KalmanIdentifier as cls
+    rec = reference_record(seconds, seed=99)
+    est = cls()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        est.fit(rec[:2_000])
+        t0 = time.perf_counter()
+        est.fit(rec[2_000:])
+        elapsed = time.perf_counter() - t0
+    rate = (rec.n - 2_000) / elapsed
+    return {"method": method, "samples": rec.n - 2_000, "samples_per_s": rate,
+            "x_30kHz": rate / 30_000.0}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="3 seeds, 6 000 samples")
@@ -110,7 +131,17 @@ def main() -> None:
               "samples/s", "restarts", "NaN"]
     print(f"\nReference stage, {n} samples per record, theta(0) = 0.01, records from rest")
     print(table(summarise(rows), header))
-    path = write_json("identify", {"samples": n, "rows": rows})
+    speed = []
+    for method in args.methods.split(","):
+        if method != "batch":
+            seconds = (0.5 if args.quick else 2.0) if method == "ekf" else \
+                (2.0 if args.quick else 10.0)
+            speed.append(throughput(method, seconds))
+    print("\nSteady-state throughput on one core (start-up excluded), baseline: a 30 kHz loop")
+    print(table([[r["method"], f"{r['samples']}", f"{r['samples_per_s']:.3g}",
+                  f"{r['x_30kHz']:.1f}x"] for r in speed],
+                ["method", "samples", "samples/s", "vs 30 kHz real time"]))
+    path = write_json("identify", {"samples": n, "rows": rows, "throughput": speed})
     print(f"wrote {path}")
 
 

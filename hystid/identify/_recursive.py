@@ -135,7 +135,7 @@ class RecursiveIdentifier:
         is an error since the model cannot be propagated without it.
         """
         u = np.array([_scalar(u_k, "u_k")])
-        y = np.array([_scalar(y_k, "y_k", allow_nonfinite=True)])
+        y = np.array([_scalar(y_k, "y_k")])
         if not np.isfinite(u[0]):
             raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
         self._process(u, y, np.empty((1, len(self.theta))),
@@ -208,7 +208,7 @@ class RecursiveIdentifier:
         return {"epsilon": self.epsilon, "theta0": _jsonable(self.theta0)}
 
 
-def _scalar(value, name: str, allow_nonfinite: bool = False) -> float:
+def _scalar(value, name: str) -> float:
     arr = np.asarray(value, dtype=float)
     if arr.ndim != 0 and arr.shape != (1,):
         raise ValueError(f"{name}: expected one sample (a scalar), got shape {arr.shape}")
