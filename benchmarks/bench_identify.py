@@ -117,8 +117,10 @@ def main() -> None:
     n = args.samples or (6_000 if args.quick else 30_000)
     seeds_online = args.seeds or (3 if args.quick else 20)
     seeds_other = min(seeds_online, 3 if args.quick else 5)
-    identify(reference_record(0.02), method="online")  # compile outside the timing
-    identify(reference_record(0.02), method="eria")
+    with warnings.catch_warnings():  # compile outside the timing
+        warnings.simplefilter("ignore", RuntimeWarning)
+        identify(reference_record(0.02), method="online")
+        identify(reference_record(0.02), method="eria")
     rows = []
     for method in args.methods.split(","):
         seeds = seeds_online if method == "online" else seeds_other

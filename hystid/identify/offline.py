@@ -172,11 +172,15 @@ def fit_output_error(
     theta_start = initial_theta(structure, theta0)
     rp = _Reparam(structure)
     u, y = record.u, record.y
+    ceiling = 1e6 * (np.max(np.abs(y)) + 1.0)
 
     def residual_and_jac(z):
         theta, dtheta = rp.to_theta(z)
-        yhat, S = output_sensitivities(theta, structure, u, x0)
-        if not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(S))):
+        with np.errstate(over="ignore", invalid="ignore"):
+            yhat, S = output_sensitivities(theta, structure, u, x0)
+            blown = not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(S)))
+            blown = blown or np.max(np.abs(yhat)) > ceiling
+        if blown:
             # the Duhem recursion left condition (8): a large, flat residual steers back
             return np.full(len(y), 1e6), np.zeros((len(y), len(z)))
         return yhat - y, S @ dtheta
