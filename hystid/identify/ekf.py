@@ -46,6 +46,8 @@ from .result import IdentificationResult, converged_at
 __all__ = ["KalmanIdentifier", "state_sizes", "transition"]
 
 _KMAX = 0.999  # reflection-coefficient bound of the projection
+#: Default relative standard deviation of an informed start (vector, dict or bootstrap).
+P0_RELATIVE = 0.2
 
 
 def state_sizes(structure: Structure) -> tuple[int, int, int, int]:
@@ -183,7 +185,6 @@ def _variances(value, n: int, argname: str, positive: bool = False) -> np.ndarra
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 0:
         arr = np.full(n, float(arr))
-    arr = arr.ravel()
     if arr.shape != (n,):
         raise ValueError(f"{argname}: expected a scalar or {n} variances, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)) or np.any(arr < 0) or (positive and np.any(arr <= 0)):
@@ -206,8 +207,11 @@ class KalmanIdentifier:
         vector in the order of :attr:`Structure.names`, a dict by name, or ``"linear"``: a
         bootstrap from :func:`~hystid.identify.offline.linear_start` on the first
         ``n_bootstrap`` samples (see :meth:`initialize`).
-    P0_theta : float or array
-        Initial variance of each parameter.
+    P0_theta : float, array or None
+        Initial variance of each parameter. By default (None) it follows the start: for
+        every parameter from a scalar ``theta0`` (an uninformed start such as the paper's
+        0.01) is ``0.01``; from a vector, a dict or the ``"linear"`` bootstrap it is
+        ``(P0_RELATIVE * |theta_i(0)|)^2`` (at least 1e-8), ``P0_RELATIVE = 0.2``.
     P0_state : float or array
         Initial variance of each internal signal in the state (the records start at rest).
     q_theta : float or array
@@ -222,6 +226,11 @@ class KalmanIdentifier:
         Process-noise variance per sample of each internal signal.
     r : float
         Variance of the measurement noise on y, in output units squared (1 nm: 1e-6 um^2).
+    alpha_min : float
+        Lower bound kept on alpha (Assumption: the stage has hysteresis). Measured on the
+        reference stage: with only alpha > 0, the estimate often collapses to alpha ~ 0 (a
+        linear model, where f1 is no longer identifiable) and stays there; ``0.1`` (an eighth
+        of the reference stage's 0.84) removes that failure. Set a small value to disable.
     n_bootstrap : int
         Samples used by the ``"linear"`` bootstrap.
     p_max : float
@@ -257,13 +266,14 @@ class KalmanIdentifier:
         structure: Structure | None = None,
         fs: float = 30_000.0,
         theta0: float | str | Sequence[float] | np.ndarray | Mapping[str, float] = 0.01,
-        P0_theta: float | Sequence[float] | np.ndarray = 1.0,
+        P0_theta: float | Sequence[float] | np.ndarray | None = None,
         P0_state: float | Sequence[float] | np.ndarray = 1e-6,
         q_theta: float | Sequence[float] | np.ndarray = 1e-14,
         q_anneal: float | Sequence[float] | np.ndarray = 1e-10,
         anneal_samples: float = 5000.0,
         q_state: float | Sequence[float] | np.ndarray = 0.0,
         r: float = 1e-6,
+        alpha_min: float = 0.1,
         n_bootstrap: int = 300,
         p_max: float = 1e6,
     ) -> None:
@@ -276,6 +286,9 @@ class KalmanIdentifier:
             raise ValueError(f"r: expected a positive finite variance, got {r!r}")
         if int(n_bootstrap) != n_bootstrap or n_bootstrap < 20:
             raise ValueError(f"n_bootstrap: expected an integer >= 20, got {n_bootstrap!r}")
+        if not (np.isscalar(alpha_min) and np.isfinite(alpha_min) and alpha_min > 0):
+            raise ValueError(f"alpha_min: expected a positive lower bound, got {alpha_min!r}")
+        self.alpha_min = float(alpha_min)
         if not (np.isscalar(p_max) and p_max > 0):
             raise ValueError(f"p_max: expected a positive number, got {p_max!r}")
         self.fs = float(fs)
@@ -287,7 +300,8 @@ class KalmanIdentifier:
         self._sizes = state_sizes(self.structure)
         self._ns = ns = sum(self._sizes[:3])
         self._layout = self.structure.layout
-        self.P0_theta = _variances(P0_theta, npar, "P0_theta")
+        self._ia = self.structure.names.index("alpha")
+        self.P0_theta = None if P0_theta is None else _variances(P0_theta, npar, "P0_theta")
         self.P0_state = _variances(P0_state, ns, "P0_state")
         self.q_theta = _variances(q_theta, npar, "q_theta")
         self.q_anneal = _variances(q_anneal, npar, "q_anneal")
@@ -321,6 +335,14 @@ class KalmanIdentifier:
                 "theta0: not admissible (alpha must be > 0 and L1, L2 stable and minimum phase); "
                 f"got {dict(zip(self.structure.names, theta.tolist(), strict=True))}"
             )
+
+    def _p0_theta(self, theta: np.ndarray) -> np.ndarray:
+        """Initial parameter variances (see ``P0_theta``)."""
+        if self.P0_theta is not None:
+            return self.P0_theta
+        if np.isscalar(self.theta0) and not isinstance(self.theta0, str):
+            return np.full(len(theta), 0.01)
+        return np.maximum((P0_RELATIVE * np.abs(theta)) ** 2, 1e-8)
 
     @property
     def n_states(self) -> int:
@@ -367,7 +389,7 @@ class KalmanIdentifier:
         ns = m1 + m2 + m3
         kf = _SandwichEKF(self.n_states, s.layout, self._sizes)
         kf.x = np.concatenate([np.zeros(ns), theta])[:, None]
-        self._P0 = np.diag(np.concatenate([self.P0_state, self.P0_theta]))
+        self._P0 = np.diag(np.concatenate([self.P0_state, self._p0_theta(theta)]))
         kf.P = self._P0.copy()
         kf.Q = np.diag(np.concatenate([self.q_state, self.q_theta + self.q_anneal]))
         kf.R = np.array([[self.r]])
@@ -442,24 +464,27 @@ class KalmanIdentifier:
         # random walk of theta: q_theta + q_anneal exp(-k / anneal_samples)
         decay = np.exp(-self.k / self.anneal_samples)
         kf.Q[ns:, ns:] = np.diag(self.q_theta + self.q_anneal * decay)
-        kf.predict(ub)
-        if skip:
-            self.e = 0.0
-            self.K = np.zeros(self.n_states)
-        else:
-            kf.update(np.array([[y_k]]), self._hjac, self._hx)
-            self.e = float(kf.y[0, 0])
-            self.K = kf.K[:, 0].copy()
-        kf.P = 0.5 * (kf.P + kf.P.T)
-        self._guard()
+        self.e = 0.0
+        self.K = np.zeros(self.n_states)
+        try:
+            kf.predict(ub)
+            if not skip:
+                kf.update(np.array([[y_k]]), self._hjac, self._hx)
+                self.e = float(kf.y[0, 0])
+                self.K = kf.K[:, 0].copy()
+            kf.P = 0.5 * (kf.P + kf.P.T)
+            ok = True
+        except (ValueError, np.linalg.LinAlgError):  # a non-finite or singular covariance
+            ok = False
+        self._guard(ok)
         self.k += 1
         self._publish()
         return self.theta.copy()
 
-    def _guard(self) -> None:
+    def _guard(self, ok: bool = True) -> None:
         """Project theta on the admissible set; reset on a non-finite or exploding filter."""
         kf = self._kf
-        if not _healthy(kf.x, kf.P, self.p_max):
+        if not (ok and _healthy(kf.x, kf.P, self.p_max)):
             self.n_resets += 1
             kf.x = self._good_x.copy()
             kf.P = self._P0.copy()
@@ -469,6 +494,9 @@ class KalmanIdentifier:
         # compiled test of Assumption 1 and alpha > 0 (as constraints.is_admissible)
         if not admissible(theta, self._layout, _KMAX):
             kf.x[ns:, 0] = project_admissible(theta, self.structure, _KMAX)
+            self.n_projections += 1
+        if kf.x[ns + self._ia, 0] < self.alpha_min:
+            kf.x[ns + self._ia, 0] = self.alpha_min
             self.n_projections += 1
         self._good_x = kf.x.copy()
 
@@ -490,11 +518,12 @@ class KalmanIdentifier:
         return {
             "structure": {k: getattr(self.structure, k)
                           for k in ("n1a", "n1b", "n2a", "n2b", "q1", "q2", "f0")},
-            "fs": self.fs, "theta0": t0, "P0_theta": self.P0_theta.tolist(),
+            "fs": self.fs, "theta0": t0,
+            "P0_theta": None if self.P0_theta is None else self.P0_theta.tolist(),
             "P0_state": self.P0_state.tolist(), "q_theta": self.q_theta.tolist(),
             "q_anneal": self.q_anneal.tolist(), "anneal_samples": self.anneal_samples,
             "q_state": self.q_state.tolist(), "r": self.r, "n_bootstrap": self.n_bootstrap,
-            "p_max": self.p_max,
+            "p_max": self.p_max, "alpha_min": self.alpha_min,
         }
 
     def fit(
