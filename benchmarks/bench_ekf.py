@@ -7,7 +7,7 @@ samples after which the max relative parameter error stays below 2 % and 0.1 %, 
 relative error, the stop-index sample (epsilon = 1e-4), the guards' counters and the speed (as
 samples per second and as a ratio against the compiled simulation of the same record).
 
-Usage: python benchmarks/bench_ekf.py [--quick] [--samples N] [--seeds S]
+Usage: python benchmarks/bench_ekf.py [--quick] [--samples N] [--seeds S] [--alpha-min A]
 """
 
 from __future__ import annotations
@@ -35,10 +35,10 @@ def settle_sample(rel: np.ndarray, level: float) -> int | None:
     return k if k < len(rel) else None
 
 
-def run_one(n: int, noise: float, seed: int, theta0, truth: np.ndarray) -> dict:
+def run_one(n: int, noise: float, seed: int, theta0, truth: np.ndarray, **settings) -> dict:
     """One EKF run; returns the figures of one table row."""
     record = reference_record(n / 30_000.0, seed=seed, noise=noise)
-    ekf = KalmanIdentifier(theta0=theta0, r=max(noise, 1e-3) ** 2)
+    ekf = KalmanIdentifier(theta0=theta0, r=max(noise, 1e-3) ** 2, **settings)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         t0 = time.perf_counter()
@@ -66,7 +66,10 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="3 000 samples, one seed")
     parser.add_argument("--samples", type=int, default=None)
     parser.add_argument("--seeds", type=int, default=None)
+    parser.add_argument("--alpha-min", type=float, default=None,
+                        help="override the alpha floor (1e-9: only alpha > 0, for the ablation)")
     args = parser.parse_args()
+    settings = {} if args.alpha_min is None else {"alpha_min": args.alpha_min}
     n = args.samples or (3_000 if args.quick else 30_000)
     seeds = range(args.seeds or (1 if args.quick else 3))
     truth = reference_model().theta
@@ -75,7 +78,7 @@ def main() -> None:
     for theta0 in STARTS:
         for noise in NOISES:
             for seed in seeds:
-                r = run_one(n, noise, seed, theta0, truth)
+                r = run_one(n, noise, seed, theta0, truth, **settings)
                 out.append(r)
                 rows.append([
                     r["start"], f"{r['noise_nm']:g}", seed, f"{r['start_max_rel_error']:.2f}",
@@ -88,14 +91,15 @@ def main() -> None:
                 ])
                 print(".", end="", flush=True)
     print()
-    print(f"EKF baseline (filterpy ExtendedKalmanFilter, default settings), reference stage, "
-          f"{n} samples per record; errors are max relative parameter errors")
+    print(f"EKF baseline (filterpy ExtendedKalmanFilter, settings: default {settings}), "
+          f"reference stage, {n} samples per record; errors are max relative parameter errors")
     print(table(rows, ["theta0", "noise nm", "seed", "start err", "to 2 %", "to 0.1 %",
                        "final err", "stop index", "proj", "resets", "samples/s",
                        "time / simulation"]))
-    settings = KalmanIdentifier().get_settings()
-    settings["r"] = "max(noise, 1e-3)**2"
-    path = write_json("ekf", {"samples": n, "seeds": list(seeds), "settings": settings,
+    used = KalmanIdentifier(**settings).get_settings()
+    used["r"] = "max(noise, 1e-3)**2"
+    name = "ekf" if not settings else f"ekf_alpha_min_{args.alpha_min:g}"
+    path = write_json(name, {"samples": n, "seeds": list(seeds), "settings": used,
                               "truth": dict(reference_model().params), "runs": out})
     print(f"wrote {path}")
 
