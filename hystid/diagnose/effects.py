@@ -1,0 +1,377 @@
+"""Candidate unmodelled effects: augmentations of the Duhem sandwich (eqs. 1, 2, 7).
+
+Each effect adds a few parameters to the nominal sandwich and reduces to it *exactly* (bit for
+bit) when they are zero. With ``ud`` the delayed input, ``v = w2 + c`` the actuator displacement
+with creep, ``yL`` the output of L2 and ``t`` the time since the start of the record::
+
+    delay       ud(k) = (1 - phi) u(k - n) + phi u(k - n - 1),   n + phi = d (samples)
+    slew_limit  w1(k) = w1(k-1) + clip(w1_L1(k) - w1(k-1), -1/s, 1/s),   s = inv_rate * fs
+    asymmetry   alpha_k = alpha (1 + e_a sgn dw1(k)),  g_k = g0 (1 + e_g sgn dw1(k))  in eq. (7)
+    creep       c(k) = c(k-1) + lam (kappa w2(k) - c(k-1)),   lam = 1 - exp(-dt / tau)
+    extra_mode  m(k) = 2 r cos(W) m(k-1) - r^2 m(k-2) + g K2 (1 - 2 r cos W + r^2) v(k)
+    drift       y(k) = yL(k) + m(k) + d1 t + d2 t^2
+
+where ``w1_L1`` is eq. (1) driven by ``ud``, ``K2`` the static gain of L2, and the mode has the
+natural frequency ``freq`` and damping ``zeta`` (``r = exp(-zeta w dt)``,
+``W = w dt sqrt(1 - zeta^2)``). All effects share one compiled kernel, so any set of them can be
+active at once (the greedy search adds them one by one).
+
+The harness makes records "from the reference stage with one effect" with
+:func:`simulate_with_effect`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..kernels import offsets
+from ..model import DuhemSandwich, InitialCondition, SandwichResponse
+
+__all__ = [
+    "EFFECTS",
+    "EFFECT_NAMES",
+    "AugmentedSandwich",
+    "Effect",
+    "augmented_output",
+    "simulate_with_effect",
+]
+
+#: Longest input dead time the kernel accepts, in samples.
+MAX_DELAY = 64
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate effect: its parameters, units, bounds and meaning.
+
+    Attributes
+    ----------
+    name : str
+        Effect name (``creep``, ``drift``, ...).
+    params : tuple of str
+        Names of its new parameters; all zero gives the nominal sandwich.
+    units : tuple of str
+        Units of each parameter (``y`` and ``u`` stand for the record's units).
+    slots : tuple of int
+        Positions of the parameters in the kernel's effect vector.
+    description : str
+        One line for reports.
+    """
+
+    name: str
+    params: tuple[str, ...]
+    units: tuple[str, ...]
+    slots: tuple[int, ...]
+    description: str
+
+
+# kernel effect vector: [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate]
+EFFECTS: dict[str, Effect] = {
+    e.name: e
+    for e in (
+        Effect("creep", ("gain", "tau"), ("1", "s"), (0, 1),
+               "slow creep of the actuator: first-order lag of gain*w2 added to w2"),
+        Effect("drift", ("rate", "accel"), ("y/s", "y/s^2"), (2, 3),
+               "slow output drift not tied to the input: rate*t + accel*t^2"),
+        Effect("extra_mode", ("gain", "freq", "zeta"), ("1", "Hz", "1"), (4, 5, 6),
+               "a further structural resonance in parallel with L2"),
+        Effect("delay", ("samples",), ("samples",), (7,),
+               "input dead time (fractional, linear interpolation)"),
+        Effect("asymmetry", ("alpha", "g0"), ("1", "1"), (8, 9),
+               "ascending and descending branches differ: alpha, g0 scaled by 1 +/- e"),
+        Effect("slew_limit", ("inv_rate",), ("s/u",), (10,),
+               "amplifier rate limit |dw1/dt| <= 1/inv_rate"),
+    )
+}
+EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
+N_SLOTS = 11
+
+
+def effect_vector(effects: Mapping[str, Mapping[str, float]] | None) -> np.ndarray:
+    """Pack ``{"creep": {"gain": .., "tau": ..}, ...}`` into the kernel's effect vector."""
+    phi = np.zeros(N_SLOTS)
+    for name, values in (effects or {}).items():
+        if name not in EFFECTS:
+            raise ValueError(f"effects: unknown effect {name!r}; expected one of {EFFECT_NAMES}")
+        eff = EFFECTS[name]
+        unknown = [k for k in values if k not in eff.params]
+        if unknown:
+            raise ValueError(
+                f"effects[{name!r}]: unknown parameters {unknown}; expected {list(eff.params)}"
+            )
+        for p, slot in zip(eff.params, eff.slots, strict=True):
+            v = float(values.get(p, 0.0))
+            if not np.isfinite(v):
+                raise ValueError(f"effects[{name!r}][{p!r}]: expected a finite number, got {v}")
+            phi[slot] = v
+    _check_vector(phi)
+    return phi
+
+
+def _check_vector(phi: np.ndarray) -> None:
+    if phi[1] < 0:
+        raise ValueError(f"creep tau must be >= 0 s, got {phi[1]}")
+    if phi[6] < 0 or phi[6] >= 1:
+        raise ValueError(f"extra_mode zeta must be in [0, 1), got {phi[6]}")
+    if phi[5] < 0:
+        raise ValueError(f"extra_mode freq must be >= 0 Hz, got {phi[5]}")
+    if not 0 <= phi[7] <= MAX_DELAY - 1:
+        raise ValueError(f"delay samples must be in [0, {MAX_DELAY - 1}], got {phi[7]}")
+    if abs(phi[8]) >= 1 or abs(phi[9]) >= 1:
+        raise ValueError(f"asymmetry alpha, g0 must be in (-1, 1), got {phi[8]}, {phi[9]}")
+    if phi[10] < 0:
+        raise ValueError(f"slew_limit inv_rate must be >= 0, got {phi[10]}")
+
+
+def effect_dict(phi: np.ndarray, names: Sequence[str] | None = None) -> dict[str, dict]:
+    """Unpack an effect vector into ``{name: {param: value}}`` for the given effect names."""
+    names = EFFECT_NAMES if names is None else names
+    return {
+        n: {p: float(phi[s]) for p, s in zip(EFFECTS[n].params, EFFECTS[n].slots, strict=True)}
+        for n in names
+    }
+
+
+# --------------------------------------------------------------------------- compiled kernel
+@njit(cache=True, inline="always")
+def _sgn(x):
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return 0.0
+
+
+@njit(cache=True)
+def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt):
+    """Simulate the augmented sandwich from index ``start`` on (extended arrays, past first).
+
+    ``U`` is the input, ``UD`` the delayed input, ``V = W2 + C`` the drive of L2, ``YL`` the
+    output of L2, ``M`` the extra mode and ``Y`` the measured-like output. Entries before
+    ``start`` are the past and are read, never written (except ``UD``, rebuilt from ``U``).
+    """
+    n1a, n1b, n2a, n2b, q1, q2 = layout[0], layout[1], layout[2], layout[3], layout[4], layout[5]
+    i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
+    alpha = theta[i_alpha]
+    f0 = theta[i_f0] if i_f0 >= 0 else 0.0
+    f1 = theta[i_f1]
+    g0 = theta[i_g0]
+    kappa, tau, d1, d2 = phi[0], phi[1], phi[2], phi[3]
+    gm, fm, zeta = phi[4], phi[5], phi[6]
+    e_a, e_g, inv_rate = phi[8], phi[9], phi[10]
+    # creep: first-order lag, lam = 1 - exp(-dt / tau)
+    lam = 1.0 - np.exp(-dt / tau) if tau > 0.0 else 1.0
+    # extra mode: poles r exp(+-jW); static gain gm * K2
+    c1 = 0.0
+    c2 = 0.0
+    bm = 0.0
+    if gm != 0.0:
+        w = 2.0 * np.pi * fm
+        r = np.exp(-zeta * w * dt)
+        wd = w * dt * np.sqrt(1.0 - zeta * zeta)
+        c1 = 2.0 * r * np.cos(wd)
+        c2 = -r * r
+        num2 = 1.0
+        for j in range(n2b):
+            num2 += theta[i_b2 + j]
+        den2 = 1.0
+        for i in range(n2a):
+            den2 += theta[i_a2 + i]
+        bm = gm * (num2 / den2) * (1.0 - c1 - c2)
+    # delay: ud(k) = (1 - frac) u(k - nd) + frac u(k - nd - 1)
+    nd = int(np.floor(phi[7]))
+    frac = phi[7] - nd
+    for k in range(U.shape[0]):
+        i0 = k - nd
+        i1 = k - nd - 1
+        a0 = U[i0] if i0 >= 0 else U[0]
+        a1 = U[i1] if i1 >= 0 else U[0]
+        UD[k] = (1.0 - frac) * a0 + frac * a1
+    lim = 1.0 / (inv_rate / dt) if inv_rate > 0.0 else 0.0
+    for k in range(start, U.shape[0]):
+        # eq. (1) on the delayed input, b10 = 1
+        w1 = UD[k - q1]
+        for j in range(1, n1b + 1):
+            w1 += theta[i_b1 + j - 1] * UD[k - q1 - j]
+        for i in range(1, n1a + 1):
+            w1 -= theta[i_a1 + i - 1] * W1[k - i]
+        if inv_rate > 0.0:
+            step = w1 - W1[k - 1]
+            if step > lim:
+                w1 = W1[k - 1] + lim
+            elif step < -lim:
+                w1 = W1[k - 1] - lim
+        W1[k] = w1
+        # eq. (7) with direction-dependent alpha and g0
+        w1p = W1[k - 1]
+        w2p = W2[k - 1]
+        dw1 = w1 - w1p
+        s = _sgn(dw1)
+        alpha_k = alpha * (1.0 + e_a * s)
+        g_k = g0 * (1.0 + e_g * s)
+        W2[k] = w2p + alpha_k * (f0 * _sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g_k * dw1
+        # creep of the actuator
+        C[k] = C[k - 1] + lam * (kappa * W2[k] - C[k - 1])
+        V[k] = W2[k] + C[k]
+        # eq. (2), b20 = 1
+        y = V[k - q2]
+        for j in range(1, n2b + 1):
+            y += theta[i_b2 + j - 1] * V[k - q2 - j]
+        for i in range(1, n2a + 1):
+            y -= theta[i_a2 + i - 1] * YL[k - i]
+        YL[k] = y
+        # extra mode in parallel with L2
+        M[k] = c1 * M[k - 1] + c2 * M[k - 2] + bm * V[k]
+        # drift, t from the start of the record
+        t = (k - start) * dt
+        Y[k] = YL[k] + M[k] + (d1 * t + d2 * t * t)
+
+
+class _Workspace:
+    """Extended arrays for one input signal, reused across simulations (the refits call the
+    kernel thousands of times)."""
+
+    def __init__(self, u: np.ndarray, P: int, x0: InitialCondition | None):
+        x0 = x0 or InitialCondition()
+        n = len(u)
+        self.P = P
+        self.n = n
+        self.U = np.concatenate([x0.window("u", P), np.asarray(u, float)])
+        self.past = {k: x0.window(k, P) for k in ("w1", "w2", "y")}
+        self.arrays = [np.zeros(P + n) for _ in range(8)]
+
+    def run(self, theta, layout, phi, dt) -> tuple[np.ndarray, ...]:
+        UD, W1, W2, V, C, YL, M, Y = self.arrays
+        P = self.P
+        W1[:P] = self.past["w1"]
+        W2[:P] = self.past["w2"]
+        V[:P] = self.past["w2"]
+        YL[:P] = self.past["y"]
+        Y[:P] = self.past["y"]
+        C[:P] = 0.0
+        M[:P] = 0.0
+        augmented_into(theta, layout, phi, self.U, UD, W1, W2, V, C, YL, M, Y, P, dt)
+        return W1[P:], W2[P:], Y[P:]
+
+
+def _history(model: DuhemSandwich) -> int:
+    return max(model.structure.history, 2)
+
+
+def augmented_output(
+    model: DuhemSandwich,
+    phi: np.ndarray,
+    u: np.ndarray,
+    x0: InitialCondition | None = None,
+) -> np.ndarray:
+    """Output of the augmented sandwich for the effect vector ``phi`` (fast path, no checks)."""
+    ws = _Workspace(u, _history(model), x0)
+    return ws.run(model.theta, model.structure.layout, phi, model.dt)[2].copy()
+
+
+class AugmentedSandwich:
+    """The Duhem sandwich with unmodelled effects switched on.
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        The nominal sandwich (L1 -> Duhem H -> L2).
+    effects : mapping
+        ``{effect name: {parameter: value}}``, see :data:`EFFECTS`; missing parameters are zero.
+    name : str, optional
+        Name for responses; by default the nominal model's name plus the effects.
+
+    Attributes
+    ----------
+    phi : ndarray
+        The effect vector used by the compiled kernel.
+    """
+
+    def __init__(
+        self,
+        model: DuhemSandwich,
+        effects: Mapping[str, Mapping[str, float]] | None = None,
+        name: str | None = None,
+    ) -> None:
+        if not isinstance(model, DuhemSandwich):
+            raise TypeError(f"model: expected a DuhemSandwich, got {type(model).__name__}")
+        self.model = model
+        self.effects = {k: dict(v) for k, v in (effects or {}).items()}
+        self.phi = effect_vector(self.effects)
+        if name is None:
+            name = model.name + (f" + {' + '.join(self.effects)}" if self.effects else "")
+        self.name = name
+
+    @property
+    def fs(self) -> float:
+        """Sampling rate in Hz."""
+        return self.model.fs
+
+    def simulate(
+        self, u: np.ndarray | Sequence[float], x0: InitialCondition | None = None
+    ) -> SandwichResponse:
+        """Simulate from the past ``x0`` (at rest by default); ``t = 0`` at the first sample.
+
+        Returns
+        -------
+        SandwichResponse
+            ``t, u, w1, w2, y``; ``w2`` is the Duhem output before creep. Unpacks as ``t, y``.
+        """
+        u = np.asarray(u, dtype=float)
+        if u.ndim != 1 or not np.all(np.isfinite(u)):
+            raise ValueError("u: expected a 1-D array of finite samples")
+        ws = _Workspace(u, _history(self.model), x0)
+        w1, w2, y = ws.run(self.model.theta, self.model.structure.layout, self.phi, self.model.dt)
+        t = np.arange(len(u)) / self.fs
+        return SandwichResponse(t, u, w1.copy(), w2.copy(), y.copy(), name=self.name)
+
+    def __repr__(self) -> str:
+        return f"AugmentedSandwich({self.model!r}, effects={self.effects})"
+
+
+def simulate_with_effect(
+    model: DuhemSandwich,
+    effect_name: str,
+    effect_params: Mapping[str, float],
+    u: np.ndarray | Sequence[float],
+    *,
+    noise: float = 0.0,
+    seed: int | None = 0,
+    x0: InitialCondition | None = None,
+) -> SandwichResponse:
+    """Simulate ``model`` with one unmodelled effect (and optional white sensor noise).
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        Nominal stage, e.g. :func:`hystid.reference.reference_model`.
+    effect_name : str
+        One of :data:`EFFECT_NAMES`, or ``"none"`` for the nominal stage.
+    effect_params : mapping
+        The effect's parameters (see :data:`EFFECTS`).
+    u : array_like
+        Input samples.
+    noise : float
+        Standard deviation of white noise added to ``y`` (output units).
+    seed : int or None
+        Seed of the noise.
+
+    Returns
+    -------
+    SandwichResponse
+        Simulated signals; ``y`` carries the noise.
+    """
+    if effect_name != "none" and effect_name not in EFFECTS:
+        raise ValueError(f"effect_name: expected 'none' or one of {EFFECT_NAMES}, got "
+                         f"{effect_name!r}")
+    if not (np.isfinite(noise) and noise >= 0):
+        raise ValueError(f"noise: expected a non-negative standard deviation, got {noise!r}")
+    effects = {} if effect_name == "none" else {effect_name: dict(effect_params)}
+    resp = AugmentedSandwich(model, effects).simulate(u, x0)
+    if noise > 0:
+        resp.y = resp.y + noise * np.random.default_rng(seed).standard_normal(len(resp.y))
+    return resp

@@ -1,0 +1,381 @@
+"""Screening of candidate effects and the held-out significance test.
+
+**Screen.** A candidate's *signature* is the change its new parameters make in the simulated
+output, with the part that the parameters already in the model can absorb projected out (their
+Jacobian, by finite differences). Its screen score is the share of the train residual that this
+signature matches (a score test: one Gauss-Newton step from the current model). Parameters that
+are undefined at zero strength (creep time constant, mode frequency and damping, slew limit,
+dead time) are scanned on a grid, seeded by the localisation (spectral peaks); the best grid
+points are the refit's starts. A signature that the model absorbs almost entirely (less than
+:data:`MIN_SEPARATION` of its norm left) means the records cannot show that effect: the candidate
+is reported as not excited.
+
+**Test.** A refit is accepted only when it lowers the held-out squared error significantly for
+coloured residuals: the loss differential ``d(k) = e_base(k)^2 - e_cand(k)^2`` is tested with a
+block t-test (the mean of ``d`` over contiguous blocks, Student t with ``blocks - 1`` degrees of
+freedom: robust to any dependence shorter than a block) and with a Diebold-Mariano statistic
+whose variance is a Newey-West HAC estimate (Bartlett kernel, Andrews' AR(1) plug-in bandwidth).
+The larger of the two one-sided p-values is used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from ..model import DuhemSandwich
+from .effects import EFFECTS, MAX_DELAY, N_SLOTS
+from .refit import FitData, Parametrisation, simulate_fit_data
+
+__all__ = ["MIN_SEPARATION", "ScreenResult", "compare_losses", "hac_variance", "screen"]
+
+#: Smallest share of a signature's norm left after projecting out the model's own directions
+#: for the records to show the effect.
+MIN_SEPARATION = 0.01
+
+_HINTS = {
+    "creep": "the input needs level changes held longer than the creep time",
+    "drift": "the record needs to be longer",
+    "extra_mode": "the input needs broadband content near the mode",
+    "delay": "the input needs fast changes",
+    "asymmetry": "the input needs ascending and descending branches of different shape",
+    "slew_limit": "the input needs fast steps",
+}
+
+
+@dataclass
+class ScreenResult:
+    """Screen of one candidate.
+
+    Attributes
+    ----------
+    name : str
+        Effect name.
+    score : float
+        Share of the train residual matched by the best signature (0..1).
+    separation : float
+        Largest share of a signature's norm that the model cannot absorb.
+    excited : bool
+        Whether the records can show the effect (``separation >= MIN_SEPARATION``).
+    starts : list of ndarray
+        Effect vectors to start the refit from, best first.
+    message : str
+        Why the candidate is not excited, or empty.
+    """
+
+    name: str
+    score: float
+    separation: float
+    excited: bool
+    starts: list[np.ndarray] = field(default_factory=list)
+    message: str = ""
+
+
+def _jacobian(model: DuhemSandwich, phi: np.ndarray, active: Sequence[str], data: FitData,
+              step_scale: float) -> np.ndarray:
+    """Finite-difference Jacobian of the simulated output w.r.t. the search coordinates."""
+    par = Parametrisation(model, active, len(data.u) / data.fs, step_scale)
+    z0 = par.to_z(model.theta, phi)
+    lo, hi = par.bounds()
+    work = DuhemSandwich(model.theta.copy(), model.structure, fs=model.fs)
+    theta, ph = par.to_values(z0, phi)
+    work.theta = theta
+    y0 = simulate_fit_data(work, ph, data)[2][data.weight].copy()
+    cols = []
+    for i in range(len(z0)):
+        h = 1e-6 * max(1.0, abs(z0[i]))
+        z = z0.copy()
+        z[i] = z0[i] + h if z0[i] + h <= hi[i] else z0[i] - h
+        theta, ph = par.to_values(z, phi)
+        work.theta = theta
+        yi = simulate_fit_data(work, ph, data)[2][data.weight]
+        cols.append((yi - y0) / (z[i] - z0[i]))
+    return np.column_stack(cols)
+
+
+def _orth(J: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the column space of a tall matrix (from its small Gram matrix;
+    a tall SVD is slow with a threaded BLAS on a busy machine)."""
+    J = J[:, np.all(np.isfinite(J), axis=0)]
+    norms = np.linalg.norm(J, axis=0)
+    J = J[:, norms > 0] / norms[norms > 0]
+    if J.shape[1] == 0:
+        return np.zeros((J.shape[0], 0))
+    w, V = np.linalg.eigh(J.T @ J)
+    keep = w > 1e-12 * w.max()
+    Q = J @ (V[:, keep] / np.sqrt(w[keep]))
+    # one re-orthogonalisation pass for accuracy
+    w2, V2 = np.linalg.eigh(Q.T @ Q)
+    return Q @ (V2 / np.sqrt(w2))
+
+
+def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least squares for a few columns by the normal equations (with a tiny ridge)."""
+    H = A.T @ A
+    return np.linalg.solve(H + 1e-14 * np.trace(H) * np.eye(len(H)) + 1e-300 * np.eye(len(H)),
+                           A.T @ b)
+
+
+def screen(
+    model: DuhemSandwich,
+    phi: np.ndarray,
+    active: Sequence[str],
+    data: FitData,
+    candidates: Sequence[str],
+    *,
+    step_scale: float,
+    peaks_hz: Sequence[float] = (),
+    n_starts: int = 2,
+) -> dict[str, ScreenResult]:
+    """Screen candidate effects against the train residual of the current model.
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        Current nominal parameters.
+    phi : ndarray
+        Current effect vector (effects already accepted).
+    active : sequence of str
+        Effects already in the model (their parameters count as the model's own directions).
+    data : FitData
+        Train record.
+    candidates : sequence of str
+        Effects to screen.
+    step_scale : float
+        Largest ``|dw1|`` per sample of the current simulation (scale of the slew grid).
+    peaks_hz : sequence of float
+        Frequencies where the localisation found narrow-band excess (mode grid seeds).
+    n_starts : int
+        Refit starts kept per candidate.
+
+    Returns
+    -------
+    dict
+        :class:`ScreenResult` by effect name.
+    """
+    fs = data.fs
+    T = len(data.u) / fs
+    dt = 1.0 / fs
+    y = data.y[data.weight]
+    y0 = simulate_fit_data(model, phi, data)[2][data.weight].copy()
+    e = y - y0
+    ee = float(e @ e)
+    Q = _orth(_jacobian(model, phi, active, data, step_scale))
+
+    def sim(ph):
+        return simulate_fit_data(model, ph, data)[2][data.weight].copy()
+
+    def with_(**slots):
+        ph = np.array(phi, float)
+        for k, v in slots.items():
+            ph[int(k[1:])] = v
+        return ph
+
+    def grid(name: str):
+        """Yield (directions N x k, function beta -> effect vector start)."""
+        h = 1e-4
+        if name == "creep":
+            for tau in np.geomspace(max(3 * dt, 1e-3), 2 * T, 10):
+                D = (sim(with_(s0=h, s1=tau)) - y0) / h
+                yield D[:, None], (lambda b, tau=tau: with_(s0=float(np.clip(b[0], -.5, .5)),
+                                                            s1=tau))
+        elif name == "drift":
+            D1 = (sim(with_(s2=h)) - y0) / h
+            D2 = (sim(with_(s3=h)) - y0) / h
+            yield np.column_stack([D1, D2]), (lambda b: with_(s2=b[0], s3=b[1]))
+        elif name == "extra_mode":
+            freqs = list(np.geomspace(max(20.0 / T, 50.0), 0.45 * fs, 48)) + list(peaks_hz)
+            for f in freqs:
+                if not 0 < f < 0.49 * fs:
+                    continue
+                for zeta in (0.01, 0.05):
+                    D = (sim(with_(s4=h, s5=f, s6=zeta)) - y0) / h
+                    yield D[:, None], (lambda b, f=f, z=zeta: with_(
+                        s4=float(np.clip(b[0], -1, 1)), s5=f, s6=z))
+        elif name == "delay":
+            for d in (0.1, 0.3, 0.6, 1.0, 2.0, 4.0, 8.0):
+                if d > MAX_DELAY - 1:
+                    continue
+                D = sim(with_(s7=d)) - y0
+                yield D[:, None], (lambda b, d=d: with_(s7=float(np.clip(b[0], 0.2, 1.5) * d)))
+        elif name == "asymmetry":
+            D1 = (sim(with_(s8=h)) - y0) / h
+            D2 = (sim(with_(s9=h)) - y0) / h
+            yield np.column_stack([D1, D2]), (lambda b: with_(s8=float(np.clip(b[0], -.5, .5)),
+                                                              s9=float(np.clip(b[1], -.5, .5))))
+        elif name == "slew_limit":
+            for rel in (1.05, 1.2, 1.5, 2.0, 3.0, 5.0):
+                inv = rel / (fs * step_scale)
+                D = sim(with_(s10=inv)) - y0
+                yield D[:, None], (lambda b, inv=inv: with_(s10=inv))
+        else:  # pragma: no cover - names are checked by the caller
+            raise ValueError(name)
+
+    out: dict[str, ScreenResult] = {}
+    best_dirs: dict[str, np.ndarray] = {}
+    for name in candidates:
+        scored = []
+        sep = 0.0
+        for D, start in grid(name):
+            D = np.where(np.isfinite(D), D, 0.0)
+            Dp = D - Q @ (Q.T @ D)
+            nD = np.linalg.norm(D, axis=0)
+            if np.all(nD == 0):
+                continue
+            sep = max(sep, float(np.min(np.linalg.norm(Dp, axis=0) / np.maximum(nD, 1e-300))))
+            b = _lstsq(Dp, e)
+            fitted = Dp @ b
+            score = float(fitted @ fitted / ee) if ee > 0 else 0.0
+            # by Frisch-Waugh-Lovell, b is also the effect's coefficient in the joint step
+            scored.append((score, start(b), Dp))
+        if not scored:
+            out[name] = ScreenResult(name, 0.0, 0.0, False, [],
+                                     f"{name}: its parameters do not change the simulated "
+                                     f"output on these records; {_HINTS[name]}")
+            continue
+        scored.sort(key=lambda s: -s[0])
+        excited = sep >= MIN_SEPARATION
+        msg = "" if excited else (
+            f"{name}: the records cannot show it: the model absorbs "
+            f"{100 * (1 - sep):.2f} % of its signature; {_HINTS[name]}")
+        starts = [s[1] for s in scored[:n_starts]]
+        out[name] = ScreenResult(name, scored[0][0], sep, excited, starts, msg)
+        best_dirs[name] = scored[0][2]
+    # creep and drift are told apart only by input level changes
+    if ("creep" in best_dirs and "drift" in best_dirs
+            and max(out["creep"].score, out["drift"].score) > 0.01):
+        A, B = _orth(best_dirs["creep"]), _orth(best_dirs["drift"])
+        if A.shape[1] and B.shape[1]:
+            cos = float(np.linalg.svd(A.T @ B, compute_uv=False).max())
+            if cos > 0.995:
+                for k in ("creep", "drift"):
+                    r = out[k]
+                    r.message = (r.message + "; " if r.message else "") + (
+                        f"creep and drift cannot be told apart on these records (signatures "
+                        f"{100 * cos:.1f} % alike): the input needs level changes")
+    return out
+
+
+def hac_variance(d: np.ndarray, demean: bool = True) -> tuple[float, int]:
+    """Newey-West long-run variance of ``d`` and the bandwidth used.
+
+    Bartlett kernel with Andrews' (1991) AR(1) plug-in bandwidth
+    ``L = 1.1447 (a N)^(1/3)``, ``a = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``, at most ``N / 4``.
+    With ``demean=False`` the series is taken as already centred (a score with known mean 0).
+    """
+    x = np.asarray(d, float)
+    x = x - np.mean(x) if demean else x
+    n = len(x)
+    g0 = float(x @ x) / n
+    if n < 8 or g0 == 0:
+        return g0, 0
+    rho = float(np.clip((x[1:] @ x[:-1]) / (x @ x), -0.99, 0.99))
+    a = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    L = int(min(np.ceil(1.1447 * (a * n) ** (1 / 3)), n // 4))
+    m = int(2 ** np.ceil(np.log2(2 * n)))
+    spec = np.fft.rfft(x, m)
+    gam = np.fft.irfft(spec * np.conj(spec), m)[: L + 1] / n
+    w = 1.0 - np.arange(1, L + 1) / (L + 1)
+    return float(max(gam[0] + 2 * np.sum(w * gam[1:]), gam[0] * 1e-6)), L
+
+
+def compare_losses(
+    e_base: Sequence[np.ndarray], e_cand: Sequence[np.ndarray], *, blocks: int = 12
+) -> dict[str, float]:
+    """One-sided test that the candidate's held-out squared error is smaller than the base's.
+
+    With ``delta = e_base - e_cand`` (the difference of the two simulations) the loss
+    differential is ``d = e_base^2 - e_cand^2 = 2 e_base delta - delta^2``, so
+    ``mean(d) > 0`` exactly when the coefficient ``beta`` of ``e_base = beta delta + eps``
+    exceeds 1/2 (the candidate's output is nearer the data than the base's; a forecast
+    encompassing form of the Diebold-Mariano test). Given the two fitted models, ``delta`` is
+    fixed and the randomness is in ``eps``: the variance of ``sum(delta eps)`` is estimated
+    with a Newey-West HAC estimator (Bartlett kernel, Andrews' bandwidth) and, separately,
+    from contiguous block sums (Student t with ``blocks - 1`` degrees of freedom); both are
+    valid for coloured residuals and the larger p-value is kept. The unconditional
+    Diebold-Mariano statistic on ``d`` (HAC variance) is reported too.
+
+    Parameters
+    ----------
+    e_base, e_cand : sequence of ndarray
+        Held-out errors of the two models, one array per held-out segment.
+    blocks : int
+        Number of contiguous blocks of the block test.
+
+    Returns
+    -------
+    dict
+        ``p_value``, ``beta``, ``t_hac``, ``p_hac``, ``hac_lag``, ``t_block``, ``p_block``,
+        ``dm``, ``p_dm``, ``rms_base``, ``rms_cand`` and ``rel_reduction``
+        (``1 - rms_cand / rms_base``).
+    """
+    eb = [np.asarray(a, float) for a in e_base]
+    ec = [np.asarray(b, float) for b in e_cand]
+    deltas = [a - b for a, b in zip(eb, ec, strict=True)]
+    Eb, Ec, De = np.concatenate(eb), np.concatenate(ec), np.concatenate(deltas)
+    n = len(Eb)
+    mb, mc = float(np.mean(Eb**2)), float(np.mean(Ec**2))
+    out = {"rms_base": float(np.sqrt(mb)), "rms_cand": float(np.sqrt(mc)),
+           "rel_reduction": float(1.0 - np.sqrt(mc / mb)) if mb > 0 else 0.0}
+    dd = float(De @ De)
+    if dd == 0:
+        out.update({"p_value": 1.0, "beta": 0.0, "t_hac": 0.0, "p_hac": 1.0, "hac_lag": 0,
+                    "t_block": 0.0, "p_block": 1.0, "dm": 0.0, "p_dm": 0.5})
+        return out
+    beta = float(Eb @ De / dd)
+    # statistic: sum(delta (e_base - delta/2)) = (beta - 1/2) sum(delta^2)
+    num = float(De @ Eb - 0.5 * dd)
+    var = 0.0
+    lag = 0
+    for a, de in zip(eb, deltas, strict=True):
+        eps = a - beta * de
+        v, L = hac_variance(de * eps, demean=False)
+        var += v * len(a)
+        lag = max(lag, L)
+    t_hac = num / np.sqrt(var) if var > 0 else (np.inf if num > 0 else -np.inf)
+    p_hac = float(stats.norm.sf(t_hac))
+    # block version: block sums of delta (e_base - delta / 2) around their share of the total
+    x = De * (Eb - beta * De) + (beta - 0.5) * De * De
+    t_block, p_block = _block_t_centered(x, De * De, beta, blocks)
+    d = Eb**2 - Ec**2
+    v_dm = sum(hac_variance(a**2 - b**2)[0] * len(a) for a, b in zip(eb, ec, strict=True))
+    dm = float(d.mean() / np.sqrt(v_dm / n**2)) if v_dm > 0 else 0.0
+    out.update({"p_value": max(p_hac, p_block), "beta": beta, "t_hac": float(t_hac),
+                "p_hac": p_hac, "hac_lag": int(lag), "t_block": t_block, "p_block": p_block,
+                "dm": dm, "p_dm": float(stats.norm.sf(dm))})
+    return out
+
+
+def _block_t_centered(x: np.ndarray, w: np.ndarray, beta: float, blocks: int):
+    """Block t-test of ``sum(x) > 0`` where ``x = delta eps + (beta - 1/2) delta^2``: the
+    spread comes from the block sums of ``delta eps`` alone (``w = delta^2`` carries the
+    fixed part)."""
+    B = int(min(blocks, max(2, len(x) // 50)))
+    fixed = (beta - 0.5) * w
+    noise = np.array([c.sum() for c in np.array_split(x - fixed, B)])
+    sd = float(np.sqrt(np.sum(noise**2) * B / (B - 1)))
+    total = float(x.sum())
+    if sd == 0:
+        t = np.inf if total > 0 else (-np.inf if total < 0 else 0.0)
+    else:
+        t = total / sd
+    return float(t), float(stats.t.sf(t, B - 1))
+
+
+def zero_vector() -> np.ndarray:
+    """An effect vector with every effect off."""
+    return np.zeros(N_SLOTS)
+
+
+def effect_names_check(names: Sequence[str]) -> tuple[str, ...]:
+    """Validate a list of candidate names."""
+    names = tuple(names)
+    bad = [n for n in names if n not in EFFECTS]
+    if bad:
+        raise ValueError(f"effects: unknown {bad}; expected names from {tuple(EFFECTS)}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"effects: duplicate names in {names}")
+    return names
