@@ -120,6 +120,15 @@ def test_linear_bootstrap_is_the_prefix_fit_then_the_same_updates():
         KalmanIdentifier(theta0="linear").update(1.0, 0.0)
 
 
+def test_failed_bootstrap_falls_back_to_the_uninformed_start():
+    short = reference_record(0.01, seed=6)[:8]  # too short for the ARX fit
+    with pytest.warns(RuntimeWarning, match="bootstrap failed"):
+        ekf = KalmanIdentifier(theta0="linear").initialize(short)
+    assert ekf.start_ == "uninformed"
+    assert ekf.theta == pytest.approx(np.full(6, 0.01))
+    assert np.diag(ekf.P)[4:] == pytest.approx(np.full(6, 0.01))
+
+
 def test_non_finite_samples_are_skipped():
     record = reference_record(0.02, seed=7, noise=1e-3)
     u, y = record.u.copy(), record.y.copy()

@@ -217,10 +217,10 @@ class KalmanIdentifier:
         bootstrap from :func:`~hystid.identify.offline.linear_start` on the first
         ``n_bootstrap`` samples (see :meth:`initialize`).
     P0_theta : float, array or None
-        Initial variance of each parameter. By default (None) it follows the start: for
-        every parameter from a scalar ``theta0`` (an uninformed start such as the paper's
-        0.01) is ``0.01``; from a vector, a dict or the ``"linear"`` bootstrap it is
-        ``(P0_RELATIVE * |theta_i(0)|)^2`` (at least 1e-8), ``P0_RELATIVE = 0.2``.
+        Initial variance of each parameter. By default (None) it follows the start: ``0.01``
+        for every parameter after an uninformed start (a scalar ``theta0`` such as the paper's
+        0.01, or a failed bootstrap), ``(P0_RELATIVE * |theta_i(0)|)^2`` (at least 1e-8,
+        ``P0_RELATIVE = 0.2``) after a vector, a dict or the ``"linear"`` bootstrap.
     P0_state : float or array
         Initial variance of each internal signal in the state (the records start at rest).
     q_theta : float or array
@@ -261,6 +261,10 @@ class KalmanIdentifier:
         Number of samples processed.
     n_skipped, n_resets, n_projections : int
         Non-finite samples not used, covariance resets, projections of theta.
+    theta_start_ : ndarray
+        The start actually used (``theta0`` or the bootstrap's result).
+    start_ : str
+        ``"uninformed"`` (scalar ``theta0`` or failed bootstrap), ``"theta0"`` or ``"linear"``.
 
     Examples
     --------
@@ -349,7 +353,7 @@ class KalmanIdentifier:
         """Initial parameter variances (see ``P0_theta``)."""
         if self.P0_theta is not None:
             return self.P0_theta
-        if np.isscalar(self.theta0) and not isinstance(self.theta0, str):
+        if self.start_ == "uninformed":
             return np.full(len(theta), 0.01)
         return np.maximum((P0_RELATIVE * np.abs(theta)) ** 2, 1e-8)
 
@@ -377,7 +381,10 @@ class KalmanIdentifier:
             ``self``, ready for :meth:`update`.
         """
         s = self.structure
+        # what the start is, for the default prior: "uninformed", "theta0" or "linear"
         self.start_ = "theta0"
+        if np.isscalar(self.theta0) and not isinstance(self.theta0, str):
+            self.start_ = "uninformed"
         if isinstance(self.theta0, str):
             if record_prefix is None:
                 raise ValueError("record_prefix: theta0='linear' needs the first samples of the "
@@ -388,6 +395,7 @@ class KalmanIdentifier:
                 warnings.warn("theta0='linear': the ARX bootstrap failed; starting from 0.01",
                               RuntimeWarning, stacklevel=2)
                 theta = np.full(len(s.names), 0.01)
+                self.start_ = "uninformed"
             else:
                 self.start_ = "linear"
             theta = project_admissible(theta, s, _KMAX)
@@ -538,7 +546,8 @@ class KalmanIdentifier:
     def fit(
         self, record: Record, progress: Callable[[int, int], None] | None = None
     ) -> IdentificationResult:
-        """Run the filter over a whole record, from :meth:`initialize`.
+        """Run the filter over a whole record, from :meth:`initialize` (fit restarts; call
+        :meth:`update` to go on from the current estimate).
 
         Parameters
         ----------
@@ -552,7 +561,7 @@ class KalmanIdentifier:
         IdentificationResult
             ``method='ekf'``; ``history`` holds theta after each sample (N x n_params),
             ``converged_at`` the stop-index sample (epsilon = 1e-4); ``info`` the counters, the
-            start used and the final innovation variance.
+            start used and the RMS innovation over the last tenth of the record.
         """
         u, y = _record_signals(record)
         fs = getattr(record, "fs", self.fs)
@@ -562,10 +571,12 @@ class KalmanIdentifier:
         self.initialize(record if isinstance(self.theta0, str) else None)
         n = len(u)
         history = np.empty((n, len(self.structure.names)))
+        innovation = np.zeros(n)
         self._quiet = True  # one warning at the end instead of one per sample
         try:
             for k in range(n):
                 history[k] = self.update(u[k], y[k])
+                innovation[k] = self.e
                 if progress is not None and ((k + 1) % 1000 == 0 or k + 1 == n):
                     progress(k + 1, n)
         finally:
@@ -576,7 +587,9 @@ class KalmanIdentifier:
         info = {"n_skipped": self.n_skipped, "n_resets": self.n_resets,
                 "n_projections": self.n_projections, "start": self.start_,
                 "theta_start": self.theta_start_.tolist(),
-                "filter": "filterpy.kalman.ExtendedKalmanFilter", "samples": n}
+                "filter": "filterpy.kalman.ExtendedKalmanFilter", "samples": n,
+                "rms_innovation": float(np.sqrt(np.mean(innovation[-max(1, n // 10):] ** 2)))
+                if n else None}
         settings = {**self.get_settings(), "samples": n}
         return IdentificationResult(self.model, "ekf", settings, history=history,
                                     converged_at=converged_at(history, 1e-4), info=info)
