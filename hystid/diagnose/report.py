@@ -1,0 +1,223 @@
+"""Readable summary and figures of a diagnosis.
+
+Figures (PNG): ``error_time.png`` (held-out error in time, rolling RMS, slow trend, noise floor,
+error after input steps), ``spectrum.png`` (residual spectrum against the noise floor, input-
+residual coherence with its bound), ``branch.png`` (error on ascending and descending branches),
+``gap.png`` (held-out RMS before and after each candidate) and ``correlation.png`` (correlation
+tests with their coloured-signal bands).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .diagnosis import DiagnosisResult
+
+__all__ = ["plot_diagnosis", "summary_text"]
+
+
+def _fmt_params(params: dict | None) -> str:
+    if not params:
+        return ""
+    return ", ".join(f"{k}={v:.4g}" for k, v in params.items())
+
+
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:.0f} %"
+
+
+def _num(x) -> str:
+    return "-" if x is None else f"{x:.4g}"
+
+
+def summary_text(result: DiagnosisResult) -> str:
+    """The diagnosis as readable text: where, which, how far."""
+    s = result.settings
+    unit = ""
+    lines = [
+        f"Sim-to-real gap diagnosis: {s['train_samples']} train samples, {s['val_samples']} "
+        f"held-out samples at {s['fs']:g} Hz",
+        f"nominal model: held-out RMS {result.nominal['rms_val']:.4g}{unit} (train "
+        f"{result.nominal['rms_train']:.4g}); noise floor {result.noise_floor_rms:.4g}; gap "
+        f"{result.nominal['gap']:.4g}",
+    ]
+    if "refit" in result.nominal:
+        r = result.nominal["refit"]
+        lines.append(f"  given model refitted alone: held-out RMS {r['rms_val']:.4g}")
+    lines.append("")
+    lines.append("Where the error lies:")
+    lines += [f"  - {f}" for f in result.where.findings[1:]] or ["  - (nothing stands out)"]
+    lines.append("")
+    lines.append("Which effect (candidates, best first):")
+    header = ["effect", "status", "held-out RMS", "gap closed", "p-value", "screen", "params"]
+    rows = []
+    for e in result.effects:
+        rows.append([e.name, e.status, _num(e.rms_val_after), _pct(e.gap_closed),
+                     "-" if "p_value" not in e.test else f"{e.test['p_value']:.2g}",
+                     f"{e.screen_score:.3f}", _fmt_params(e.params)])
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    lines.append("  " + "  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)))
+    for r in rows:
+        lines.append("  " + "  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)))
+    notes = [e for e in result.effects if e.message]
+    for e in notes:
+        lines.append(f"  note: {e.message}")
+    lines.append("")
+    if result.accepted:
+        lines.append("How far it shrinks (accepted, cumulative):")
+        for e in result.effects:
+            if e.accepted and e.cumulative:
+                lines.append(f"  round {e.round}: + {e.name}: held-out RMS "
+                             f"{e.cumulative['rms_val']:.4g}, gap closed "
+                             f"{_pct(e.cumulative.get('gap_closed'))} (p = "
+                             f"{e.cumulative['p_value']:.2g})")
+        lines.append(f"final: held-out RMS {result.nominal['rms_val']:.4g} -> "
+                     f"{result.final['rms_val']:.4g} ({_pct(result.final['gap_closed'])} of the "
+                     f"gap to the noise floor closed)")
+        lines += [f"  - {f}" for f in result.where_final.findings[1:3]]
+    else:
+        lines.append("accepted: none (no candidate lowers the held-out error significantly and "
+                     f"by at least {100 * s['min_reduction']:.0f} %)")
+    return "\n".join(lines)
+
+
+def plot_diagnosis(result: DiagnosisResult, out_dir) -> list[Path]:
+    """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    w0, wf = result.where, result.where_final
+    nf = result.noise_floor_rms
+    ts = w0.series["time"]
+
+    # ---------------------------------------------------------------- error in time
+    fig, ax = plt.subplots(2, 1, figsize=(9, 6))
+    t = ts["t"]
+    ax[0].plot(t, ts["e"], lw=0.4, color="0.6", label="error (nominal)")
+    ax[0].plot(t, ts["rolling_rms"], lw=1.2, color="C3", label="rolling RMS")
+    ax[0].plot(t, ts["trend"], lw=1.2, color="C0", label="slow trend")
+    if result.accepted:
+        ax[0].plot(t, wf.series["time"]["e"], lw=0.4, color="C2", alpha=0.7,
+                   label="error (with " + " + ".join(result.accepted) + ")")
+    for sgn in (1, -1):
+        ax[0].axhline(sgn * nf, ls="--", color="k", lw=0.8)
+    ax[0].set_xlabel("time in its record [s]")
+    ax[0].set_ylabel("y - yhat")
+    ax[0].set_title("held-out simulation error (dashed: noise floor)")
+    ax[0].legend(loc="best", fontsize=7)
+    lag = ts["step_lags"]
+    ax[1].axhline(0, color="k", lw=0.5)
+    ax[1].plot(lag, ts["step_avg"], "o-", ms=3, label="nominal")
+    if result.accepted:
+        ax[1].plot(lag, wf.series["time"]["step_avg"], "o-", ms=3, label="final")
+    ax[1].axvline(0, color="k", ls=":", lw=0.8)
+    ax[1].set_xlabel("samples after an input step")
+    ax[1].set_ylabel("mean error x sign(step)")
+    ax[1].set_title(f"error after input steps ({w0.time['steps']} steps)")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "error_time.png"))
+
+    # ---------------------------------------------------------------- spectrum
+    fser = w0.series["frequency"]
+    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    f = fser["f"]
+    ax[0].loglog(f[1:], fser["psd"][1:], lw=1, label="residual (nominal)")
+    if result.accepted:
+        ax[0].loglog(f[1:], wf.series["frequency"]["psd"][1:], lw=1,
+                     label="residual (with " + " + ".join(result.accepted) + ")")
+    ax[0].axhline(2 * nf**2 / w0.series["fs"], color="k", ls="--", lw=1,
+                  label=f"noise floor ({nf:.3g} RMS)")
+    band = w0.frequency["band_hz"]
+    if band[1] > band[0]:
+        ax[0].axvspan(max(band[0], f[1]), band[1], color="C3", alpha=0.08,
+                      label="10-90 % of the excess power")
+    ax[0].set_ylabel("PSD [unit^2/Hz]")
+    ax[0].legend(fontsize=7)
+    ax[0].set_title("residual spectrum against the noise floor")
+    ax[1].semilogx(f[1:], fser["coherence"][1:], lw=1)
+    ax[1].axhline(fser["coherence_bound"], color="C3", ls="--", lw=1, label="1 % bound")
+    ax[1].set_ylim(0, 1)
+    ax[1].set_xlabel("frequency [Hz]")
+    ax[1].set_ylabel("coherence u - e")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "spectrum.png"))
+
+    # ---------------------------------------------------------------- branches
+    bs = w0.series["branch"]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    y, e, up = bs["y"], bs["e"], bs["up"]
+    step = max(1, len(y) // 6000)
+    ax[0].plot(y[::step][up[::step]], e[::step][up[::step]], ".", ms=1, alpha=0.4, color="C0",
+               label="ascending")
+    ax[0].plot(y[::step][~up[::step]], e[::step][~up[::step]], ".", ms=1, alpha=0.4,
+               color="C1", label="descending")
+    centres = 0.5 * (bs["edges"][1:] + bs["edges"][:-1])
+    ax[0].plot(centres, bs["ascending"], "o-", color="C0")
+    ax[0].plot(centres, bs["descending"], "s-", color="C1")
+    ax[0].set_xlabel("simulated output")
+    ax[0].set_ylabel("error")
+    ax[0].set_title("error by branch")
+    ax[0].legend(fontsize=7, markerscale=8)
+    ax[1].plot(centres, 0.5 * (bs["ascending"] + bs["descending"]), "o-", label="common")
+    ax[1].plot(centres, 0.5 * (bs["ascending"] - bs["descending"]), "s-", label="loop width")
+    ax[1].axhline(0, color="k", lw=0.5)
+    ax[1].set_xlabel("simulated output")
+    ax[1].set_title("common vs loop-width error")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    paths.append(_save(fig, out / "branch.png"))
+
+    # ---------------------------------------------------------------- gap per candidate
+    fig, ax = plt.subplots(figsize=(8, 0.6 * len(result.effects) + 1.5))
+    names = [e.name for e in result.effects]
+    before = result.nominal["rms_val"]
+    after = [e.rms_val_after if e.rms_val_after is not None else np.nan for e in result.effects]
+    yk = np.arange(len(names))[::-1]
+    ax.barh(yk + 0.2, [before] * len(names), height=0.4, color="0.7", label="nominal")
+    colors = ["C2" if e.accepted else "C0" for e in result.effects]
+    ax.barh(yk - 0.2, np.nan_to_num(after), height=0.4, color=colors, label="with the effect")
+    for k, e in zip(yk, result.effects, strict=True):
+        text = e.status if e.gap_closed is None else f"{e.status}, {_pct(e.gap_closed)} closed"
+        ax.text(before * 1.01, k, text, va="center", fontsize=7)
+    ax.axvline(nf, color="k", ls="--", lw=1, label="noise floor")
+    ax.set_yticks(yk)
+    ax.set_yticklabels(names)
+    ax.set_xlabel("held-out RMS error")
+    ax.set_xlim(0, before * 1.45)
+    ax.set_title("gap before/after per candidate (green: accepted)")
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    paths.append(_save(fig, out / "gap.png"))
+
+    # ---------------------------------------------------------------- correlation tests
+    cs = w0.series["correlation"]
+    fig, axs = plt.subplots(1, len(cs), figsize=(3 * len(cs), 3), sharey=True)
+    for a, (name, res) in zip(np.atleast_1d(axs), cs.items(), strict=True):
+        a.plot(res["lags"], res["rho"], lw=0.8)
+        a.axhline(res["band"], color="C3", ls="--", lw=0.8)
+        a.axhline(-res["band"], color="C3", ls="--", lw=0.8)
+        a.set_title(name, fontsize=8)
+        a.set_xlabel("lag [samples]")
+    np.atleast_1d(axs)[0].set_ylabel("correlation (99 % band)")
+    fig.tight_layout()
+    paths.append(_save(fig, out / "correlation.png"))
+    return paths
+
+
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
