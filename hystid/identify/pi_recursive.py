@@ -49,7 +49,7 @@ __all__ = [
     "pi_output_sensitivities",
 ]
 
-PREDICTORS = ("output-error", "equation-error")
+FORMS = ("key-term", "output-error")
 
 
 # =========================================================================== compiled kernels
@@ -218,13 +218,63 @@ def _admissible(theta, layout, c):
 
 
 @njit(cache=True)
-def rpem_step(theta, P, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k,
-              y_meas, equation_error, c, psi_c, psi, K, Ph):
-    """One sample of the extended recursion (eqs. 15-19) on the PI sandwich.
+def _eria_update(theta, U, D, lam, rho_prev, rho, psi, e, K, f, ia1, n1a, ia2, n2a):
+    """Eqs. (16)-(19) given the regressor ``psi`` and the error ``e``; returns Lambda^-1(k).
 
-    Updates ``theta``, ``P`` in place (``K`` too) and returns ``(e, Lambda^-1, yhat)``.
+    ``P = U diag(D) U'`` is kept in U-D factored form (Bierman's update, O(n^2)) so that it stays
+    positive definite in floating point; ``theta``, ``U``, ``D`` and ``K`` are updated in place.
+    The gain is eq. (17), ``K = P h / (h' P h + mu Lambda^-1)``; the covariance update is the
+    matching rank-one form ``P(k) = [P - K h' P] / mu``, which is eq. (18) when ``mu = 1``
+    (for ``mu < 1``, (18) adds ``(1 - mu) Lambda^-1 K K' / mu``). The step is halved while it
+    would put a pole of L1 (``theta[ia1:ia1+n1a]``) or L2 (``theta[ia2:ia2+n2a]``) on or outside
+    the unit circle (at most 30 times, then it is dropped).
     """
-    npar = theta.shape[0]
+    n = theta.shape[0]
+    mu = rho_prev / rho * (1.0 - rho)                  # forgetting factor mu(k)
+    lam = lam + rho * (e * e - lam)                     # (19)
+    r = mu * lam
+    if not r > 0.0:
+        r = 1e-300
+    # Bierman: f = U' h, v = D f (v stored in K, then turned into the gain)
+    for j in range(n):
+        s = psi[j]
+        for i in range(j):
+            s += U[i, j] * psi[i]
+        f[j] = s
+    alpha = r + D[0] * f[0] * f[0]
+    K[0] = D[0] * f[0]
+    D[0] = D[0] * r / alpha
+    for j in range(1, n):
+        vj = D[j] * f[j]
+        beta = alpha
+        alpha = alpha + vj * f[j]
+        lj = -f[j] / beta
+        D[j] = D[j] * beta / alpha
+        for i in range(j):
+            tmp = U[i, j]
+            U[i, j] = tmp + K[i] * lj
+            K[i] = K[i] + tmp * vj
+        K[j] = vj
+    for j in range(n):
+        K[j] = K[j] / alpha                             # (17)
+        D[j] = D[j] / mu                                # (18)
+    old = theta.copy()
+    step = 1.0
+    for _ in range(31):                                 # (16), kept stable
+        for a in range(n):
+            theta[a] = old[a] + step * K[a] * e
+        if _is_stable_poly(theta[ia1 : ia1 + n1a]) and _is_stable_poly(theta[ia2 : ia2 + n2a]):
+            return lam
+        step *= 0.5
+    theta[:] = old
+    return lam
+
+
+@njit(cache=True)
+def _minimal_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP,
+                  k, y_meas, equation_error, c, psi_c, psi, K, f):
+    # regressor: gradient of yhat(k) w.r.t. the model's own (free) parameters
+    n1a, n1b, n, n2a = layout[0], layout[1], layout[2], layout[3]
     nc = c.shape[0]
     full_coefficients(theta, layout, c)
     pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k)
@@ -232,40 +282,11 @@ def rpem_step(theta, P, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1, SW2, SY
     for m in range(nc):
         psi_c[m] = SY[k, m]
     free_gradient(psi_c, layout, psi)
-    e = y_meas - yhat                                                    # (15)
-    mu = rho_prev / rho * (1.0 - rho)
-    lam = lam + rho * (e * e - lam)                                      # (19)
-    hPh = 0.0
-    for a in range(npar):
-        s = 0.0
-        for b in range(npar):
-            s += P[a, b] * psi[b]
-        Ph[a] = s
-        hPh += psi[a] * s
-    den = hPh + mu * lam
-    if not den > 0.0:
-        den = 1e-300
-    for a in range(npar):
-        K[a] = Ph[a] / den                                               # (17)
-    # (18), Joseph form: (I - K h') P (I - K h')' + K lam K' = P - K Ph' - Ph K' + hPh K K' + ...
-    for a in range(npar):
-        for b in range(a, npar):
-            v = (P[a, b] - K[a] * Ph[b] - Ph[a] * K[b] + (hPh + lam) * K[a] * K[b]) / mu
-            P[a, b] = v
-            P[b, a] = v
-    # (16) with the step halved while it would leave the stable set
-    step = 1.0
-    old = theta.copy()
-    for _ in range(31):
-        for a in range(npar):
-            theta[a] = old[a] + step * K[a] * e
-        if _admissible(theta, layout, c):
-            break
-        step *= 0.5
-    else:
-        theta[:] = old
+    e = y_meas - yhat                                   # (15)
+    lam = _eria_update(theta, U_, D, lam, rho_prev, rho, psi, e, K, f, 0, n1a,
+                       n1a + n1b - 1 + n, n2a)
     if equation_error:
-        # the paper-like regressor: past outputs are the measured ones (no output recursion)
+        # past outputs in the regressor are the measured ones (no output recursion)
         Y[k] = y_meas
         for m in range(nc):
             SY[k, m] = 0.0
@@ -273,27 +294,137 @@ def rpem_step(theta, P, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1, SW2, SY
 
 
 @njit(cache=True)
-def rpem_run(theta, P, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start,
-             ymeas, equation_error, history, errors, yhats):
-    """Run :func:`rpem_step` from index ``start`` to the end; rows of ``history`` get theta."""
+def _l1_operators(theta, layout, r, U, W1, S1, PH, SPH, p, SP, k, c1):
+    # eqs. (29)-(30) at index k with d w1 / d c1 and d p_i / d c1 (c1 = full L1 coefficients);
+    # theta starts with the free L1 parameters [a1.., b12..]; b11 gives unit DC gain
+    n1a, n1b, n, q1 = layout[0], layout[1], layout[2], layout[5]
+    n1 = n1a + n1b
+    gain = 1.0
+    for i in range(n1a):
+        c1[i] = theta[i]
+        gain += theta[i]
+    for j in range(1, n1b):
+        c1[n1a + j] = theta[n1a + j - 1]
+        gain -= theta[n1a + j - 1]
+    c1[n1a] = gain
+    w1 = 0.0
+    for j in range(n1b):
+        w1 += c1[n1a + j] * U[k - q1 - j]
+    for i in range(n1a):
+        w1 -= c1[i] * W1[k - 1 - i]
+    W1[k] = w1
+    for m in range(n1):
+        s = 0.0
+        for i in range(n1a):
+            s -= c1[i] * S1[k - 1 - i, m]
+        S1[k, m] = s
+    for i in range(n1a):
+        S1[k, i] -= W1[k - 1 - i]
+    for j in range(n1b):
+        S1[k, n1a + j] += U[k - q1 - j]
+    for i in range(n):
+        lo = w1 - r[i]
+        hi = w1 + r[i]
+        if lo > p[i]:
+            p[i] = lo
+            for m in range(n1):
+                SP[i, m] = S1[k, m]
+        elif hi < p[i]:
+            p[i] = hi
+            for m in range(n1):
+                SP[i, m] = S1[k, m]
+        PH[k, i] = p[i]
+        for m in range(n1):
+            SPH[k, i, m] = SP[i, m]
+
+
+@njit(cache=True)
+def _keyterm_regressor(beta, ib, layout, PH, SPH, k, phi, psi1):
+    # phi[ib + j N + i] = p_i(k - q2 - j); psi1 = sum_j sum_i beta_ji d p_i(k-q2-j) / d c1;
+    # returns sum_j sum_i beta_ji p_i(k - q2 - j)
+    n1a, n1b, n, n2b, q2 = layout[0], layout[1], layout[2], layout[4], layout[6]
+    n1 = n1a + n1b
+    acc = 0.0
+    for m in range(n1):
+        psi1[m] = 0.0
+    for j in range(n2b):
+        kk = k - q2 - j
+        for i in range(n):
+            b = beta[j * n + i]
+            acc += b * PH[kk, i]
+            phi[ib + j * n + i] = PH[kk, i]
+            for m in range(n1):
+                psi1[m] += b * SPH[kk, i, m]
+    return acc
+
+
+@njit(cache=True)
+def _l1_chain(psi1, n1a, n1b, psi):
+    # d/d(free L1 parameters) from d/d(full L1 coefficients): b11 = 1 + sum a1 - sum b1j
+    for i in range(n1a):
+        psi[i] = psi1[i] + psi1[n1a]
+    for j in range(1, n1b):
+        psi[n1a + j - 1] = psi1[n1a + j] - psi1[n1a]
+
+
+@njit(cache=True)
+def _keyterm_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, Y, S1, PH, SPH, p, SP, k,
+                  y_meas, c1, psi1, psi, K, f):
+    # the paper-like regressor: eq. (31) with w2 = sum_i mu_i p_i substituted is linear in a2
+    # and beta_ji = b2j mu_i given the operator outputs; past outputs are the measured ones
+    n1a, n1b, n, n2a, n2b = layout[0], layout[1], layout[2], layout[3], layout[4]
+    ib = n1a + n1b - 1
+    ia2 = ib + n2b * n
+    _l1_operators(theta, layout, r, U, W1, S1, PH, SPH, p, SP, k, c1)
+    yhat = _keyterm_regressor(theta[ib:ia2], ib, layout, PH, SPH, k, psi, psi1)
+    for i in range(n2a):
+        yhat -= theta[ia2 + i] * Y[k - 1 - i]
+        psi[ia2 + i] = -Y[k - 1 - i]
+    _l1_chain(psi1, n1a, n1b, psi)
+    e = y_meas - yhat                                   # (15)
+    lam = _eria_update(theta, U_, D, lam, rho_prev, rho, psi, e, K, f, 0, n1a, ia2, n2a)
+    Y[k] = y_meas
+    return e, lam, yhat
+
+
+@njit(cache=True)
+def _rho(n, gamma):
+    # convergence factor rho(k) = (k+1)^-gamma, with rho(0) = 1
+    return float(n + 1) ** (-gamma)
+
+
+@njit(cache=True)
+def recursion_run(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
+                  p, SP, start, ymeas, history, errors, yhats, K):
+    """Run the recursion from index ``start`` to the end of the extended arrays.
+
+    ``mode`` 0: key-term regressor (measured past outputs); 1: output-error gradient. Row
+    ``k - start`` of ``history`` receives theta(k); ``lam[0]`` (Lambda^-1) is updated in place.
+    """
     npar = theta.shape[0]
-    nc = S1.shape[1]
-    c = np.empty(nc)
+    nc = SW2.shape[1]
+    n1 = layout[0] + layout[1]
+    c = np.empty(max(nc, n1))
+    c1 = np.empty(n1)
     psi_c = np.empty(nc)
+    psi1 = np.empty(n1)
     psi = np.empty(npar)
-    K = np.empty(npar)
-    Ph = np.empty(npar)
+    f = np.empty(npar)
     for k in range(start, U.shape[0]):
-        n = k0 + k - start + 1  # sample count since the start of the recursion (1, 2, ...)
-        rho_prev = 1.0 if n == 1 else float(n) ** (-gamma)
-        rho = float(n + 1) ** (-gamma)
-        e, lam, yhat = rpem_step(theta, P, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1,
-                                 SW2, SY, p, SP, k, ymeas[k - start], equation_error, c, psi_c,
-                                 psi, K, Ph)
+        n = k0 + k - start + 1  # samples since the start of the recursion (1, 2, ...)
+        rho_prev = _rho(n - 1, gamma)
+        rho = _rho(n, gamma)
+        y_k = ymeas[k - start]
+        if mode == 0:
+            e, lam[0], yhat = _keyterm_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U, W1,
+                                            Y, S1, PH, SPH, p, SP, k, y_k, c1, psi1, psi, K, f)
+        else:
+            e, lam[0], yhat = _minimal_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U,
+                                            W1, W2, Y, S1, SW2, SY, p, SP, k, y_k, False, c,
+                                            psi_c, psi, K, f)
         history[k - start, :] = theta
         errors[k - start] = e
         yhats[k - start] = yhat
-    return lam
 
 
 # =========================================================================== helpers
@@ -347,11 +478,34 @@ def _record_thresholds(record: Record, n_operators: int) -> np.ndarray:
 
 
 # =========================================================================== recursive
+def keyterm_to_model(theta_kt: np.ndarray, structure: PIStructure) -> np.ndarray:
+    """Model parameters (unit DC gains) from key-term parameters; rows of a 2-D array too.
+
+    The key-term vector is ``[a1.., b12.., beta, a2..]`` with ``beta[j, i] = b2{j+1} mu_i``.
+    With unit DC gain ``sum_j b2j = A2(1) = 1 + sum a2``, so ``mu_i = sum_j beta[j, i] / A2(1)``
+    (the well-determined low-frequency combination; at high sampling rates ``p_i(k-1)`` and
+    ``p_i(k-2)`` are nearly collinear and the difference of the rows of ``beta`` is poorly
+    determined), and ``b2`` is the least-squares factor ``beta mu / |mu|^2`` (whose sum is then
+    ``A2(1)``).
+    """
+    s = structure
+    th = np.atleast_2d(np.asarray(theta_kt, dtype=float))
+    n, nb = s.n_operators, s.n2b
+    i1 = s.n1a + s.n1b - 1
+    beta = th[:, i1 : i1 + nb * n].reshape(-1, nb, n)
+    a2 = th[:, i1 + nb * n :]
+    mu = beta.sum(axis=1) / (1.0 + a2.sum(axis=1))[:, None]
+    norm = np.maximum(np.einsum("ri,ri->r", mu, mu), 1e-300)
+    b2 = np.einsum("rji,ri->rj", beta, mu) / norm[:, None]
+    out = np.hstack([th[:, :i1], mu, a2, b2[:, 1:]])
+    return out[0] if np.ndim(theta_kt) == 1 else out
+
+
 class PIRecursiveIdentifier:
     """On-line identification of the PI sandwich by the extended recursion (eqs. 15-19).
 
     Configuration in the constructor, one sample per :meth:`update`, a record per :meth:`fit`;
-    the intermediates of the last update are kept as attributes.
+    the intermediates of the last update are kept as attributes (filterpy style).
 
     Parameters
     ----------
@@ -362,27 +516,40 @@ class PIRecursiveIdentifier:
         Orders and delays; the paper's (eqs. 29, 31) with ``n_operators`` operators by default.
     n_operators : int
         Number of play operators when neither ``thresholds`` nor ``structure`` say (40).
-    P0 : float
-        Initial covariance ``P(0) = P0 I`` (the paper's 1e6).
+    P0 : float or array_like
+        Initial covariance ``P(0) = P0 I`` (the paper's 1e6), or its diagonal. After a warm-up
+        it is the prior of the warm-up fit: ``P = (J'J / s^2 + I / P0)^-1``.
     theta0 : float or array_like
-        Initial estimate: one value for every parameter (the paper's 0.001) or a vector.
+        Initial estimate in the recursion's coordinates (:attr:`names`): one value for every
+        parameter (the paper's 0.001) or a vector.
     epsilon : float
         Stop index (1e-4): the recursion has converged once no parameter changes by more than
         ``epsilon`` relative to its value (see :func:`hystid.identify.result.converged_at`).
     gamma : float
-        Exponent of the convergence factor ``rho(k) = (k+1)^-gamma``: the paper's 9/13 forgets
-        (``mu(k) < 1``); ``gamma = 1`` gives ``mu(k) = 1`` (no forgetting).
+        Exponent of the convergence factor ``rho(k) = (k+1)^-gamma`` of eq. (19).
+        ``gamma = 1`` (default) gives ``mu(k) = 1`` (no forgetting); 9/13 (the paper's Duhem
+        setting) forgets, which blows ``P`` up along the weights of operators the input no
+        longer moves.
     lambda0 : float
         Initial ``Lambda^-1`` (estimated error variance, output units squared).
-    predictor : {"output-error", "equation-error"}
-        Where the past outputs in the regressor come from (see the module docstring).
+    form : {"output-error", "key-term"}
+        Regressor ``h(k)``. ``"output-error"`` (default): the gradient of the simulated output
+        with respect to the model's own parameters (a recursive prediction-error method).
+        ``"key-term"``: the paper-like pseudo-linear regression, eq. (31) with
+        ``w2 = sum mu_i p_i`` substituted, linear in ``a2`` and ``b2j mu_i`` given the operator
+        outputs, with the *measured* past outputs (as the paper's ``h(k)`` holds
+        ``-Delta y(k-i)``); L1 enters through the gradient.
+    warmup : int
+        Output-error form only: the first ``warmup`` samples are fitted off-line
+        (:func:`fit_pi_output_error`) and the recursion continues from that estimate and its
+        covariance. ``0`` starts cold from ``theta0`` and ``P0`` (the paper's start).
     fs : float
         Sampling rate of the data in Hz (for the model); :meth:`fit` takes the record's.
 
     Attributes
     ----------
     theta : ndarray
-        Current estimate.
+        Current estimate in the recursion's coordinates (see :attr:`names`).
     P : ndarray
         Current covariance matrix ``P(k)``.
     K : ndarray
@@ -395,6 +562,15 @@ class PIRecursiveIdentifier:
         Current ``Lambda^-1(k)``.
     k : int
         Number of samples processed.
+
+    Notes
+    -----
+    The paper's start (``warmup=0``, ``P0 = 1e6``, ``theta0 = 0.001``) does not converge on
+    this model in either form: with a diffuse ``P`` the first samples, where the signals are
+    of the size of the sensor noise, throw L1 and L2 far off, and the play operators keep the
+    wrong ``w1`` extrema in memory. The key-term form is also biased by sensor noise at high
+    sampling rates (the regressors ``y(k-1)``, ``y(k-2)`` and ``p_i(k-1)``, ``p_i(k-2)`` are
+    nearly collinear). See ``benchmarks/bench_pi_vs_duhem.py`` for figures.
     """
 
     def __init__(
@@ -403,42 +579,70 @@ class PIRecursiveIdentifier:
         structure: PIStructure | None = None,
         *,
         n_operators: int = N_OPERATORS,
-        P0: float = 1e6,
+        P0: float | np.ndarray = 1e6,
         theta0: float | np.ndarray = 0.001,
         epsilon: float = 1e-4,
-        gamma: float = 9.0 / 13.0,
+        gamma: float = 1.0,
         lambda0: float = 1.0,
-        predictor: str = "output-error",
+        form: str = "output-error",
+        warmup: int = 1000,
         fs: float = 30_000.0,
     ) -> None:
-        if predictor not in PREDICTORS:
-            raise ValueError(f"predictor: expected one of {PREDICTORS}, got {predictor!r}")
-        for label, value in (("P0", P0), ("epsilon", epsilon), ("gamma", gamma),
-                             ("lambda0", lambda0), ("fs", fs)):
+        if form not in FORMS:
+            raise ValueError(f"form: expected one of {FORMS}, got {form!r}")
+        P0 = np.asarray(P0, dtype=float)
+        if P0.ndim > 1 or not (np.all(np.isfinite(P0)) and np.all(P0 >= 0) and np.any(P0 > 0)):
+            raise ValueError(f"P0: expected a positive number or a non-negative diagonal, got {P0}")
+        for label, value in (("epsilon", epsilon), ("gamma", gamma), ("lambda0", lambda0),
+                             ("fs", fs), ("n_operators", n_operators)):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{label}: expected a positive finite number, got {value!r}")
         if gamma > 1:
             raise ValueError(f"gamma: expected a value in (0, 1] (mu(k) <= 1), got {gamma!r}")
+        if int(warmup) != warmup or warmup < 0:
+            raise ValueError(f"warmup: expected a non-negative number of samples, got {warmup!r}")
+        if warmup and form != "output-error":
+            raise ValueError("warmup: only the output-error form has a warm-up; use warmup=0")
         self.thresholds = thresholds
         self.structure = structure
-        self.n_operators = n_operators
-        self.P0 = float(P0)
+        self.n_operators = int(n_operators)
+        self.P0 = P0
         self.theta0 = theta0
         self.epsilon = float(epsilon)
         self.gamma = float(gamma)
         self.lambda0 = float(lambda0)
-        self.predictor = predictor
+        self.form = form
+        self.warmup = int(warmup)
         self.fs = float(fs)
         self._ready = False
 
-    # ----------------------------------------------------------------- state
+    # ----------------------------------------------------------------- configuration
     @property
     def settings(self) -> dict:
         """The configuration, for reports."""
-        return {"P0": self.P0, "theta0": np.asarray(self.theta0).tolist(),
+        return {"P0": self.P0.tolist(), "theta0": np.asarray(self.theta0).tolist(),
                 "epsilon": self.epsilon, "gamma": self.gamma, "lambda0": self.lambda0,
-                "predictor": self.predictor, "n_operators": self.structure_.n_operators
-                if self._ready else self.n_operators}
+                "form": self.form, "warmup": self.warmup,
+                "n_operators": self._structure().n_operators}
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of the recursion's parameters (the entries of :attr:`theta`)."""
+        s = self._structure()
+        if self.form == "output-error":
+            return s.names
+        beta = tuple(f"b2{j + 1}*mu{i}" for j in range(s.n2b) for i in range(s.n_operators))
+        return (tuple(f"a1{i}" for i in range(1, s.n1a + 1))
+                + tuple(f"b1{j}" for j in range(2, s.n1b + 1)) + beta
+                + tuple(f"a2{i}" for i in range(1, s.n2a + 1)))
+
+    def _structure(self) -> PIStructure:
+        if self._ready:
+            return self.structure_
+        if self.structure is not None:
+            return self.structure
+        n = len(np.ravel(self.thresholds)) if self.thresholds is not None else self.n_operators
+        return PIStructure(n_operators=n)
 
     def reset(self, thresholds: np.ndarray | None = None) -> PIRecursiveIdentifier:
         """Start over from ``theta0``, ``P0`` at rest (optionally with new thresholds)."""
@@ -449,76 +653,146 @@ class PIRecursiveIdentifier:
                 "thresholds: the identifier needs the play-operator thresholds before the first "
                 "update; pass thresholds= (see hystid.pi.pi_thresholds) or call fit(record)"
             )
+        self._ready = False
+        s = self._structure()
         r = np.ascontiguousarray(np.asarray(self.thresholds, dtype=float).ravel())
-        s = self.structure or PIStructure(n_operators=len(r))
         if s.n_operators != len(r):
             raise ValueError(f"thresholds: expected {s.n_operators} values, got {len(r)}")
-        # validates the thresholds and the start vector
-        start = PISandwich(self._theta_start(s), r, s, fs=self.fs)
         self.structure_ = s
-        self.thresholds_ = start.thresholds
+        names = self.names
+        theta = self._theta_start(len(names))
+        PISandwich(self._model_theta(theta), r, s)  # validates thresholds and start
+        if self.P0.ndim == 1 and self.P0.shape != (len(names),):
+            raise ValueError(f"P0: expected {len(names)} diagonal values, got {self.P0.shape}")
+        self.thresholds_ = r
         self.layout_ = _layout(s)
-        npar, nc = len(s.names), _n_full(s)
-        self.theta = start.theta.copy()
-        self.P = self.P0 * np.eye(npar)
-        self.K = np.zeros(npar)
+        self.theta = theta
+        self._U = np.eye(len(names))
+        self._D = np.array(np.broadcast_to(self.P0, (len(names),)), dtype=float)
+        self.K = np.zeros(len(names))
         self.e = 0.0
         self.yhat = 0.0
-        self.lam = self.lambda0
+        self.lam = np.array([self.lambda0])
         self.k = 0
-        self._H = s.history
-        # signal windows: H past samples + the current one
-        w = self._H + 1
-        self._U, self._W1, self._W2, self._Y = (np.zeros(w) for _ in range(4))
-        self._S1, self._SW2, self._SY = (np.zeros((w, nc)) for _ in range(3))
-        self._p = np.zeros(len(r))
-        self._SP = np.zeros((len(r), nc))
-        self._c = np.empty(nc)
-        self._psi_c = np.empty(nc)
-        self._psi = np.empty(npar)
-        self._Ph = np.empty(npar)
+        self._H = max(s.history, s.q2 + s.n2b - 1)
+        self._windows = self._arrays(self._H + 1)
+        self._p = np.zeros(s.n_operators)
+        self._SP = np.zeros((s.n_operators, _n_full(s)))
+        self._buffer: list[tuple[float, float]] = []
+        self.warm_result_: IdentificationResult | None = None
         self._ready = True
         return self
 
-    def _theta_start(self, s: PIStructure) -> np.ndarray:
-        n = len(s.names)
+    def _arrays(self, length: int) -> list[np.ndarray]:
+        """Extended arrays U, W1, W2, Y, S1, SW2, SY, PH, SPH of the given length.
+
+        Output-error form: ``S1, SW2, SY`` are the sensitivities. Key-term form: ``PH, SPH``
+        hold the operator outputs and their L1 sensitivities.
+        """
+        s = self.structure_
+        nc, n = _n_full(s), s.n_operators
+        sig = [np.zeros(length) for _ in range(4)]
+        if self.form == "output-error":
+            sens = [np.zeros((length, nc)) for _ in range(3)]
+            return [*sig, *sens, np.zeros((1, 1)), np.zeros((1, 1, 1))]
+        n1 = s.n1a + s.n1b
+        return [*sig, np.zeros((length, n1)), np.zeros((1, 1)), np.zeros((1, 1)),
+                np.zeros((length, n)), np.zeros((length, n, n1))]
+
+    def _theta_start(self, n: int) -> np.ndarray:
         if np.isscalar(self.theta0):
             return np.full(n, float(self.theta0))
         theta = np.asarray(self.theta0, dtype=float).ravel()
-        if theta.shape != (n,):
-            raise ValueError(f"theta0: expected a scalar or {n} values, got shape {theta.shape}")
-        return theta
+        if theta.shape != (n,) or not np.all(np.isfinite(theta)):
+            raise ValueError(f"theta0: expected a scalar or {n} finite values for {self.form!r}")
+        return theta.copy()
+
+    def _model_theta(self, theta: np.ndarray) -> np.ndarray:
+        if self.form == "key-term":
+            return keyterm_to_model(theta, self._structure())
+        return np.asarray(theta, dtype=float)
+
+    @property
+    def P(self) -> np.ndarray:
+        """Current covariance matrix ``P(k) = U diag(D) U'`` (kept factored)."""
+        if not self._ready:
+            raise ValueError("no estimate yet: call update() or fit() first")
+        return (self._U * self._D) @ self._U.T
 
     @property
     def model(self) -> PISandwich:
         """The current estimate as a :class:`~hystid.pi.PISandwich`."""
         if not self._ready:
             raise ValueError("no estimate yet: call update() or fit() first")
-        return PISandwich(self.theta, self.thresholds_, self.structure_, fs=self.fs,
-                          name="identified PI sandwich")
+        return PISandwich(self._model_theta(self.theta), self.thresholds_, self.structure_,
+                          fs=self.fs, name="identified PI sandwich")
+
+    # ----------------------------------------------------------------- warm start
+    def _warm_start(self, u: np.ndarray, y: np.ndarray) -> None:
+        """Fit the first samples off-line, then set the recursion's state as if it had run."""
+        s = self.structure_
+        rec = Record(u=u, y=y, fs=self.fs, name="warm-up")
+        res = fit_pi_output_error(rec, self.thresholds_, s)
+        self.warm_result_ = res
+        theta = res.model.theta
+        yhat, J = pi_output_sensitivities(res.model, u)
+        s2 = max(float(np.mean((y - yhat) ** 2)), 1e-30)
+        prior = 1.0 / np.broadcast_to(self.P0, theta.shape)
+        info = J.T @ J / s2 + np.diag(prior)
+        P = np.linalg.inv(info)
+        self._U, self._D = _ud_factor(0.5 * (P + P.T))
+        # replay the warm-up with the fitted parameters and no update (D = 0) to set the
+        # signal windows, operator states and sensitivities
+        self.theta = theta.copy()
+        arrays = self._arrays(self._H + len(u))
+        arrays[0][self._H:] = u
+        D, self._D = self._D, np.zeros_like(self._D)
+        n = len(u)
+        self._run(arrays, self._H, 0, y, np.empty((n, len(theta))), np.empty(n), np.empty(n))
+        self._D = D
+        self.theta = theta.copy()
+        self.lam = np.array([s2])
+        for dst, src in zip(self._windows, arrays, strict=True):
+            if len(dst) > 1:
+                dst[:] = src[-len(dst):]
 
     # ----------------------------------------------------------------- one sample
     def update(self, u_k: float, y_k: float) -> float:
-        """Process one sample ``(u(k), y(k))``; returns the prediction error ``e(k)``."""
+        """Process one sample ``(u(k), y(k))``; returns the prediction error ``e(k)``.
+
+        During the warm-up the sample is stored and ``e(k) = 0`` is returned; the sample that
+        completes it triggers the off-line fit.
+        """
         if not self._ready:
             self.reset()
         u_k, y_k = float(u_k), float(y_k)
         if not (np.isfinite(u_k) and np.isfinite(y_k)):
             raise ValueError(f"update: non-finite sample u={u_k!r}, y={y_k!r}")
-        for arr in (self._U, self._W1, self._W2, self._Y, self._S1, self._SW2, self._SY):
-            arr[:-1] = arr[1:]
-        self._U[-1] = u_k
+        if self.k < self.warmup:
+            self._buffer.append((u_k, y_k))
+            self.k += 1
+            if self.k == self.warmup:
+                u, y = np.array(self._buffer).T
+                self._warm_start(np.ascontiguousarray(u), np.ascontiguousarray(y))
+            self.e, self.yhat = 0.0, 0.0
+            return self.e
+        for arr in self._windows:
+            if len(arr) > 1:
+                arr[:-1] = arr[1:]
+        self._windows[0][-1] = u_k
+        hist = np.empty((1, len(self.theta)))
+        err, yh = np.empty(1), np.empty(1)
+        self._run(self._windows, self._H, self.k, np.array([y_k]), hist, err, yh)
         self.k += 1
-        n = self.k
-        rho_prev = 1.0 if n == 1 else float(n) ** (-self.gamma)
-        rho = float(n + 1) ** (-self.gamma)
-        self.e, self.lam, self.yhat = rpem_step(
-            self.theta, self.P, self.lam, rho_prev, rho, self.layout_, self.thresholds_,
-            self._U, self._W1, self._W2, self._Y, self._S1, self._SW2, self._SY, self._p,
-            self._SP, self._H, y_k, self.predictor == "equation-error", self._c, self._psi_c,
-            self._psi, self.K, self._Ph,
-        )
+        self.e, self.yhat = float(err[0]), float(yh[0])
         return self.e
+
+    def _run(self, arrays, start, k0, y, history, errors, yhats) -> None:
+        mode = FORMS.index(self.form)
+        U, W1, W2, Y, S1, SW2, SY, PH, SPH = arrays
+        recursion_run(mode, self.theta, self._U, self._D, self.lam, self.gamma, k0,
+                      self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
+                      self._p, self._SP, start, y, history, errors, yhats, self.K)
 
     # ----------------------------------------------------------------- a record
     def fit(
@@ -539,57 +813,69 @@ class PIRecursiveIdentifier:
         Returns
         -------
         IdentificationResult
-            ``method="pi-recursive"``; ``history`` has one row per sample; ``converged_at``
-            is the first sample after which the estimate stays within ``epsilon``;
-            ``info`` holds the prediction errors' RMS over the last 10 % and the final
-            ``Lambda^-1``.
+            ``method="pi-recursive"``; ``history`` has one row per sample in the model's
+            parameters (:attr:`hystid.pi.PIStructure.names`; ``theta0`` during a warm-up);
+            ``converged_at`` is the first sample after which the estimate stays within
+            ``epsilon``; ``info`` holds the prediction errors and their RMS over the last 10 %.
         """
         if not hasattr(record, "u") or not hasattr(record, "y"):
             raise ValueError(f"record: expected a hystid Record with u and y, got {record!r}")
         u = np.ascontiguousarray(record.u, dtype=float)
         y = np.ascontiguousarray(record.y, dtype=float)
-        if len(u) < 2 or not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+        if len(u) < 2 or len(u) != len(y) or not (np.all(np.isfinite(u))
+                                                   and np.all(np.isfinite(y))):
             raise ValueError("record: expected at least 2 finite samples of u and y")
+        if len(u) <= self.warmup:
+            raise ValueError(f"record: {len(u)} samples, not more than warmup={self.warmup}")
         self.fs = float(record.fs)
+        n_ops = self.structure.n_operators if self.structure else self.n_operators
         self.reset(self.thresholds if self.thresholds is not None
-                   else _record_thresholds(record, self.structure.n_operators
-                                           if self.structure else self.n_operators))
-        n, H = len(u), self._H
-        nc = _n_full(self.structure_)
-        U = np.concatenate([np.zeros(H), u])
-        W1, W2, Y = (np.zeros(H + n) for _ in range(3))
-        S1, SW2, SY = (np.zeros((H + n, nc)) for _ in range(3))
-        history = np.empty((n, len(self.theta)))
-        errors = np.empty(n)
-        yhats = np.empty(n)
-        for a in range(0, n, chunk):
+                   else _record_thresholds(record, n_ops))
+        n, H, w = len(u), self._H, self.warmup
+        raw = np.empty((n, len(self.theta)))
+        errors = np.zeros(n)
+        yhats = np.zeros(n)
+        raw[:w] = self.theta
+        if w:
+            self._warm_start(u[:w], y[:w])
+        arrays = self._arrays(H + n - w)
+        for dst, src in zip(arrays, self._windows, strict=True):
+            if len(src) > 1:
+                dst[:H] = src[1:]
+        arrays[0][H:] = u[w:]
+        for a in range(w, n, chunk):
             b = min(n, a + chunk)
-            self.lam = rpem_run(
-                self.theta, self.P, self.lam, self.gamma, a, self.layout_, self.thresholds_,
-                U[: H + b], W1[: H + b], W2[: H + b], Y[: H + b], S1[: H + b], SW2[: H + b],
-                SY[: H + b], self._p, self._SP, H + a, y[a:b],
-                self.predictor == "equation-error", history[a:b], errors[a:b], yhats[a:b],
-            )
+            self._run([x[: H + b - w] for x in arrays], H + a - w, a, y[a:b], raw[a:b],
+                      errors[a:b], yhats[a:b])
             if progress is not None:
                 progress(b, n)
         self.k = n
         self.e, self.yhat = float(errors[-1]), float(yhats[-1])
-        # leave the on-line windows where the batch ended, so update() can continue
-        for dst, src in ((self._U, U), (self._W1, W1), (self._W2, W2), (self._Y, Y),
-                         (self._S1, S1), (self._SW2, SW2), (self._SY, SY)):
-            dst[:] = src[-(H + 1):]
-        tail = errors[-max(1, n // 10):]
+        for dst, src in zip(self._windows, arrays, strict=True):
+            if len(dst) > 1:
+                dst[:] = src[-len(dst):]
+        history = self._model_theta(raw)
+        tail = errors[-max(1, (n - w) // 10):]
         info = {
             "rms_prediction_error_last10": float(np.sqrt(np.mean(tail**2))),
-            "lambda_inv": float(self.lam),
+            "lambda_inv": float(self.lam[0]),
             "thresholds": self.thresholds_.tolist(),
             "prediction_errors": errors,
+            "stable": bool(self.model.is_stable()),
         }
         settings = {**self.settings, "samples": n}
         return IdentificationResult(
             self.model, "pi-recursive", settings, history=history,
             converged_at=converged_at(history, self.epsilon), info=info,
         )
+
+
+def _ud_factor(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``P = U diag(D) U'`` with ``U`` unit upper triangular (Cholesky of the reversed matrix)."""
+    L = np.linalg.cholesky(P[::-1, ::-1])
+    Ut = L[::-1, ::-1]
+    d = np.diag(Ut).copy()
+    return Ut / d, d**2
 
 
 # =========================================================================== off-line
