@@ -1,0 +1,717 @@
+"""The inverse sandwich: a reference for ``y`` becomes an amplifier voltage ``u``.
+
+The compensator runs the sandwich backwards, one sample at a time::
+
+    y_ref --M--> y_M --L2^-1--> w2d --H^-1 (planned)--> w1c --L1^-1--> u_cmd --sat--> u
+
+* ``M`` is the *reference model*: ``None`` inverts L2 through its static gain only
+  (``w2d = y_ref / L2(1)``), ``"exact"`` inverts L2 whole (``y = y_ref``), and a discrete
+  transfer function asks for ``y = M y_ref``. L2 is minimum phase (Assumption 1), so its
+  inverse is stable.
+* ``H^-1`` is the per-sample inverse of eq. (7) with the reversal planner of
+  :mod:`~hystid.compensate.duhem_inverse` (or the exact inverse Prandtl-Ishlinskii operator for a
+  :class:`~hystid.pi.PISandwich`, or the anhysteretic line ``w1 = w2 / f1`` for the
+  uncompensated baseline).
+* ``L1^-1``: ``u(k) = w1(k+q1) - sum b1j u(k-j) + sum a1i w1(k+q1-i)``, stable because L1 is
+  minimum phase (Assumption 1).
+
+Preview. ``u(k)`` acts on ``y`` at ``k + q`` at the earliest (``q = q1 + q2``: the delays of L1
+and L2), and the reversal planner looks ``P`` samples further ahead. The compensator therefore
+reads the reference *advanced* by ``q + P`` samples: its input is ``r(k) = y_ref(k + q + P)``
+(see :meth:`HysteresisInverse.advance`) and its output ``yd(k) = (M y_ref)(k)`` is the desired
+output aligned with the stage's ``y(k)``, for a feedback loop.
+
+No windup. The compensator keeps its own copy of L1 and of the hysteresis block and drives it
+with the *saturated* command it actually applies. After a saturated stretch the hysteresis
+state is where the real actuator is, so the next samples steer from there (no stale memory, no
+integrating state). The reference path (``M``, ``L2^-1``) only depends on the reference.
+
+State layout (flat vector, the python-control system's states)::
+
+    [x_M | y_M line | w2d line | past u | past w1 | hysteresis state]
+
+with the hysteresis state ``w2(k+q1-1)`` for the Duhem block (the planner itself keeps no state)
+or the play-operator states ``p_i`` for the PI block.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import control as ct
+import numpy as np
+from numba import njit
+
+from ..model import DuhemSandwich
+from .duhem_inverse import check_bound, duhem_forward, plan_step
+
+__all__ = [
+    "COMPENSATIONS",
+    "DEFAULT_PREVIEW",
+    "DUHEM_BOUND",
+    "HysteresisInverse",
+    "SATURATED",
+    "Feedforward",
+    "feedforward",
+    "inverse",
+    "dc_delay",
+    "hysteresis_gain",
+    "linear_feedforward",
+    "smoothing_model",
+]
+
+#: Samples of preview the reversal planner uses by default (10 ms at 30 kHz).
+DEFAULT_PREVIEW = 300
+#: Default largest ``alpha |dw1|`` per sample (condition 8 needs it below 2).
+DUHEM_BOUND = 1.5
+#: Status flag: the command was clipped to the input limits.
+SATURATED = 4
+
+KIND_DUHEM, KIND_PI, KIND_LINEAR, KIND_NONE = 0, 1, 2, 3
+#: ``compensation`` names accepted by :func:`compensator` and the closed-loop helpers.
+COMPENSATIONS = {"inverse": KIND_DUHEM, "linear": KIND_LINEAR, "none": KIND_NONE}
+
+# ispec indices
+(_KIND, _N1A, _N1B, _Q1, _N2A, _N2B, _Q2, _NM, _L2MODE, _P, _LY, _LW, _NPI,
+ _OFF_M, _OFF_Y, _OFF_W, _OFF_U, _OFF_W1, _OFF_H, _NX, _H1, _Q) = range(22)
+# fpar indices
+(_ALPHA, _F0, _F1, _G0, _BOUND, _UMIN, _UMAX, _B1LEAD, _B2LEAD, _K2, _KH) = range(11)
+
+
+# =========================================================================== compiled chain
+@njit(cache=True, inline="always")
+def _play(v, p_prev, r):
+    # eq. (30)
+    return max(v - r, min(v + r, p_prev))
+
+
+@njit(cache=True)
+def _push_reference(x, r, ispec, fpar, a2, b2t, AM, BM, CM, DM):
+    """Feed one reference sample through ``M`` and ``L2^-1`` into the lines (in place)."""
+    nM, LY, LW = ispec[_NM], ispec[_LY], ispec[_LW]
+    oM, oY, oW = ispec[_OFF_M], ispec[_OFF_Y], ispec[_OFF_W]
+    # reference model M (state space); y_M = r when there is none
+    if nM > 0:
+        ym = DM * r
+        for i in range(nM):
+            ym += CM[i] * x[oM + i]
+        xm_new = np.empty(nM)
+        for i in range(nM):
+            acc = BM[i] * r
+            for j in range(nM):
+                acc += AM[i, j] * x[oM + j]
+            xm_new[i] = acc
+        for i in range(nM):
+            x[oM + i] = xm_new[i]
+    else:
+        ym = r
+    for i in range(LY - 1):
+        x[oY + i] = x[oY + i + 1]
+    x[oY + LY - 1] = ym
+    # L2^-1 (eq. 2 solved for w2(t), t = newest y_M time - q2)
+    if ispec[_L2MODE] == 0:
+        w2 = ym / fpar[_K2]
+    else:
+        w2 = ym
+        for i in range(1, ispec[_N2A] + 1):
+            w2 += a2[i - 1] * x[oY + LY - 1 - i]
+        for j in range(1, ispec[_N2B] + 1):
+            w2 -= b2t[j - 1] * x[oW + LW - j]
+        w2 /= fpar[_B2LEAD]
+    for i in range(LW - 1):
+        x[oW + i] = x[oW + i + 1]
+    x[oW + LW - 1] = w2
+
+
+@njit(cache=False)
+def chain_step(x, r, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv):
+    """One sample of the compensator: returns ``(x_next, u, yd, status)`` (``x`` untouched)."""
+    xn = x.copy()
+    _push_reference(xn, r, ispec, fpar, a2, b2t, AM, BM, CM, DM)
+    kind, P, LY, LW = ispec[_KIND], ispec[_P], ispec[_LY], ispec[_LW]
+    oW, oU, oW1, oH, H1 = ispec[_OFF_W], ispec[_OFF_U], ispec[_OFF_W1], ispec[_OFF_H], ispec[_H1]
+    n1a, n1b = ispec[_N1A], ispec[_N1B]
+    yd = xn[ispec[_OFF_Y] + LY - 1 - (ispec[_Q] + P)]
+    if kind == KIND_NONE:  # reference path only (a feedback loop without feed-forward)
+        return xn, 0.0, yd, 0
+    window = xn[oW + LW - 1 - P : oW + LW]  # w2d(k+q1) .. w2d(k+q1+P)
+    w2d = window[0]
+    w1p = xn[oW1 + H1 - 1]  # w1(k+q1-1) of the internal model
+    status = 0
+    alpha, f0, f1, g0 = fpar[_ALPHA], fpar[_F0], fpar[_F1], fpar[_G0]
+    # hysteresis inverse -> w1c = w1(k+q1)
+    if kind == KIND_DUHEM:
+        d, status = plan_step(window, w1p, xn[oH], alpha, f0, f1, g0, fpar[_BOUND])
+        w1c = w1p + d
+    elif kind == KIND_PI:
+        n = ispec[_NPI]
+        # inverse-operator states matching the forward states p (pi_inverse_state)
+        tail = 0.0
+        pinv = np.empty(n)
+        for i in range(n - 1, -1, -1):
+            pinv[i] = tail
+            tail += mu_pi[i] * xn[oH + i]
+        cum = 0.0
+        for i in range(n):
+            cum += mu_pi[i]
+            pinv[i] += cum * xn[oH + i]
+        w1c = 0.0
+        for i in range(n):
+            w1c += mu_inv[i] * _play(w2d, pinv[i], r_inv[i])
+    else:
+        w1c = w2d / fpar[_KH]
+    # L1^-1 (eq. 1 solved for u(k))
+    u = w1c
+    for j in range(1, n1b + 1):
+        u -= b1t[j - 1] * xn[oU + n1b - j]
+    for i in range(1, n1a + 1):
+        u += a1[i - 1] * xn[oW1 + H1 - i]
+    u /= fpar[_B1LEAD]
+    if u > fpar[_UMAX]:
+        u = fpar[_UMAX]
+        status |= 4
+    elif u < fpar[_UMIN]:
+        u = fpar[_UMIN]
+        status |= 4
+    # internal model driven by the applied (saturated) command: no windup
+    w1 = fpar[_B1LEAD] * u
+    for j in range(1, n1b + 1):
+        w1 += b1t[j - 1] * xn[oU + n1b - j]
+    for i in range(1, n1a + 1):
+        w1 -= a1[i - 1] * xn[oW1 + H1 - i]
+    if kind == KIND_DUHEM:
+        xn[oH] = duhem_forward(w1, w1p, xn[oH], alpha, f0, f1, g0)
+    elif kind == KIND_PI:
+        for i in range(ispec[_NPI]):
+            xn[oH + i] = _play(w1, xn[oH + i], r_pi[i])
+    for i in range(H1 - 1):
+        xn[oW1 + i] = xn[oW1 + i + 1]
+    xn[oW1 + H1 - 1] = w1
+    for i in range(n1b - 1):
+        xn[oU + i] = xn[oU + i + 1]
+    if n1b > 0:
+        xn[oU + n1b - 1] = u
+    return xn, u, yd, status
+
+
+@njit(cache=True)
+def chain_prime(x, rs, ispec, fpar, a2, b2t, AM, BM, CM, DM):
+    """Push the first ``q + P`` reference samples (in place), the plant still at rest."""
+    for k in range(rs.shape[0]):
+        _push_reference(x, rs[k], ispec, fpar, a2, b2t, AM, BM, CM, DM)
+
+
+@njit(cache=False)
+def chain_run(x, rs, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv,
+              u, yd, status):
+    """Run :func:`chain_step` over the advanced reference ``rs``; returns the final state."""
+    for k in range(rs.shape[0]):
+        x, u[k], yd[k], status[k] = chain_step(x, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM,
+                                               CM, DM, r_pi, mu_pi, r_inv, mu_inv)
+    return x
+
+
+# =========================================================================== configuration
+@dataclass(frozen=True)
+class _Chain:
+    """Arrays the compiled chain takes, and the state names."""
+
+    ispec: np.ndarray
+    fpar: np.ndarray
+    a1: np.ndarray
+    b1t: np.ndarray
+    a2: np.ndarray
+    b2t: np.ndarray
+    AM: np.ndarray
+    BM: np.ndarray
+    CM: np.ndarray
+    DM: float
+    r_pi: np.ndarray
+    mu_pi: np.ndarray
+    r_inv: np.ndarray
+    mu_inv: np.ndarray
+    states: tuple[str, ...]
+    lead: int = 0
+
+    @property
+    def delay(self) -> int:
+        """``q = q1 + q2``: samples from ``u`` to ``y``."""
+        return int(self.ispec[_Q])
+
+    @property
+    def preview(self) -> int:
+        """Planner preview ``P`` in samples."""
+        return int(self.ispec[_P])
+
+    @property
+    def advance(self) -> int:
+        """Samples the input reference is ahead of ``y``: ``q + P + lead``."""
+        return self.delay + self.preview + self.lead
+
+    def args(self):
+        return (self.ispec, self.fpar, self.a1, self.b1t, self.a2, self.b2t, self.AM, self.BM,
+                self.CM, self.DM, self.r_pi, self.mu_pi, self.r_inv, self.mu_inv)
+
+    def prime_args(self):
+        return (self.ispec, self.fpar, self.a2, self.b2t, self.AM, self.BM, self.CM, self.DM)
+
+    def initial_state(self, y_ref: np.ndarray | None = None) -> np.ndarray:
+        x = np.zeros(int(self.ispec[_NX]))
+        if y_ref is not None:
+            head = _pad_hold(np.asarray(y_ref, float), self.advance)[: self.advance]
+            chain_prime(x, np.ascontiguousarray(head), *self.prime_args())
+        return x
+
+
+def _min_phase(poly: np.ndarray, label: str) -> None:
+    if len(poly) > 1 and np.max(np.abs(np.roots(poly))) >= 1.0:
+        raise ValueError(
+            f"model: {label} is not minimum phase (a zero on or outside the unit circle); "
+            "its inverse would be unstable (Assumption 1)"
+        )
+
+
+def _reference_model(reference_model, dt: float):
+    """``(l2mode, AM, BM, CM, DM)`` for None / 'exact' / a discrete SISO LTI system."""
+    empty = (np.zeros((0, 0)), np.zeros(0), np.zeros(0), 0.0)
+    if reference_model is None:
+        return 0, *empty
+    if isinstance(reference_model, str):
+        if reference_model != "exact":
+            raise ValueError(
+                f"reference_model: expected None, 'exact' or a discrete transfer function, "
+                f"got {reference_model!r}"
+            )
+        return 1, *empty
+    if not isinstance(reference_model, ct.LTI) or reference_model.ninputs != 1 \
+            or reference_model.noutputs != 1:
+        raise ValueError(
+            f"reference_model: expected None, 'exact' or a SISO control.TransferFunction / "
+            f"StateSpace, got {reference_model!r}"
+        )
+    if not reference_model.dt or not np.isclose(float(reference_model.dt), dt):
+        raise ValueError(
+            f"reference_model: must be discrete with dt = {dt:g} s like the model, "
+            f"got dt = {reference_model.dt!r}"
+        )
+    ss = reference_model if isinstance(reference_model, ct.StateSpace) else \
+        ct.tf2ss(reference_model, method="scipy")
+    A, B, C, D = (np.asarray(m, float) for m in (ss.A, ss.B, ss.C, ss.D))
+    if A.size and np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
+        raise ValueError("reference_model: must be stable (poles inside the unit circle)")
+    return 1, A, B[:, 0].copy(), C[0].copy(), float(D[0, 0])
+
+
+def dc_delay(reference_model) -> int:
+    """The reference model's group delay at DC, rounded to samples (0 for None / 'exact').
+
+    For ``M(z) = N(z) / D(z)`` it is ``D'(1)/D(1) - N'(1)/N(1)``; a linear-phase FIR smoother
+    of length ``L`` has ``(L - 1) / 2``.
+    """
+    if reference_model is None or isinstance(reference_model, str):
+        return 0
+    tf = reference_model if isinstance(reference_model, ct.TransferFunction) else \
+        ct.ss2tf(reference_model)
+    num = np.asarray(tf.num[0][0], float)
+    den = np.asarray(tf.den[0][0], float)
+    n1, d1 = np.polyval(num, 1.0), np.polyval(den, 1.0)
+    if n1 == 0 or d1 == 0:
+        raise ValueError("reference_model: needs a finite non-zero static gain")
+    tau = np.polyval(np.polyder(den), 1.0) / d1 - np.polyval(np.polyder(num), 1.0) / n1
+    return max(int(round(tau)), 0)
+
+
+def smoothing_model(samples: int, dt: float) -> ct.TransferFunction:
+    """A linear-phase smoother for references with corners (triangles): a Hann-window FIR.
+
+    With ``reference_model=smoothing_model(L, dt)`` the compensator asks for ``y`` equal to the
+    reference smoothed over ``L`` samples, *without* lag: the smoother's delay ``(L-1)/2`` is
+    taken from the preview (``reference_lead``). A triangle's corners then stay within reach
+    of the hysteresis inverse (an exact inverse of L2 at a sharp corner would ask ``w2`` for a
+    reversal of a few nanometres that eq. 7 cannot make).
+
+    Parameters
+    ----------
+    samples : int
+        Odd window length ``L >= 3``.
+    dt : float
+        Sampling period in seconds.
+
+    Returns
+    -------
+    control.TransferFunction
+        Unit static gain, ``(L-1)/2`` samples of delay.
+    """
+    if int(samples) != samples or samples < 3 or samples % 2 == 0:
+        raise ValueError(f"samples: expected an odd window length >= 3, got {samples!r}")
+    L = int(samples)
+    h = np.hanning(L + 2)[1:-1]
+    h /= h.sum()
+    den = np.zeros(L)
+    den[0] = 1.0
+    return ct.tf(h, den, dt, inputs="y_ref", outputs="y_M", name="smoother")
+
+
+def _pi_parts(model):
+    from ..pi import pi_inverse_parameters
+
+    if not model.is_invertible():
+        raise ValueError(
+            "model: the PI operator has no exact inverse (first weight or a partial sum of "
+            "the weights is not positive)"
+        )
+    r_inv, mu_inv = pi_inverse_parameters(model.thresholds, model.mu)
+    return model.thresholds.copy(), model.mu.copy(), r_inv, mu_inv
+
+
+def _linear_parts(model):
+    """``(a1, b1lead, b1tail, q1, a2, b2lead, b2tail, q2)`` of either sandwich class."""
+    s = model.structure
+    if isinstance(model, DuhemSandwich):
+        return model.a1, 1.0, model.b1, s.q1, model.a2, 1.0, model.b2, s.q2
+    b1, b2 = model.b1, model.b2
+    return model.a1, float(b1[0]), b1[1:], s.q1, model.a2, float(b2[0]), b2[1:], s.q2
+
+
+def hysteresis_gain(model) -> float:
+    """Slope of the hysteresis block's central (anhysteretic) line, ``dw2/dw1``.
+
+    ``f1`` for the Duhem block (its ascending and descending branches are
+    ``w2 = f1 w1 -+ (f1 - g0) / alpha``); for a PI block the secant of the loading curve over the
+    largest threshold.
+    """
+    if isinstance(model, DuhemSandwich):
+        return float(model.params["f1"])
+    r, mu = model.thresholds, model.mu
+    a = float(r[-1] + (r[1] - r[0] if len(r) > 1 else 1.0))
+    return float(np.sum(mu * np.maximum(a - r, 0.0)) / a)
+
+
+def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
+           reference_lead: int | None = None) -> _Chain:
+    if not hasattr(model, "structure") or not hasattr(model, "L1"):
+        raise ValueError(f"model: expected a DuhemSandwich or PISandwich, got {model!r}")
+    umin, umax = (float(v) for v in u_limits)
+    if not (np.isfinite(umin) and np.isfinite(umax) and umin < umax):
+        raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")
+    duhem = isinstance(model, DuhemSandwich)
+    if kind == KIND_DUHEM and not duhem:
+        kind = KIND_PI
+    if kind == KIND_DUHEM and not model.params["alpha"] > 0:
+        raise ValueError(f"model: alpha must be positive, got {model.params['alpha']!r}")
+    bound = check_bound(duhem_bound)
+    if kind in (KIND_LINEAR, KIND_NONE):
+        preview = 0  # nothing to plan
+    elif preview is None:
+        preview = DEFAULT_PREVIEW if kind == KIND_DUHEM else 0
+    if int(preview) != preview or preview < 0:
+        raise ValueError(f"preview: expected a non-negative number of samples, got {preview!r}")
+    P = int(preview)
+    if reference_lead is None:
+        reference_lead = dc_delay(reference_model)
+    if int(reference_lead) != reference_lead or reference_lead < 0:
+        raise ValueError(
+            f"reference_lead: expected a non-negative number of samples, got {reference_lead!r}"
+        )
+    if reference_lead and (reference_model is None or isinstance(reference_model, str)):
+        raise ValueError("reference_lead: only meaningful with a reference model M (its delay)")
+    a1, b1lead, b1t, q1, a2, b2lead, b2t, q2 = _linear_parts(model)
+    _min_phase(np.r_[b1lead, b1t], "L1")
+    l2mode, AM, BM, CM, DM = _reference_model(reference_model, model.dt)
+    if l2mode == 1:
+        _min_phase(np.r_[b2lead, b2t], "L2")
+    k2 = float((b2lead + np.sum(b2t)) / (1.0 + np.sum(a2)))
+    if not (np.isfinite(k2) and k2 != 0):
+        raise ValueError(f"model: L2 has no finite non-zero static gain ({k2!r})")
+    kh = hysteresis_gain(model)
+    if kind == KIND_LINEAR and not (np.isfinite(kh) and kh != 0):
+        raise ValueError(f"model: the hysteresis block's central slope is {kh!r}")
+    q = q1 + q2
+    nM = AM.shape[0]
+    LY = max(q + P + 1, len(a2) + 1)
+    LW = max(P + 1, len(b2t) + 1)
+    H1 = max(len(a1), 1)
+    if kind == KIND_PI:
+        r_pi, mu_pi, r_inv, mu_inv = _pi_parts(model)
+        hyst_states = tuple(f"p{i}" for i in range(len(r_pi)))
+    else:
+        r_pi = mu_pi = r_inv = mu_inv = np.zeros(0)
+        hyst_states = ("w2_model",) if kind == KIND_DUHEM else ()
+    states = (
+        tuple(f"xM{i}" for i in range(nM))
+        + tuple(f"yM{i}" for i in range(LY))
+        + tuple(f"w2d{i}" for i in range(LW))
+        + tuple(f"u_past{j}" for j in range(len(b1t), 0, -1))
+        + tuple(f"w1_model{i}" for i in range(H1, 0, -1))
+        + hyst_states
+    )
+    offs = np.cumsum([0, nM, LY, LW, len(b1t), H1, len(hyst_states)])
+    ispec = np.array(
+        [kind, len(a1), len(b1t), q1, len(a2), len(b2t), q2, nM, l2mode, P, LY, LW, len(r_pi),
+         offs[0], offs[1], offs[2], offs[3], offs[4], offs[5], offs[6], H1, q],
+        dtype=np.int64,
+    )
+    p = model.params if duhem else {}
+    fpar = np.array([
+        p.get("alpha", 1.0), p.get("f0", 0.0), p.get("f1", 0.0), p.get("g0", 0.0), bound,
+        umin, umax, b1lead, b2lead, k2, kh,
+    ])
+    f = np.ascontiguousarray
+    return _Chain(ispec, fpar, f(a1, float), f(b1t, float), f(a2, float), f(b2t, float),
+                  f(AM.reshape(nM, nM)), f(BM), f(CM), float(DM), f(r_pi), f(mu_pi), f(r_inv),
+                  f(mu_inv), states, int(reference_lead))
+
+
+def _pad_hold(y: np.ndarray, n: int) -> np.ndarray:
+    """``y`` followed by ``n`` copies of its last value."""
+    return np.concatenate([y, np.full(n, y[-1])]) if n else y
+
+
+def _as_reference(y_ref, name: str = "y_ref") -> np.ndarray:
+    y = np.asarray(y_ref, dtype=float)
+    if y.ndim != 1 or y.size == 0:
+        raise ValueError(f"{name}: expected a non-empty 1-D array of samples, got shape {y.shape}")
+    if not np.all(np.isfinite(y)):
+        k = int(np.flatnonzero(~np.isfinite(y))[0])
+        raise ValueError(f"{name}: non-finite value at sample {k}")
+    return np.ascontiguousarray(y)
+
+
+# =========================================================================== python-control
+def _functions(chain: _Chain):
+    args = chain.args()
+
+    def update(t, x, u, params):
+        xn, _, _, _ = chain_step(np.asarray(x, float), float(u[0]), *args)
+        return xn
+
+    def output(t, x, u, params):
+        _, uc, yd, status = chain_step(np.asarray(x, float), float(u[0]), *args)
+        return np.array([uc, yd, float(status)])
+
+    return update, output
+
+
+class HysteresisInverse(ct.NonlinearIOSystem):
+    """The compensator as a discrete python-control system (see :func:`inverse`).
+
+    Input ``r(k) = y_ref(k + advance)``; outputs the command ``u``, the desired output ``yd``
+    aligned with the stage's ``y`` and a ``status`` (bit flags: 1 step clipped to the bound of
+    condition 8, 2 no exact step existed, 4 command saturated; 0 = exact).
+
+    Attributes
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model inverted.
+    delay : int
+        ``q1 + q2``, samples from ``u`` to ``y``.
+    preview : int
+        Samples of reference the reversal planner looks ahead.
+    advance : int
+        ``delay + preview``: how far ahead of ``y`` the input reference runs.
+    """
+
+    def __init__(self, model, chain: _Chain, *, inputs, outputs, name):
+        update, output = _functions(chain)
+        super().__init__(update, output, inputs=inputs, outputs=outputs, states=list(chain.states),
+                         dt=model.dt, name=name)
+        self.model = model
+        self._chain = chain
+
+    @property
+    def delay(self) -> int:
+        """``q1 + q2``."""
+        return self._chain.delay
+
+    @property
+    def preview(self) -> int:
+        """Planner preview in samples."""
+        return self._chain.preview
+
+    @property
+    def advance(self) -> int:
+        """Samples the input reference runs ahead of ``y``."""
+        return self._chain.advance
+
+    def reference_input(self, y_ref: np.ndarray | Sequence[float]) -> np.ndarray:
+        """The input signal ``r(k) = y_ref(k + advance)`` (the last value held at the end)."""
+        y = _as_reference(y_ref)
+        return _pad_hold(y, self.advance)[self.advance:]
+
+    def initial_state(self, y_ref: np.ndarray | Sequence[float] | None = None) -> np.ndarray:
+        """State at rest with the first ``advance`` reference samples already read in.
+
+        Pass it as ``X0`` to :func:`control.input_output_response` together with
+        :meth:`reference_input`; without ``y_ref``, the reference is taken as zero before
+        sample ``advance``.
+        """
+        return self._chain.initial_state(None if y_ref is None else _as_reference(y_ref))
+
+
+def inverse(
+    model,
+    *,
+    u_limits: tuple[float, float] = (0.0, 10.0),
+    reference_model=None,
+    reference_lead: int | None = None,
+    preview: int | None = None,
+    duhem_bound: float = DUHEM_BOUND,
+    compensation: str = "inverse",
+    inputs: str = "r",
+    outputs: Sequence[str] = ("u", "yd", "status"),
+    name: str = "inverse",
+) -> HysteresisInverse:
+    """The inverse sandwich (hysteresis compensator) as a discrete python-control system.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified stage. L1 (and L2 when it is inverted dynamically) must be minimum
+        phase; a PI operator must have an exact inverse.
+    u_limits : (float, float)
+        Amplifier input limits in volts (0-10 V like the paper's amplifier). The command is
+        clipped and the compensator's internal model follows the clipped command (no windup).
+    reference_model : None, 'exact' or control.TransferFunction
+        ``None``: invert L2 through its static gain (``w2d = y_ref / L2(1)``); ``'exact'``:
+        invert L2 whole (``y = y_ref``); a discrete SISO system ``M`` (same ``dt``): ``y = M
+        y_ref``. The dynamic choices need L2 minimum phase.
+    reference_lead : int, optional
+        Samples of ``M``'s delay taken from the preview, so that ``yd(k) = (M y_ref)(k + lead)``
+        is aligned with ``y_ref``; by default ``M``'s DC group delay (see :func:`dc_delay`).
+    preview : int, optional
+        Samples the Duhem reversal planner looks ahead (:data:`DEFAULT_PREVIEW` for a Duhem
+        model, 0 for a PI model, which needs none). ``0`` gives a strictly causal inverse
+        that cannot prepare reversals (they are then approximate for a stage like the paper's).
+    duhem_bound : float
+        Largest ``alpha |dw1|`` per sample, below the stability bound 2 of condition (8).
+    compensation : {"inverse", "linear", "none"}
+        ``"inverse"``: the hysteresis inverse; ``"linear"``: the uncompensated baseline (the
+        hysteresis replaced by its central line, see :func:`linear_feedforward`); ``"none"``:
+        the reference path only (``u = 0``, ``yd`` still given: feedback alone).
+    inputs, outputs, name : str
+        Signal and system names (python-control keywords).
+
+    Returns
+    -------
+    HysteresisInverse
+        A :class:`control.NonlinearIOSystem` with pure update and output functions; feed it
+        :meth:`HysteresisInverse.reference_input` and start it from
+        :meth:`HysteresisInverse.initial_state`.
+    """
+    if compensation not in COMPENSATIONS:
+        raise ValueError(
+            f"compensation: expected one of {', '.join(COMPENSATIONS)}, got {compensation!r}"
+        )
+    chain = _build(model, kind=COMPENSATIONS[compensation], u_limits=u_limits,
+                   reference_model=reference_model, preview=preview, duhem_bound=duhem_bound,
+                   reference_lead=reference_lead)
+    outputs = list(outputs)
+    if len(outputs) != 3:
+        raise ValueError(f"outputs: expected three names (command, yd, status), got {outputs!r}")
+    return HysteresisInverse(model, chain, inputs=[inputs], outputs=outputs, name=name)
+
+
+# =========================================================================== fast path
+@dataclass
+class Feedforward:
+    """Feed-forward commands for a reference. Unpacks as ``u, yd``.
+
+    Attributes
+    ----------
+    u : ndarray
+        Command, one value per reference sample.
+    yd : ndarray
+        Desired output aligned with ``y`` (``M y_ref``, or ``y_ref`` itself).
+    status : ndarray
+        Per-sample status flags (0 exact; 1 clipped to the bound of condition 8; 2 no exact
+        step; 4 saturated).
+    preview, delay : int
+        Planner preview and ``q1 + q2``.
+    """
+
+    u: np.ndarray
+    yd: np.ndarray
+    status: np.ndarray
+    preview: int
+    delay: int
+
+    def __iter__(self):
+        yield self.u
+        yield self.yd
+
+    @property
+    def exact(self) -> np.ndarray:
+        """Samples where the inverse step was exact and unsaturated."""
+        return self.status == 0
+
+
+def _run(chain: _Chain, y_ref: np.ndarray) -> Feedforward:
+    x = chain.initial_state(y_ref)
+    rs = _pad_hold(y_ref, chain.advance)[chain.advance:]
+    n = len(rs)
+    u, yd, status = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    chain_run(x, np.ascontiguousarray(rs), *chain.args(), u, yd, status)
+    return Feedforward(u, yd, status, chain.preview, chain.delay)
+
+
+def feedforward(
+    model,
+    y_ref: np.ndarray | Sequence[float],
+    *,
+    u_limits: tuple[float, float] = (0.0, 10.0),
+    reference_model=None,
+    reference_lead: int | None = None,
+    preview: int | None = None,
+    duhem_bound: float = DUHEM_BOUND,
+    full_output: bool = False,
+) -> np.ndarray | Feedforward:
+    """Feed-forward command for a whole reference, compiled; the same as :func:`inverse`.
+
+    Runs the compensator of :func:`inverse` over ``y_ref`` (with the preview taken from
+    ``y_ref`` itself, its last value held at the end) so that ``model.simulate(u).y`` tracks
+    ``y_ref`` (or ``M y_ref``). The reference should start at rest (``y_ref[0] = 0``, the stage's
+    state at rest).
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified stage.
+    y_ref : array_like
+        Desired output, one value per sample.
+    u_limits, reference_model, reference_lead, preview, duhem_bound
+        As for :func:`inverse`.
+    full_output : bool
+        Return a :class:`Feedforward` (command, aligned desired output, status) instead of
+        the command alone.
+
+    Returns
+    -------
+    ndarray or Feedforward
+        The command ``u``.
+    """
+    chain = _build(model, kind=KIND_DUHEM, u_limits=u_limits, reference_model=reference_model,
+                   preview=preview, duhem_bound=duhem_bound, reference_lead=reference_lead)
+    result = _run(chain, _as_reference(y_ref))
+    return result if full_output else result.u
+
+
+def linear_feedforward(
+    model,
+    y_ref: np.ndarray | Sequence[float],
+    *,
+    u_limits: tuple[float, float] = (0.0, 10.0),
+    reference_model=None,
+    reference_lead: int | None = None,
+    full_output: bool = False,
+) -> np.ndarray | Feedforward:
+    """The uncompensated baseline: the same inverse with the hysteresis replaced by its
+    central line ``w1 = w2 / hysteresis_gain(model)``.
+
+    L1 and L2 are inverted exactly as in :func:`feedforward`, so the difference between the two
+    tracking errors is the error hysteresis causes.
+    """
+    chain = _build(model, kind=KIND_LINEAR, u_limits=u_limits, reference_model=reference_model,
+                   preview=0, duhem_bound=DUHEM_BOUND, reference_lead=reference_lead)
+    result = _run(chain, _as_reference(y_ref))
+    return result if full_output else result.u
