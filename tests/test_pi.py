@@ -1,0 +1,322 @@
+"""The Prandtl-Ishlinskii block, its inverse, the PI sandwich and its identification."""
+
+import control as ct
+import numpy as np
+import pytest
+
+from hystid.identify.pi_recursive import (
+    PIRecursiveIdentifier,
+    fit_pi_output_error,
+    identify_pi,
+    keyterm_to_model,
+    pi_output_sensitivities,
+)
+from hystid.model import InitialCondition
+from hystid.pi import (
+    PISandwich,
+    PIStructure,
+    pi_block,
+    pi_inverse_block,
+    pi_inverse_parameters,
+    pi_inverse_state,
+    pi_operator,
+    pi_thresholds,
+    play_operator,
+)
+from hystid.records import Record
+from hystid.reference import paper_excitation
+
+FS = 30_000.0
+
+
+def random_weights(n, rng, negative=True):
+    """Weights with a positive first one and increasing partial sums (invertible)."""
+    mu = rng.uniform(0.0, 0.1, n)
+    mu[0] = 0.6
+    if negative:
+        mu[n // 2 :] -= 0.05  # some negative weights, partial sums stay positive
+    assert np.all(np.cumsum(mu) > 0)
+    return mu
+
+
+def random_walk(n, rng, scale=0.3):
+    return np.cumsum(scale * rng.standard_normal(n))
+
+
+def known_sandwich(n_operators=10, u=None):
+    """A PI sandwich with a genuine second-order L1 (so L1 is unique) and the reference L2."""
+    u = paper_excitation(9000, FS, seed=3) if u is None else u
+    r = pi_thresholds(u, n_operators)
+    mu = 0.25 * np.exp(-np.arange(n_operators) / 3.0)
+    params = {"a11": -0.9, "a12": 0.2, "b12": 0.15,
+              **{f"mu{i}": m for i, m in enumerate(mu)},
+              "a21": -1.6049, "a22": 0.9226, "b22": 0.1}
+    return PISandwich(params, r, fs=FS, name="known PI"), u
+
+
+# --------------------------------------------------------------------- operator properties
+def test_thresholds_rule_and_bad_input():
+    r = pi_thresholds(np.array([-3.0, 1.0, 5.0]), 4)
+    np.testing.assert_allclose(r, [0.0, 1.0, 2.0, 3.0])  # i/N * (max - min)/2
+    with pytest.raises(ValueError, match="range is empty"):
+        pi_thresholds(np.ones(5))
+    with pytest.raises(ValueError, match="n_operators"):
+        pi_thresholds([0.0, 1.0], 0)
+
+
+def test_rate_independence_time_rescaling():
+    rng = np.random.default_rng(0)
+    r = pi_thresholds((-2, 2), 12)
+    mu = random_weights(12, rng)
+    extrema = np.array([0.0, 1.5, -0.7, 1.1, -1.9, 0.4, 0.2, 1.8, -0.3])
+    slow = np.concatenate([np.linspace(a, b, 37)[1:] for a, b in zip(extrema[:-1], extrema[1:],
+                                                                     strict=True)])
+    fast = np.concatenate([np.linspace(a, b, 5)[1:] for a, b in zip(extrema[:-1], extrema[1:],
+                                                                    strict=True)])
+    y_slow = pi_operator(slow, r, mu)
+    y_fast = pi_operator(fast, r, mu)
+    # same value at every extremum whatever the speed in between
+    np.testing.assert_allclose(y_slow[35::36], y_fast[3::4], rtol=0, atol=1e-12)
+    # and only the extrema matter: the output at the extrema of the extrema-only sequence too
+    np.testing.assert_allclose(pi_operator(extrema[1:], r, mu), y_fast[3::4], atol=1e-12)
+
+
+def test_wiping_out_of_minor_loops():
+    rng = np.random.default_rng(1)
+    r = pi_thresholds((-2, 2), 16)
+    mu = random_weights(16, rng)
+    # history ... 1.5 then a minor loop inside [-0.5, 1.2] then up to 1.8 (above 1.5)
+    with_loop = np.array([0.0, 1.5, -0.5, 1.2, -0.2, 0.9, 1.8])
+    without = np.array([0.0, 1.5, -0.5, 1.8])
+    assert pi_operator(with_loop, r, mu)[-1] == pytest.approx(pi_operator(without, r, mu)[-1],
+                                                              abs=1e-12)
+    # and the whole state is wiped: every operator holds the same value afterwards
+    np.testing.assert_allclose(play_operator(with_loop, r)[-1], play_operator(without, r)[-1],
+                               atol=1e-12)
+    # a minor loop that is not exceeded is remembered
+    not_wiped = np.array([0.0, 1.5, -0.5, 1.2, -0.2, 1.0])
+    assert not np.allclose(play_operator(not_wiped, r)[-1],
+                           play_operator(np.array([0.0, 1.5, -0.5, 1.0]), r)[-1])
+
+
+def test_inverse_composed_with_forward_is_identity():
+    rng = np.random.default_rng(2)
+    for n in (1, 5, 40):
+        r = pi_thresholds((-3, 3), n)
+        mu = random_weights(n, rng, negative=n > 1)
+        r_inv, mu_inv = pi_inverse_parameters(r, mu)
+        v = random_walk(2000, rng)
+        np.testing.assert_allclose(pi_operator(pi_operator(v, r, mu), r_inv, mu_inv), v,
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(pi_operator(pi_operator(v, r_inv, mu_inv), r, mu), v,
+                                   rtol=0, atol=1e-9)
+
+
+def test_inverse_from_a_non_virgin_state():
+    rng = np.random.default_rng(3)
+    r = pi_thresholds((-3, 3), 20)
+    mu = random_weights(20, rng)
+    r_inv, mu_inv = pi_inverse_parameters(r, mu)
+    v = random_walk(600, rng)
+    p = play_operator(v[:300], r)[-1]
+    y = pi_operator(v[300:], r, mu, p0=p)
+    back = pi_operator(y, r_inv, mu_inv, p0=pi_inverse_state(mu, p))
+    np.testing.assert_allclose(back, v[300:], atol=1e-9)
+
+
+def test_inverse_needs_increasing_loading_curve():
+    r = pi_thresholds((-1, 1), 4)
+    with pytest.raises(ValueError, match="positive first weight"):
+        pi_inverse_parameters(r, [0.0, 0.1, 0.1, 0.1])
+    with pytest.raises(ValueError, match="partial sum"):
+        pi_inverse_parameters(r, [0.1, -0.2, 0.1, 0.1])
+    with pytest.raises(ValueError, match="strictly increasing"):
+        pi_inverse_parameters([0.0, 0.5, 0.5, 1.0], [1.0, 0.1, 0.1, 0.1])
+
+
+def test_pi_blocks_in_python_control():
+    rng = np.random.default_rng(4)
+    r = pi_thresholds((-2, 2), 8)
+    mu = random_weights(8, rng)
+    dt = 1 / FS
+    H = pi_block(r, mu, dt=dt)
+    Hinv = pi_inverse_block(r, mu, dt=dt)
+    assert H.nstates == 8 and H.state_labels[0] == "p0"
+    assert H.params["pi_mu3"] == mu[3] and H.params["pi_r3"] == r[3]
+    v = random_walk(300, rng)
+    t = np.arange(len(v)) * dt
+    w2 = ct.input_output_response(H, t, v).outputs
+    np.testing.assert_allclose(w2, pi_operator(v, r, mu), atol=1e-12)
+    back = ct.input_output_response(Hinv, t, w2).outputs
+    np.testing.assert_allclose(back, v, atol=1e-9)
+    # compensation: inverse then forward, interconnected, is the identity
+    comp = pi_inverse_block(r, mu, dt=dt, inputs="ref", outputs="w1", name="C")
+    chain = ct.interconnect([comp, H], inputs="ref", outputs="w2", name="compensated")
+    assert chain.nstates == 16
+    out = ct.input_output_response(chain, t, v).outputs
+    np.testing.assert_allclose(out, v, atol=1e-9)
+
+
+# --------------------------------------------------------------------- the sandwich
+def test_sandwich_parameters_and_normalisation():
+    model, u = known_sandwich()
+    s = model.structure
+    assert s.names[:3] == ("a11", "a12", "b12") and s.names[-3:] == ("a21", "a22", "b22")
+    assert len(model.theta) == 3 + 10 + 3
+    # unit DC gains (b11, b21 derived)
+    assert ct.dcgain(model.L1) == pytest.approx(1.0)
+    assert ct.dcgain(model.L2) == pytest.approx(1.0)
+    # delays of eqs. (29) and (31): no direct feed-through, first sample of the impulse is 0
+    assert model.L1.num[0][0][-1] != 0 and model.L1.den[0][0].size == 3
+    imp = model.simulate(np.r_[1.0, np.zeros(5)]).y
+    assert imp[0] == 0.0 and imp[1] == 0.0 and imp[2] != 0.0  # two samples of delay in all
+    assert model.is_stable()
+    with pytest.raises(ValueError, match="missing"):
+        PISandwich({"a11": 0.1}, model.thresholds)
+    with pytest.raises(ValueError, match="thresholds"):
+        PISandwich(model.theta, model.thresholds[:-1], s)
+    with pytest.raises(ValueError, match="non-finite"):
+        PISandwich(np.full(len(model.theta), np.nan), model.thresholds)
+
+
+def test_python_control_equivalence_from_rest():
+    model, u = known_sandwich(u=paper_excitation(1500, FS, seed=5))
+    fast = model.simulate(u)
+    sys = model.to_control()
+    t = np.arange(len(u)) / FS
+    out = ct.input_output_response(sys, t, u, X0=model.control_state())
+    y, w1, w2 = out.outputs
+    scale = np.max(np.abs(fast.y))
+    assert np.max(np.abs(y - fast.y)) < 1e-9 * scale
+    np.testing.assert_allclose(w1, fast.w1, rtol=0, atol=1e-9 * np.max(np.abs(fast.w1)))
+    np.testing.assert_allclose(w2, fast.w2, rtol=0, atol=1e-9 * np.max(np.abs(fast.w2)))
+
+
+def test_python_control_equivalence_from_initial_condition():
+    model, u = known_sandwich(u=paper_excitation(2000, FS, seed=6))
+    first = model.simulate(u[:1200])
+    x0 = InitialCondition(u=u[1197:1200], w1=first.w1[-3:], w2=first.w2[-3:], y=first.y[-3:])
+    p0 = play_operator(first.w1, model.thresholds)[-1]
+    rest = model.simulate(u[1200:], x0, p0=p0)
+    np.testing.assert_allclose(rest.y, model.simulate(u).y[1200:], rtol=1e-12, atol=1e-12)
+    t = np.arange(800) / FS
+    out = ct.input_output_response(model.to_control(), t, u[1200:],
+                                   X0=model.control_state(x0, p0=p0))
+    assert np.max(np.abs(out.outputs[0] - rest.y)) < 1e-9 * np.max(np.abs(rest.y))
+
+
+def test_from_control_round_trip_and_gain_moving():
+    model, _ = known_sandwich()
+    back = PISandwich.from_control(model.to_control())
+    np.testing.assert_allclose(back.theta, model.theta, atol=1e-9)
+    np.testing.assert_allclose(back.thresholds, model.thresholds, atol=1e-12)
+    # L1 scaled by 2, H with doubled thresholds, L2 scaled by 0.5: P_2r[2 w] = 2 P_r[w], so
+    # this is the same stage; from_control moves the gains into H and finds the model again
+    L1 = ct.tf(2 * model.L1.num[0][0], model.L1.den[0][0], model.dt)
+    L2 = ct.tf(0.5 * model.L2.num[0][0], model.L2.den[0][0], model.dt)
+    H = pi_block(2 * model.thresholds, model.mu, dt=model.dt)
+    moved = PISandwich.from_control(L1, H, L2)
+    np.testing.assert_allclose(moved.thresholds, model.thresholds, atol=1e-12)
+    np.testing.assert_allclose(moved.theta, model.theta, atol=1e-9)
+    u = paper_excitation(900, FS, seed=8)
+    np.testing.assert_allclose(moved.simulate(u).y, model.simulate(u).y, atol=1e-10)
+
+
+def test_output_sensitivities_match_finite_differences():
+    model, u = known_sandwich(u=paper_excitation(600, FS, seed=9))
+    _, J = pi_output_sensitivities(model, u)
+    for i in (0, 1, 2, 5, len(model.theta) - 2, len(model.theta) - 1):
+        d = 1e-6
+        hi, lo = model.theta.copy(), model.theta.copy()
+        hi[i] += d
+        lo[i] -= d
+        fd = (PISandwich(hi, model.thresholds).simulate(u).y
+              - PISandwich(lo, model.thresholds).simulate(u).y) / (2 * d)
+        assert np.max(np.abs(J[:, i] - fd)) < 1e-6 * max(1.0, np.max(np.abs(fd)))
+
+
+def test_keyterm_factorisation_is_exact_on_a_rank_one_product():
+    model, _ = known_sandwich()
+    s = model.structure
+    b2, mu = model.b2, model.mu
+    kt = np.concatenate([model.theta[:3], np.outer(b2, mu).ravel(), model.a2])
+    np.testing.assert_allclose(keyterm_to_model(kt, s), model.theta, atol=1e-12)
+
+
+# --------------------------------------------------------------------- identification
+def noisy_record(model, u, noise, seed):
+    y = model.simulate(u).y
+    rng = np.random.default_rng(seed)
+    return Record(u=u, y=y + noise * rng.standard_normal(len(y)), fs=FS, name="known PI")
+
+
+def test_recursive_recovers_known_pi_sandwich():
+    model, u = known_sandwich()
+    rec = noisy_record(model, u, 1e-3, seed=10)
+    idf = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=1000)
+    res = idf.fit(rec)
+    assert res.method == "pi-recursive" and res.history.shape == (len(u), len(model.theta))
+    est = res.model
+    assert est.is_stable()
+    rel = np.abs(est.theta - model.theta) / np.abs(model.theta)
+    names = model.structure.names
+    # L1, L2 and the weights of the operators the input keeps moving (r_i < ~1.4 V here; the
+    # others move only during the initial ramp and are less well determined)
+    moving = [n for n in names if not n.startswith("mu") or int(n[2:]) < 4]
+    worst = max(rel[names.index(n)] for n in moving)
+    assert worst < 0.01, dict(zip(names, rel.round(4), strict=True))
+    assert np.max(rel) < 0.2
+    u_val = paper_excitation(6000, FS, seed=11)
+    err = est.simulate(u_val).y - model.simulate(u_val).y
+    assert np.sqrt(np.mean(err**2)) < 5e-3  # a few nm on a ~um output
+    # the recursion improves on its warm-up estimate
+    warm_err = idf.warm_result_.model.simulate(u_val).y - model.simulate(u_val).y
+    assert np.sqrt(np.mean(err**2)) < np.sqrt(np.mean(warm_err**2))
+
+
+def test_update_one_sample_matches_fit():
+    model, u = known_sandwich(u=paper_excitation(1500, FS, seed=12))
+    rec = noisy_record(model, u, 1e-3, seed=13)
+    batch = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=600)
+    res = batch.fit(rec)
+    online = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=600)
+    errors = [online.update(a, b) for a, b in zip(rec.u, rec.y, strict=True)]
+    np.testing.assert_allclose(online.theta, res.model.theta, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(errors, res.info["prediction_errors"], rtol=1e-9, atol=1e-12)
+    assert online.K.shape == online.theta.shape and online.P.shape == (16, 16)
+    assert np.all(np.linalg.eigvalsh(online.P) > 0)
+
+
+def test_paper_cold_start_is_reported_not_hidden():
+    # the paper's start (P0 = 1e6, theta0 = 0.001, no warm-up): runs, keeps L1 and L2 stable
+    model, u = known_sandwich(u=paper_excitation(3000, FS, seed=14))
+    rec = noisy_record(model, u, 1e-3, seed=15)
+    for form in ("output-error", "key-term"):
+        res = PIRecursiveIdentifier(form=form, warmup=0).fit(rec)
+        assert res.model.is_stable()
+        assert np.all(np.isfinite(res.history))
+        assert res.settings["P0"] == 1e6 and res.settings["theta0"] == 0.001
+
+
+def test_batch_fit_and_identify_pi_entry_point():
+    model, u = known_sandwich(u=paper_excitation(3000, FS, seed=16))
+    rec = noisy_record(model, u, 1e-3, seed=17)
+    res = identify_pi(rec, method="batch", thresholds=model.thresholds)
+    assert res.method == "pi-batch"
+    assert res.info["rms_residual"] == pytest.approx(1e-3, rel=0.1)
+    direct = fit_pi_output_error(rec, model.thresholds)
+    np.testing.assert_allclose(direct.model.theta, res.model.theta)
+    with pytest.raises(ValueError, match="method"):
+        identify_pi(rec, method="nope")
+    with pytest.raises(ValueError, match="form"):
+        PIRecursiveIdentifier(form="nope")
+    with pytest.raises(ValueError, match="thresholds"):
+        PIRecursiveIdentifier(warmup=0).update(1.0, 1.0)
+    with pytest.raises(ValueError, match="warmup"):
+        PIRecursiveIdentifier(warmup=5000).fit(rec[:1000])
+
+
+def test_structure_validation():
+    with pytest.raises(ValueError, match="n1b"):
+        PIStructure(n1b=0)
+    assert PIStructure(n_operators=3).history == 2
