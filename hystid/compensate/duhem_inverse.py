@@ -76,6 +76,9 @@ EXACT = 0
 BOUND = 1
 UNREACHABLE = 2
 
+# a requested change of w2 this small is round-off of the reference path, not a reversal
+_ROUND_OFF = 1e-13
+
 
 @njit(cache=True, inline="always")
 def _sgn(x):
@@ -113,8 +116,8 @@ def duhem_solutions(w2d, w1p, w2p, alpha, f0, f1, g0):
     """
     G = duhem_gap(w1p, w2p, f0, f1)
     delta = w2d - w2p
-    if delta == 0.0:
-        return 1, 0.0, 0.0
+    if abs(delta) <= _ROUND_OFF * (1.0 + abs(w2d)):
+        return 1, 0.0, 0.0  # w2 stays (within round-off): d = 0
     s_pos = g0 + alpha * G  # slope of phi for d > 0
     s_neg = g0 - alpha * G  # slope of phi for d < 0
     n = 0

@@ -19,7 +19,7 @@ class ScanReference:
     t, y : ndarray
         Time (s) and desired output.
     skip : int
-        Samples to leave out of the tracking figures: the lead-in from rest and the first
+        Samples to leave out of the tracking figures: the rest, the lead-in and the first
         period (the hysteresis starts on its virgin curve).
     kind : str
         ``"triangle"`` or ``"sine"``.
@@ -47,12 +47,14 @@ def scan_reference(
     low: float = 1.0,
     high: float = 8.0,
     lead_in: float = 0.01,
+    rest: float = 0.002,
 ) -> ScanReference:
     """A triangle or sine scan between ``low`` and ``high``, reached from rest.
 
-    The output first rises from 0 to ``low`` along a raised cosine over ``lead_in`` seconds
-    (a stage at rest cannot follow a jump), then scans ``periods`` periods starting upwards
-    from ``low``. The defaults cover most of the reference stage's stroke (about 0.5-8.5 um
+    The output stays at 0 for ``rest`` seconds (so that a look-ahead smoother of the reference
+    still starts at rest), rises from 0 to ``low`` along a raised cosine over ``lead_in``
+    seconds (a stage at rest cannot follow a jump), then scans ``periods`` periods starting
+    upwards from ``low``. The defaults cover most of the reference stage's stroke (about 0.5-8.5 um
     with the 0-10 V amplifier).
 
     Parameters
@@ -69,6 +71,8 @@ def scan_reference(
         Range of the scan in output units (um).
     lead_in : float
         Seconds of the approach from rest.
+    rest : float
+        Seconds at 0 before the approach.
     """
     if kind not in ("triangle", "sine"):
         raise ValueError(f"kind: expected 'triangle' or 'sine', got {kind!r}")
@@ -77,8 +81,10 @@ def scan_reference(
             raise ValueError(f"{name}: expected a positive number, got {value!r}")
     if not (np.isfinite(low) and np.isfinite(high) and low < high):
         raise ValueError(f"low, high: expected low < high, got {low!r}, {high!r}")
-    if not (np.isfinite(lead_in) and lead_in >= 0):
-        raise ValueError(f"lead_in: expected a non-negative duration, got {lead_in!r}")
+    for name, value in (("lead_in", lead_in), ("rest", rest)):
+        if not (np.isfinite(value) and value >= 0):
+            raise ValueError(f"{name}: expected a non-negative duration, got {value!r}")
+    n_rest = int(round(rest * fs))
     n_lead = int(round(lead_in * fs))
     n_scan = int(round(periods * fs / frequency))
     ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(n_lead) / max(n_lead, 1))
@@ -87,8 +93,8 @@ def scan_reference(
         shape = 1.0 - np.abs(2.0 * phase - 1.0)
     else:
         shape = 0.5 - 0.5 * np.cos(2.0 * np.pi * phase)
-    y = np.concatenate([low * ramp, low + (high - low) * shape])
-    skip = n_lead + int(round(fs / frequency))
+    y = np.concatenate([np.zeros(n_rest), low * ramp, low + (high - low) * shape])
+    skip = n_rest + n_lead + int(round(fs / frequency))
     return ScanReference(np.arange(len(y)) / fs, y, skip, kind, float(frequency))
 
 
