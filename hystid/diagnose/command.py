@@ -59,6 +59,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="sampling rate in Hz (for files without a time vector or fs)")
     parser.add_argument("--columns", default=None, metavar="t=1,u=3,y=2",
                         help="where t, u and y are in the files (names or 0-based positions)")
+    parser.add_argument("--model", default=None, metavar="FILE.json",
+                        help="diagnose this model instead of identifying one: a JSON object "
+                        "with 'params' (as written by 'hystid identify --out') and optionally "
+                        "'structure' (n1a, n1b, n2a, n2b, q1, q2, f0)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--out", default=None, metavar="DIR",
                         help="write report.json, summary.txt and the figures to DIR")
@@ -135,6 +139,34 @@ def _load(path: str, args, label: str):
     return rec
 
 
+def _model(path: str | None, fs: float):
+    if path is None:
+        return None
+    from ..model import DuhemSandwich, Structure
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as err:
+        raise _BadInput(f"--model {path}: cannot read a JSON object ({err})") from err
+    if not isinstance(data, dict) or not isinstance(data.get("params"), dict):
+        raise _BadInput(f"--model {path}: expected a JSON object with a 'params' mapping")
+    params = data["params"]
+    if "structure" in data:
+        try:
+            structure = Structure(**data["structure"])
+        except (TypeError, ValueError) as err:
+            raise _BadInput(f"--model {path}: bad 'structure': {err}") from err
+    else:
+        count = {k: sum(1 for n in params if n.startswith(k) and n[2:].isdigit())
+                 for k in ("a1", "b1", "a2", "b2")}
+        structure = Structure(count["a1"], count["b1"], count["a2"], count["b2"],
+                              f0="f0" in params)
+    try:
+        return DuhemSandwich(params, structure, fs=fs, name=f"model from {Path(path).name}")
+    except ValueError as err:
+        raise _BadInput(f"--model {path}: {err}") from err
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``hystid diagnose``; returns the exit status (2 for bad input).
 
@@ -156,8 +188,9 @@ def run(args: argparse.Namespace) -> int:
             strict = True
         if args.max_rounds < 1:
             raise _BadInput(f"--max-rounds: expected a positive integer, got {args.max_rounds}")
+        model = _model(args.model, train.fs)
         result = diagnose(
-            train, vals, effects=names, holdout=args.holdout, alpha=args.alpha,
+            train, vals, model, effects=names, holdout=args.holdout, alpha=args.alpha,
             min_reduction=args.min_reduction, max_rounds=args.max_rounds,
             initial=args.initial, refit_all=args.refit_all, require_excitation=strict,
             progress=not args.quiet,
