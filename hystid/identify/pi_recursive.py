@@ -30,11 +30,12 @@ the weights. :func:`identify_pi` is the entry point of ``hystid identify REC --m
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.optimize import least_squares
 
 from ..model import InitialCondition
 from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds
@@ -836,8 +837,10 @@ class PIRecursiveIdentifier:
         errors = np.zeros(n)
         yhats = np.zeros(n)
         raw[:w] = self.theta
+        t0 = time.perf_counter()
         if w:
             self._warm_start(u[:w], y[:w])
+        warm_seconds = time.perf_counter() - t0
         arrays = self._arrays(H + n - w)
         for dst, src in zip(arrays, self._windows, strict=True):
             if len(src) > 1:
@@ -862,6 +865,7 @@ class PIRecursiveIdentifier:
             "thresholds": self.thresholds_.tolist(),
             "prediction_errors": errors,
             "stable": bool(self.model.is_stable()),
+            "warmup_seconds": warm_seconds,
         }
         settings = {**self.settings, "samples": n}
         return IdentificationResult(
@@ -897,13 +901,13 @@ def fit_pi_output_error(
     n_operators: int = N_OPERATORS,
     theta0: np.ndarray | None = None,
     max_nfev: int = 200,
-    tol: float = 1e-10,
+    tol: float = 1e-8,
     name: str = "identified PI sandwich",
 ) -> IdentificationResult:
     """Identify the PI sandwich off-line by output-error least squares (the reference).
 
-    Minimises ``sum_k (y(k) - yhat(k | theta))^2`` of the free-run simulation from rest with
-    ``scipy.optimize.least_squares`` (trust region, exact Jacobian). The denominators of L1 and
+    Minimises ``sum_k (y(k) - yhat(k | theta))^2`` of the free-run simulation from rest by
+    Levenberg-Marquardt with the exact Jacobian. The denominators of L1 and
     L2 are searched as reflection coefficients in (-1, 1), so the model stays stable. The
     default start is ``L1 = L2 = z^-1`` with the weights fitted by linear least squares (the
     output is linear in the weights).
@@ -923,12 +927,12 @@ def fit_pi_output_error(
     max_nfev : int
         Maximum number of residual evaluations.
     tol : float
-        ``ftol``, ``xtol`` and ``gtol`` of the solver.
+        Stop when the relative decrease of the cost or the relative step falls below it.
 
     Returns
     -------
     IdentificationResult
-        ``method="pi-batch"``; ``info`` holds the RMS residual and the solver's status.
+        ``method="pi-batch"``; ``info`` holds the RMS residual and the solver's message.
     """
     u = np.ascontiguousarray(record.u, dtype=float)
     y = np.ascontiguousarray(record.y, dtype=float)
@@ -965,29 +969,70 @@ def fit_pi_output_error(
     hi = np.full(len(z0), np.inf)
     for g in groups:
         lo[g], hi[g] = -K_MAX, K_MAX
-    cache: dict = {}
-
     def fun(z):
         theta, dth = to_theta(z)
-        m = PISandwich(theta, r, s, fs=record.fs)
-        yhat, J = pi_output_sensitivities(m, u)
-        cache["z"], cache["J"] = z.copy(), J @ dth
-        return yhat - y
+        yhat, J = pi_output_sensitivities(PISandwich(theta, r, s, fs=record.fs), u)
+        if not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(J))):
+            return None, None
+        return yhat - y, J @ dth
 
-    def jac(z):
-        if "z" not in cache or not np.array_equal(cache["z"], z):
-            fun(z)
-        return cache["J"]
-
-    sol = least_squares(fun, z0, jac=jac, bounds=(lo, hi), method="trf", ftol=tol, xtol=tol,
-                        gtol=tol, max_nfev=max_nfev, x_scale="jac")
+    sol = _levenberg_marquardt(fun, z0, lo, hi, max_nfev, tol)
     theta = to_theta(sol.x)[0]
     model = PISandwich(theta, r, s, fs=record.fs, name=name)
     info = {"rms_residual": float(np.sqrt(np.mean(sol.fun**2))), "nfev": int(sol.nfev),
-            "status": int(sol.status), "message": str(sol.message),
-            "thresholds": r.tolist()}
+            "message": str(sol.message), "thresholds": r.tolist()}
     settings = {"n_operators": len(r), "max_nfev": max_nfev, "tol": tol, "samples": len(u)}
     return IdentificationResult(model, "pi-batch", settings, info=info)
+
+
+@dataclass
+class _Solution:
+    x: np.ndarray
+    fun: np.ndarray
+    nfev: int
+    message: str
+
+
+def _levenberg_marquardt(fun, z0, lo, hi, max_nfev: int, tol: float) -> _Solution:
+    """Box-bounded Levenberg-Marquardt on the normal equations (n_params is small).
+
+    ``fun(z) -> (residual, jacobian)`` or ``(None, None)`` where the model cannot be simulated.
+    """
+    z = np.clip(z0, lo, hi)
+    res, J = fun(z)
+    if res is None:
+        raise ValueError("theta0: the start cannot be simulated (non-finite output)")
+    cost = float(res @ res)
+    nfev, lam, message = 1, None, "maximum number of evaluations reached"
+    while nfev < max_nfev:
+        A = J.T @ J
+        g = J.T @ res
+        diag = np.maximum(np.diag(A), 1e-12 * max(np.max(np.diag(A)), 1e-300))
+        lam = 1e-3 if lam is None else lam
+        improved = False
+        while nfev < max_nfev:
+            step = np.linalg.solve(A + lam * np.diag(diag), -g)
+            z_new = np.clip(z + step, lo, hi)
+            r_new, J_new = fun(z_new)
+            nfev += 1
+            c_new = float(r_new @ r_new) if r_new is not None else np.inf
+            if c_new < cost:
+                improved = True
+                break
+            lam *= 4.0
+            if lam > 1e12:
+                break
+        if not improved:
+            message = "no further decrease of the cost"
+            break
+        gain = (cost - c_new) / max(cost, 1e-300)
+        dz = np.max(np.abs(z_new - z) / np.maximum(np.abs(z), 1e-3))
+        z, res, J, cost = z_new, r_new, J_new, c_new
+        lam = max(lam / 3.0, 1e-12)
+        if gain < tol or dz < tol:
+            message = "relative decrease of the cost or step below tol"
+            break
+    return _Solution(z, res, nfev, message)
 
 
 # =========================================================================== entry point
