@@ -15,6 +15,12 @@
   or nothing.
 * The amplifier clips the total command to ``u_limits``; the compensator clips its own part and
   follows it, so neither path winds up.
+* While the compensator turns the hysteresis round before a reversal (status
+  :data:`~hystid.compensate.compensator.TURNING`) the stage's incremental gain is small or of
+  the other sign (after a reversal of ``w1`` the paper's Duhem block first keeps going the old
+  way), so feedback there would only wind its integrator up and release it as an overshoot
+  after the turn: the error fed to ``C`` is held at zero for those samples
+  (``hold_while_turning``).
 
 :func:`closed_loop` returns the :class:`control.InterconnectedSystem` and
 :func:`closed_loop_response` simulates it with :func:`control.input_output_response`;
@@ -36,6 +42,7 @@ from ..model import DuhemSandwich
 from .compensator import (
     COMPENSATIONS,
     DUHEM_BOUND,
+    TURNING,
     HysteresisInverse,
     _as_reference,
     _build,
@@ -70,7 +77,7 @@ class ClosedLoopResponse:
     u, u_ff, u_fb : ndarray
         Applied command and its feed-forward and feedback parts (before clipping).
     e : ndarray
-        Error seen by the controller, ``yd - (y + noise)``.
+        Error seen by the controller: ``yd - (y + noise)``, or 0 while it holds.
     status : ndarray
         Compensator status flags (see :class:`~hystid.compensate.compensator.Feedforward`).
     """
@@ -171,6 +178,7 @@ def closed_loop(
     reference_lead: int | None = None,
     preview: int | None = None,
     duhem_bound: float = DUHEM_BOUND,
+    hold_while_turning: bool = True,
     noise_input: bool = True,
     name: str = "closed loop",
 ) -> ct.InterconnectedSystem:
@@ -188,6 +196,8 @@ def closed_loop(
         The stage actually driven (input ``u``, output ``y``); the model itself by default.
     u_limits, reference_model, reference_lead, preview, duhem_bound
         As for :func:`~hystid.compensate.compensator.inverse`.
+    hold_while_turning : bool
+        Feed ``C`` a zero error while the compensator turns the hysteresis round.
     noise_input : bool
         Add an input ``n`` (sensor noise, added to ``y`` before the controller).
     name : str
@@ -212,9 +222,15 @@ def closed_loop(
 
     sat = ct.nlsys(None, amplifier, inputs=["u_cmd"], outputs=["u", "du"], dt=dt,
                    name="amplifier")
+
+    def error(t, x, u, params):
+        held = hold_while_turning and (int(round(u[2])) & TURNING)
+        return np.array([0.0 if held else u[0] - u[1]])
+
     blocks = [
         ff,
-        ct.summing_junction(["yd", "-ym"], "e", dt=dt, name="error"),
+        ct.nlsys(None, error, inputs=["yd", "ym", "ff_status"], outputs=["e"], dt=dt,
+                 name="error"),
         _controller_ss(controller, dt),
         ct.summing_junction(["u_ff", "u_fb"], "u_cmd", dt=dt, name="command"),
         sat,
@@ -288,7 +304,7 @@ def closed_loop_response(
 # =========================================================================== compiled twin
 @njit(cache=False)  # calls into other modules: a cached copy would not see their edits
 def _run_loop(x_ff, rs, chain_args, Ac, Bc, Cc, Dc, theta, layout, U, W1, W2, Y, P0,
-              noise, umin, umax, y, u, u_ff, u_fb, yd, e, status):
+              noise, umin, umax, hold, y, u, u_ff, u_fb, yd, e, status):
     nc = Ac.shape[0]
     xc = np.zeros(nc)
     xc_new = np.zeros(nc)
@@ -299,6 +315,8 @@ def _run_loop(x_ff, rs, chain_args, Ac, Bc, Cc, Dc, theta, layout, U, W1, W2, Y,
         x_ff, uf, ydk, st = chain_step(x_ff, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM,
                                        DM, r_pi, mu_pi, r_inv, mu_inv)
         ek = ydk - (y[k] + noise[k])
+        if hold and (st & 8):
+            ek = 0.0
         ub = Dc[0] * ek
         for i in range(nc):
             ub += Cc[i] * xc[i]
@@ -335,6 +353,7 @@ def simulate_closed_loop(
     reference_lead: int | None = None,
     preview: int | None = None,
     duhem_bound: float = DUHEM_BOUND,
+    hold_while_turning: bool = True,
 ) -> ClosedLoopResponse:
     """The loop of :func:`closed_loop`, compiled, for a Duhem stage.
 
@@ -361,6 +380,8 @@ def simulate_closed_loop(
         Seed of the noise.
     u_limits, reference_model, reference_lead, preview, duhem_bound
         As for :func:`~hystid.compensate.compensator.inverse`.
+    hold_while_turning : bool
+        As for :func:`closed_loop`.
     """
     stage = model if plant is None else plant
     if not isinstance(stage, DuhemSandwich):
@@ -395,6 +416,7 @@ def simulate_closed_loop(
     status = np.empty(n, dtype=np.int64)
     umin, umax = (float(v) for v in u_limits)
     _run_loop(x_ff, rs, chain.args(), Ac, Bc, Cc, Dc, stage.theta, stage.structure.layout,
-              U, W1, W2, Y, P0, np.ascontiguousarray(noise), umin, umax, *out, status)
+              U, W1, W2, Y, P0, np.ascontiguousarray(noise), umin, umax,
+              bool(hold_while_turning), *out, status)
     y, u, u_ff, u_fb, yd, e = out
     return ClosedLoopResponse(np.arange(n) * model.dt, y_ref, yd, y, u, u_ff, u_fb, e, status)

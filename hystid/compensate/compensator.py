@@ -51,7 +51,9 @@ __all__ = [
     "DEFAULT_PREVIEW",
     "DUHEM_BOUND",
     "HysteresisInverse",
+    "NOT_EXACT",
     "SATURATED",
+    "TURNING",
     "Feedforward",
     "feedforward",
     "inverse",
@@ -67,6 +69,12 @@ DEFAULT_PREVIEW = 300
 DUHEM_BOUND = 1.5
 #: Status flag: the command was clipped to the input limits.
 SATURATED = 4
+#: Status flag (not an error): the compensator is turning the hysteresis round (a far-branch
+#: step: ``w1`` already reverses while ``w2`` still goes on), so the stage's incremental gain is
+#: far from the branch slope (small, or of the other sign); a feedback integrator holds then.
+TURNING = 8
+#: Status bits that mean the sample was not exact.
+NOT_EXACT = 1 | 2 | 4
 
 KIND_DUHEM, KIND_PI, KIND_LINEAR, KIND_NONE = 0, 1, 2, 3
 #: ``compensation`` names accepted by :func:`compensator` and the closed-loop helpers.
@@ -142,7 +150,9 @@ def chain_step(x, r, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi,
     alpha, f0, f1, g0 = fpar[_ALPHA], fpar[_F0], fpar[_F1], fpar[_G0]
     # hysteresis inverse -> w1c = w1(k+q1)
     if kind == KIND_DUHEM:
-        d, status = plan_step(window, w1p, xn[oH], alpha, f0, f1, g0, fpar[_BOUND])
+        d, status, far = plan_step(window, w1p, xn[oH], alpha, f0, f1, g0, fpar[_BOUND])
+        if far:
+            status |= 8
         w1c = w1p + d
     elif kind == KIND_PI:
         n = ispec[_NPI]
@@ -498,7 +508,8 @@ class HysteresisInverse(ct.NonlinearIOSystem):
 
     Input ``r(k) = y_ref(k + advance)``; outputs the command ``u``, the desired output ``yd``
     aligned with the stage's ``y`` and a ``status`` (bit flags: 1 step clipped to the bound of
-    condition 8, 2 no exact step existed, 4 command saturated; 0 = exact).
+    condition 8, 2 no exact step existed, 4 command saturated -- none of these: exact; and 8,
+    :data:`TURNING`, the compensator is turning the hysteresis round).
 
     Attributes
     ----------
@@ -624,8 +635,8 @@ class Feedforward:
     yd : ndarray
         Desired output aligned with ``y`` (``M y_ref``, or ``y_ref`` itself).
     status : ndarray
-        Per-sample status flags (0 exact; 1 clipped to the bound of condition 8; 2 no exact
-        step; 4 saturated).
+        Per-sample status flags: 1 clipped to the bound of condition 8; 2 no exact step;
+        4 saturated (see :attr:`exact`); 8 turning the hysteresis round (:data:`TURNING`).
     preview, delay : int
         Planner preview and ``q1 + q2``.
     """
@@ -643,7 +654,7 @@ class Feedforward:
     @property
     def exact(self) -> np.ndarray:
         """Samples where the inverse step was exact and unsaturated."""
-        return self.status == 0
+        return (self.status & NOT_EXACT) == 0
 
 
 def _run(chain: _Chain, y_ref: np.ndarray) -> Feedforward:

@@ -371,16 +371,18 @@ def plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound):
         Increment of ``w1``.
     status : int
         ``EXACT``, ``BOUND`` or ``UNREACHABLE``.
+    far : bool
+        Whether the far branch was taken.
     """
     d0, st0 = duhem_inverse_step(W[0], w1p, w2p, alpha, f0, f1, g0, bound)
     n = W.shape[0]
     if st0 == UNREACHABLE or n < 3:
-        return d0, st0
+        return d0, st0, False
     w1a = w1p + d0
     w2a = duhem_forward(w1a, w1p, w2p, alpha, f0, f1, g0)
     j = _first_unreachable(W, 1, w1a, w2a, alpha, f0, f1, g0, bound)
     if j < 1:
-        return d0, st0
+        return d0, st0, False
     lo = np.empty(_K)
     hi = np.empty(_K)
     lo2 = np.empty(_K)
@@ -393,17 +395,17 @@ def plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound):
         lo, lo2 = lo2, lo
         hi, hi2 = hi2, hi
     if m == 0:
-        return d0, st0  # no exact plan: keep going, the reversal will be approximate
+        return d0, st0, False  # no exact plan: keep going, the reversal will be approximate
     # gap after the near step, relative to W[0]
     if _inside(duhem_gap(w1a, w2a, f0, f1), lo, hi, m):
-        return d0, st0
+        return d0, st0, False
     n_sol, near, far = duhem_solutions(W[0], w1p, w2p, alpha, f0, f1, g0)
     if n_sol == 2 and alpha * abs(far) <= bound:
         w1f = w1p + far
         w2f = duhem_forward(w1f, w1p, w2p, alpha, f0, f1, g0)
         if _inside(duhem_gap(w1f, w2f, f0, f1), lo, hi, m):
-            return far, EXACT
-    return d0, st0
+            return far, EXACT, True
+    return d0, st0, False
 
 
 def check_bound(bound: float) -> float:
