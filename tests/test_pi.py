@@ -312,8 +312,23 @@ def test_batch_fit_and_identify_pi_entry_point():
         PIRecursiveIdentifier(form="nope")
     with pytest.raises(ValueError, match="thresholds"):
         PIRecursiveIdentifier(warmup=0).update(1.0, 1.0)
-    with pytest.raises(ValueError, match="warmup"):
+    with pytest.raises(ValueError, match="warm-up"):
         PIRecursiveIdentifier(warmup=5000).fit(rec[:1000])
+    with pytest.raises(ValueError, match="warmup"):
+        PIRecursiveIdentifier(form="key-term", warmup=100)
+
+
+def test_sweep_warmup_waits_for_the_input_range():
+    rng = np.random.default_rng(18)
+    r = pi_thresholds((-1.0, 1.0), 5)
+    idf = PIRecursiveIdentifier(thresholds=r, min_warmup=50, max_warmup=400)
+    idf.reset()
+    u = np.r_[np.linspace(0, 0.5, 100), np.linspace(0.5, -0.9, 100)]  # swept 1.4 < 1.8
+    assert idf._warmup_length(u) == len(u)
+    u2 = np.r_[u, np.linspace(-0.9, 0.95, 50)]  # reaches a swing of 1.85 at sample ~247
+    n = idf._warmup_length(u2)
+    assert 240 < n < 250
+    assert idf._warmup_length(0.01 * rng.standard_normal(1000)) == 400  # capped
 
 
 def test_structure_validation():

@@ -540,10 +540,16 @@ class PIRecursiveIdentifier:
         ``w2 = sum mu_i p_i`` substituted, linear in ``a2`` and ``b2j mu_i`` given the operator
         outputs, with the *measured* past outputs (as the paper's ``h(k)`` holds
         ``-Delta y(k-i)``); L1 enters through the gradient.
-    warmup : int
+    warmup : int or "sweep"
         Output-error form only: the first ``warmup`` samples are fitted off-line
         (:func:`fit_pi_output_error`) and the recursion continues from that estimate and its
-        covariance. ``0`` starts cold from ``theta0`` and ``P0`` (the paper's start).
+        covariance. ``"sweep"`` (default): at least ``min_warmup`` samples and until the input
+        has swept 90 % of the range the thresholds were placed for (``2 r_max N/(N-1)``), so
+        that every play operator has moved once, but at most ``max_warmup`` samples. ``0``
+        starts cold from ``theta0`` and ``P0`` (the paper's start); the key-term form always
+        does.
+    min_warmup, max_warmup : int
+        Bounds of the ``"sweep"`` warm-up.
     fs : float
         Sampling rate of the data in Hz (for the model); :meth:`fit` takes the record's.
 
@@ -586,7 +592,9 @@ class PIRecursiveIdentifier:
         gamma: float = 1.0,
         lambda0: float = 1.0,
         form: str = "output-error",
-        warmup: int = 1000,
+        warmup: int | str = "sweep",
+        min_warmup: int = 1000,
+        max_warmup: int = 20_000,
         fs: float = 30_000.0,
     ) -> None:
         if form not in FORMS:
@@ -600,10 +608,16 @@ class PIRecursiveIdentifier:
                 raise ValueError(f"{label}: expected a positive finite number, got {value!r}")
         if gamma > 1:
             raise ValueError(f"gamma: expected a value in (0, 1] (mu(k) <= 1), got {gamma!r}")
-        if int(warmup) != warmup or warmup < 0:
-            raise ValueError(f"warmup: expected a non-negative number of samples, got {warmup!r}")
-        if warmup and form != "output-error":
-            raise ValueError("warmup: only the output-error form has a warm-up; use warmup=0")
+        if warmup != "sweep" and (isinstance(warmup, str) or int(warmup) != warmup
+                                  or warmup < 0):
+            raise ValueError(f"warmup: expected 'sweep' or a number of samples, got {warmup!r}")
+        if int(min_warmup) != min_warmup or not 50 <= min_warmup <= max_warmup:
+            raise ValueError(f"min_warmup, max_warmup: expected 50 <= min <= max, got "
+                             f"{min_warmup!r}, {max_warmup!r}")
+        if form != "output-error":
+            if warmup not in (0, "sweep"):
+                raise ValueError("warmup: only the output-error form has a warm-up; use warmup=0")
+            warmup = 0
         self.thresholds = thresholds
         self.structure = structure
         self.n_operators = int(n_operators)
@@ -613,7 +627,9 @@ class PIRecursiveIdentifier:
         self.gamma = float(gamma)
         self.lambda0 = float(lambda0)
         self.form = form
-        self.warmup = int(warmup)
+        self.warmup = warmup if warmup == "sweep" else int(warmup)
+        self.min_warmup = int(min_warmup)
+        self.max_warmup = int(max_warmup)
         self.fs = float(fs)
         self._ready = False
 
@@ -623,7 +639,8 @@ class PIRecursiveIdentifier:
         """The configuration, for reports."""
         return {"P0": self.P0.tolist(), "theta0": np.asarray(self.theta0).tolist(),
                 "epsilon": self.epsilon, "gamma": self.gamma, "lambda0": self.lambda0,
-                "form": self.form, "warmup": self.warmup,
+                "form": self.form, "warmup": self.warmup, "min_warmup": self.min_warmup,
+                "max_warmup": self.max_warmup,
                 "n_operators": self._structure().n_operators}
 
     @property
@@ -680,7 +697,9 @@ class PIRecursiveIdentifier:
         self._p = np.zeros(s.n_operators)
         self._SP = np.zeros((s.n_operators, _n_full(s)))
         self._buffer: list[tuple[float, float]] = []
+        self._umin, self._umax = np.inf, -np.inf
         self.warm_result_: IdentificationResult | None = None
+        self.warmed_up = False
         self._ready = True
         return self
 
@@ -729,6 +748,24 @@ class PIRecursiveIdentifier:
                           fs=self.fs, name="identified PI sandwich")
 
     # ----------------------------------------------------------------- warm start
+    def _warm_due(self, n: int, swept: float) -> bool:
+        """Whether ``n`` samples whose input spans ``swept`` complete the warm-up."""
+        if self.warmup != "sweep":
+            return n >= self.warmup
+        r, N = self.thresholds_, len(self.thresholds_)
+        span = 2.0 * r[-1] * N / (N - 1) if N > 1 else 0.0
+        return n >= self.max_warmup or (n >= self.min_warmup and swept >= 0.9 * span)
+
+    def _warmup_length(self, u: np.ndarray) -> int:
+        """Length of the warm-up on a whole input record (see ``warmup``)."""
+        if not self.warmup:
+            return 0
+        swept = np.maximum.accumulate(u) - np.minimum.accumulate(u)
+        for n in range(1, len(u) + 1):
+            if self._warm_due(n, swept[n - 1]):
+                return n
+        return len(u)
+
     def _warm_start(self, u: np.ndarray, y: np.ndarray) -> None:
         """Fit the first samples off-line, then set the recursion's state as if it had run."""
         s = self.structure_
@@ -769,12 +806,14 @@ class PIRecursiveIdentifier:
         u_k, y_k = float(u_k), float(y_k)
         if not (np.isfinite(u_k) and np.isfinite(y_k)):
             raise ValueError(f"update: non-finite sample u={u_k!r}, y={y_k!r}")
-        if self.k < self.warmup:
+        if self.warmup and not self.warmed_up:
             self._buffer.append((u_k, y_k))
             self.k += 1
-            if self.k == self.warmup:
+            self._umin, self._umax = min(self._umin, u_k), max(self._umax, u_k)
+            if self._warm_due(self.k, self._umax - self._umin):
                 u, y = np.array(self._buffer).T
                 self._warm_start(np.ascontiguousarray(u), np.ascontiguousarray(y))
+                self.warmed_up = True
             self.e, self.yhat = 0.0, 0.0
             return self.e
         for arr in self._windows:
@@ -826,13 +865,13 @@ class PIRecursiveIdentifier:
         if len(u) < 2 or len(u) != len(y) or not (np.all(np.isfinite(u))
                                                    and np.all(np.isfinite(y))):
             raise ValueError("record: expected at least 2 finite samples of u and y")
-        if len(u) <= self.warmup:
-            raise ValueError(f"record: {len(u)} samples, not more than warmup={self.warmup}")
         self.fs = float(record.fs)
         n_ops = self.structure.n_operators if self.structure else self.n_operators
         self.reset(self.thresholds if self.thresholds is not None
                    else _record_thresholds(record, n_ops))
-        n, H, w = len(u), self._H, self.warmup
+        n, H, w = len(u), self._H, self._warmup_length(u)
+        if w >= n:
+            raise ValueError(f"record: {n} samples are not more than the warm-up ({w} samples)")
         raw = np.empty((n, len(self.theta)))
         errors = np.zeros(n)
         yhats = np.zeros(n)
@@ -840,6 +879,7 @@ class PIRecursiveIdentifier:
         t0 = time.perf_counter()
         if w:
             self._warm_start(u[:w], y[:w])
+            self.warmed_up = True
         warm_seconds = time.perf_counter() - t0
         arrays = self._arrays(H + n - w)
         for dst, src in zip(arrays, self._windows, strict=True):
@@ -866,6 +906,7 @@ class PIRecursiveIdentifier:
             "prediction_errors": errors,
             "stable": bool(self.model.is_stable()),
             "warmup_seconds": warm_seconds,
+            "warmup_samples": w,
         }
         settings = {**self.settings, "samples": n}
         return IdentificationResult(
