@@ -118,11 +118,17 @@ def run_case(name: str, train: Record, simulate, quick: bool) -> list[dict]:
         row = {
             "record": name, "model": model_kind, "method": label,
             "converged_at": res.converged_at, "samples": train.n,
+            "converged_at_norm": norm_converged_at(res.history),
             "n_params": len(res.model.theta),
             "seconds": seconds, "us_per_sample": 1e6 * seconds / train.n,
             "validation": v.to_dict(), "finite": finite,
             "stable": bool(res.model.is_stable()),
         }
+        if "warmup_seconds" in res.info:
+            n_rec = train.n - res.info["warmup_samples"]
+            row["warmup_samples"] = res.info["warmup_samples"]
+            row["us_per_sample_recursion"] = (
+                1e6 * (seconds - res.info["warmup_seconds"]) / max(n_rec, 1))
         if model_kind == "duhem":
             sim = res.model.simulate(train.u)
             row["duhem_margin"] = float(res.model.params["alpha"] * sim.duhem_margin)
@@ -130,10 +136,31 @@ def run_case(name: str, train: Record, simulate, quick: bool) -> list[dict]:
     return out
 
 
-def _fmt_conv(row):
-    if row.get("converged_at") is None:
+def norm_converged_at(history: np.ndarray | None, epsilon: float = 1e-4) -> int | None:
+    """First sample after which ``||theta(k) - theta(k-1)|| / ||theta(k)||`` stays within epsilon.
+
+    A vector reading of the stop index, next to the project's per-parameter one
+    (:func:`hystid.identify.result.converged_at`), which no estimate with a parameter near zero
+    can meet.
+    """
+    if history is None or len(history) < 2:
+        return None
+    h = np.asarray(history, float)
+    change = np.linalg.norm(np.diff(h, axis=0), axis=1) / np.maximum(
+        np.linalg.norm(h[1:], axis=1), 1e-300)
+    above = np.flatnonzero(~(change <= epsilon))
+    if len(above) == 0:
+        return 0
+    k = int(above[-1]) + 1
+    return k if k < len(h) - 1 else None
+
+
+def _fmt_conv(row, key="converged_at"):
+    if row.get("samples") is None:
+        return ""
+    if row.get(key) is None:
         return f"not within {row['samples']}"
-    return str(row["converged_at"])
+    return str(row[key])
 
 
 def print_table(rows: list[dict]) -> None:
@@ -143,18 +170,20 @@ def print_table(rows: list[dict]) -> None:
     for r in rows:
         if "error" in r:
             body.append([r["record"], r["model"], r["method"], "failed: " + r["error"][:60],
-                         "", "", "", "", ""])
+                         "", "", "", "", "", "", ""])
             continue
         v = r["validation"]
         ratio = r["us_per_sample"] / base[r["record"]] if r["record"] in base else float("nan")
+        rec_only = r.get("us_per_sample_recursion")
         body.append([
-            r["record"], r["model"], r["method"], _fmt_conv(r),
+            r["record"], r["model"], r["method"], _fmt_conv(r), _fmt_conv(r, "converged_at_norm"),
             f"{v['err_min']:.3g} .. {v['err_max']:.3g}", f"{v['rms']:.3g}", r["n_params"],
-            f"{r['us_per_sample']:.1f}", f"{ratio:.2f}",
+            f"{r['us_per_sample']:.1f}", "" if rec_only is None else f"{rec_only:.1f}",
+            f"{ratio:.2f}",
         ])
-    print(table(body, ["record", "model", "identifier", "samples to convergence",
-                       "validation error [um]", "RMS [um]", "params", "us/sample",
-                       "time vs Duhem on-line"]))
+    print(table(body, ["record", "model", "identifier", "converged (each param)",
+                       "converged (norm)", "validation error [um]", "RMS [um]", "params",
+                       "us/sample", "us/sample after warm-up", "time vs Duhem on-line"]))
 
 
 def main() -> None:
