@@ -24,8 +24,8 @@
 
 :func:`closed_loop` returns the :class:`control.InterconnectedSystem` and
 :func:`closed_loop_response` simulates it with :func:`control.input_output_response`;
-:func:`simulate_closed_loop` runs the same loop compiled (the Duhem stage only), hundreds of
-times faster, for long runs.
+:func:`simulate_closed_loop` runs the same loop compiled (the Duhem stage only), about 200
+times faster (``benchmarks/bench_compensate.py``), for long runs.
 """
 
 from __future__ import annotations

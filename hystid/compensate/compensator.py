@@ -594,6 +594,10 @@ def inverse(
         Samples the Duhem reversal planner looks ahead (:data:`DEFAULT_PREVIEW` for a Duhem
         model, 0 for a PI model, which needs none). ``0`` gives a strictly causal inverse
         that cannot prepare reversals (they are then approximate for a stage like the paper's).
+        The stretch a reversal needs grows as the scan slows: on the reference stage, for a
+        7 um sine, 300 samples suffice down to 5 Hz, 1 000 at 2 Hz, 3 000 at 1 Hz; a preview too
+        short leaves the reversal approximate (status 2 for a few samples). The cost per
+        sample grows linearly with the preview (``benchmarks/bench_compensate.py``).
     duhem_bound : float
         Largest ``alpha |dw1|`` per sample, below the stability bound 2 of condition (8).
     compensation : {"inverse", "linear", "none"}

@@ -331,9 +331,13 @@ def _target(delta, alpha, g0, bound, lo, hi):
 
 
 @njit(cache=True)
-def _first_unreachable(W, i0, w1p, w2p, alpha, f0, f1, g0, bound):
-    """Index of the first sample of ``W[i0:]`` the near branch cannot reach (-1 if none)."""
+def _first_unreachable(W, i0, w1p, w2p, alpha, f0, f1, g0, bound, gaps):
+    """Index of the first sample of ``W[i0:]`` the near branch cannot reach (-1 if none).
+
+    ``gaps[i]`` receives the gap of the near-branch path before sample ``i``.
+    """
     for i in range(i0, W.shape[0]):
+        gaps[i] = duhem_gap(w1p, w2p, f0, f1)
         d, st = duhem_inverse_step(W[i], w1p, w2p, alpha, f0, f1, g0, bound)
         if st == UNREACHABLE:
             return i
@@ -380,7 +384,8 @@ def plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound):
         return d0, st0, False
     w1a = w1p + d0
     w2a = duhem_forward(w1a, w1p, w2p, alpha, f0, f1, g0)
-    j = _first_unreachable(W, 1, w1a, w2a, alpha, f0, f1, g0, bound)
+    gaps = np.empty(n)
+    j = _first_unreachable(W, 1, w1a, w2a, alpha, f0, f1, g0, bound, gaps)
     if j < 1:
         return d0, st0, False
     lo = np.empty(_K)
@@ -391,6 +396,9 @@ def plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound):
     for i in range(j - 1, 0, -1):
         if m == 0:
             break
+        if _inside(gaps[i + 1], lo, hi, m):
+            # the near-branch path reaches the set by itself: waiting (near now) is safe
+            return d0, st0, False
         m = _preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, lo2, hi2)
         lo, lo2 = lo2, lo
         hi, hi2 = hi2, hi
