@@ -32,6 +32,9 @@ from .closedloop import (
 from .compensator import (
     DEFAULT_PREVIEW,
     DUHEM_BOUND,
+    NOT_EXACT,
+    SATURATED,
+    TURNING,
     Feedforward,
     HysteresisInverse,
     feedforward,
@@ -46,6 +49,9 @@ from .tracking import ScanReference, TrackingMetrics, scan_reference, tracking_m
 __all__ = [
     "DEFAULT_PREVIEW",
     "DUHEM_BOUND",
+    "NOT_EXACT",
+    "SATURATED",
+    "TURNING",
     "ClosedLoopResponse",
     "FeedbackDesign",
     "Feedforward",

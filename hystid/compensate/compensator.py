@@ -12,14 +12,17 @@ The compensator runs the sandwich backwards, one sample at a time::
   :mod:`~hystid.compensate.duhem_inverse` (or the exact inverse Prandtl-Ishlinskii operator for a
   :class:`~hystid.pi.PISandwich`, or the anhysteretic line ``w1 = w2 / f1`` for the
   uncompensated baseline).
-* ``L1^-1``: ``u(k) = w1(k+q1) - sum b1j u(k-j) + sum a1i w1(k+q1-i)``, stable because L1 is
-  minimum phase (Assumption 1).
+* ``L1^-1``: ``u(k) = w1(k+q1) - sum b1j u(k-j) + sum a1i w1(k+q1-i)`` (divided by the
+  leading numerator coefficient for the PI sandwich), stable because L1 is minimum phase
+  (Assumption 1).
 
 Preview. ``u(k)`` acts on ``y`` at ``k + q`` at the earliest (``q = q1 + q2``: the delays of L1
 and L2), and the reversal planner looks ``P`` samples further ahead. The compensator therefore
 reads the reference *advanced* by ``q + P`` samples: its input is ``r(k) = y_ref(k + q + P)``
-(see :meth:`HysteresisInverse.advance`) and its output ``yd(k) = (M y_ref)(k)`` is the desired
-output aligned with the stage's ``y(k)``, for a feedback loop.
+(see :attr:`HysteresisInverse.advance`) and its output ``yd(k) = (M y_ref)(k)`` is the desired
+output aligned with the stage's ``y(k)``, for a feedback loop. A reference model with a delay
+(a linear-phase smoother) takes that delay from the preview as well (``reference_lead``), so
+``yd`` has no lag.
 
 No windup. The compensator keeps its own copy of L1 and of the hysteresis block and drives it
 with the *saturated* command it actually applies. After a saturated stretch the hysteresis
@@ -77,7 +80,7 @@ TURNING = 8
 NOT_EXACT = 1 | 2 | 4
 
 KIND_DUHEM, KIND_PI, KIND_LINEAR, KIND_NONE = 0, 1, 2, 3
-#: ``compensation`` names accepted by :func:`compensator` and the closed-loop helpers.
+#: ``compensation`` names accepted by :func:`inverse` and the closed-loop helpers.
 COMPENSATIONS = {"inverse": KIND_DUHEM, "linear": KIND_LINEAR, "none": KIND_NONE}
 
 # ispec indices
@@ -318,6 +321,16 @@ def dc_delay(reference_model) -> int:
 
     For ``M(z) = N(z) / D(z)`` it is ``D'(1)/D(1) - N'(1)/N(1)``; a linear-phase FIR smoother
     of length ``L`` has ``(L - 1) / 2``.
+
+    Parameters
+    ----------
+    reference_model : None, str or control.LTI
+        As for :func:`inverse`.
+
+    Returns
+    -------
+    int
+        The delay in samples (negative delays count as 0).
     """
     if reference_model is None or isinstance(reference_model, str):
         return 0
@@ -504,7 +517,7 @@ def _functions(chain: _Chain):
 
 
 class HysteresisInverse(ct.NonlinearIOSystem):
-    """The compensator as a discrete python-control system (see :func:`inverse`).
+    """The compensator as a discrete python-control system; made by :func:`inverse`.
 
     Input ``r(k) = y_ref(k + advance)``; outputs the command ``u``, the desired output ``yd``
     aligned with the stage's ``y`` and a ``status`` (bit flags: 1 step clipped to the bound of
