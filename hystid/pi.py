@@ -51,6 +51,7 @@ __all__ = [
     "pi_thresholds",
     "play_operator",
     "pi_simulate_into",
+    "unit_gain_numerator",
     "N_OPERATORS",
 ]
 

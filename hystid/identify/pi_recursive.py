@@ -9,23 +9,36 @@ settings, ``P(0) = 1e6 I``, ``theta(0) = 0.001`` and the stop index ``epsilon = 
     P(k)      = [(I - K h') P(k-1) (I - K h')' + K Lambda^-1 K'] / mu(k)             (18)
     Lambda^-1(k) = Lambda^-1(k-1) + rho(k) [e(k)^2 - Lambda^-1(k-1)]                 (19)
 
-with ``rho(k) = (k+1)^-gamma`` and ``mu(k) = rho(k-1)/rho(k) (1 - rho(k))``. The PI model is
-not linear in its parameters (L1 acts through the play operators), so ``h(k)`` is the gradient
-``d yhat(k) / d theta`` computed along the recursion with the current estimates (forward
-sensitivities through eqs. 29-31; ``dp_i/dw1`` is 1 while operator ``i`` moves, 0 while it
-holds). Two predictors are offered:
+with ``rho(k) = (k+1)^-gamma`` and ``mu(k) = rho(k-1)/rho(k) (1 - rho(k))``; ``P`` is kept in
+U-D factored form (Bierman), which the plain update (18) needs at 46 parameters: in floating
+point it loses positive definiteness within a few thousand samples.
 
-* ``predictor="output-error"`` (default): ``yhat`` and its gradient come from the model's own
-  past outputs (a recursive prediction-error method). Sensor noise does not enter ``h``.
-* ``predictor="equation-error"``: the paper-like regressor, whose L2 part holds the *measured*
-  past outputs ``-y(k-1), -y(k-2)`` (as the paper's ``h(k)`` holds ``-Delta y(k-i)``).
+Regressors ``h(k)`` (``form``):
+
+* ``"output-error"`` (default): the gradient ``d yhat(k) / d theta`` of the *simulated* output,
+  by forward sensitivities through eqs. 29-31 along the recursion (``dp_i/dw1`` is 1 while
+  operator ``i`` moves, 0 while it holds): a recursive prediction-error method. Sensor noise
+  does not enter ``h``.
+* ``"key-term"``: the paper-like pseudo-linear regression. With ``w2 = sum mu_i p_i``
+  substituted, eq. (31) is linear in ``a2`` and the products ``b2j mu_i`` given the operator
+  outputs; the past outputs are the *measured* ones (as the paper's ``h(k)`` holds
+  ``-Delta y(k-i)``); L1 enters through the gradient. The products are turned back into
+  weights and ``b2`` by :func:`keyterm_to_model`.
+
+Start. The paper's cold start (``P0 = 1e6``, ``theta0 = 0.001``) diverges in both forms (see
+``benchmarks/bench_pi_vs_duhem.py``): with a diffuse ``P`` the first samples, where the signals
+are of the size of the sensor noise, throw L1 and L2 far off, and the play operators keep the
+wrong extrema of ``w1`` in memory. The default therefore warms up: the first samples, until the
+input has swept its range, are fitted off-line and the recursion continues from that estimate
+with ``P`` set to the inverse information of that fit (with the paper's ``P(0)`` as prior).
 
 After every update the estimate is kept stable (poles of L1 and L2 inside the unit circle): a
 step that would leave that set is halved until it does not (at most 30 times, then dropped).
 
-:func:`fit_pi_output_error` is the off-line reference: output-error least squares (scipy, exact
-Jacobian, poles kept inside the circle by reflection coefficients) started from a linear fit of
-the weights. :func:`identify_pi` is the entry point of ``hystid identify REC --model pi``.
+:func:`fit_pi_output_error` is the off-line reference: output-error least squares
+(Levenberg-Marquardt, exact Jacobian, poles kept inside the circle by reflection coefficients)
+started from a linear fit of the weights. :func:`identify_pi` is the entry point of
+``hystid identify REC --model pi``.
 """
 
 from __future__ import annotations
@@ -47,6 +60,7 @@ __all__ = [
     "PIRecursiveIdentifier",
     "fit_pi_output_error",
     "identify_pi",
+    "keyterm_to_model",
     "pi_output_sensitivities",
 ]
 
