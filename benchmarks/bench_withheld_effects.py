@@ -79,6 +79,11 @@ def effect_params(name: str, strength: int, rng: np.random.Generator, u: np.ndar
         w1 = reference_model(FS).simulate(u).w1
         limit = (0.8, 0.6, 0.4)[strength] * float(np.max(np.abs(np.diff(w1))))
         return {"inv_rate": 1.0 / (limit * FS)}
+    if name == "saturation":
+        w1 = reference_model(FS).simulate(u).w1
+        return {"cubic": sign * (0.01, 0.03, 0.1)[strength] / float(np.max(w1**2))}
+    if name == "offset":
+        return {"y0": sign * (0.002, 0.005, 0.015)[strength]}
     raise ValueError(name)
 
 
@@ -127,7 +132,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true",
                         help="one draw per effect, 6 clean records, 0.3 s records")
     parser.add_argument("--trials", type=int, default=None,
-                        help="random effect draws (each at three strengths; default 24)")
+                        help="random effect draws (each at three strengths; default 4 per "
+                        "effect)")
     parser.add_argument("--clean", type=int, default=None, help="clean records (default 24)")
     parser.add_argument("--seconds", type=float, default=None,
                         help="length of each train and held-out record (default 0.5 s)")

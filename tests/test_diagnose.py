@@ -37,6 +37,8 @@ CASES = {
     "delay": {"samples": 0.5},
     "asymmetry": {"alpha": 0.1},
     "slew_limit": {"inv_rate": 1.0 / (0.6 * FS)},
+    "saturation": {"cubic": 3e-4},
+    "offset": {"y0": 0.01},
 }
 
 

@@ -63,6 +63,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="diagnose this model instead of identifying one: a JSON object "
                         "with 'params' (as written by 'hystid identify --out') and optionally "
                         "'structure' (n1a, n1b, n2a, n2b, q1, q2, f0)")
+    parser.add_argument("--structure", default=None, metavar="n1a=1,n2a=2,...",
+                        help="structure of the identified nominal model (keys n1a, n1b, n2a, "
+                        "n2b, q1, q2, f0); the paper's experimental one by default")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--out", default=None, metavar="DIR",
                         help="write report.json, summary.txt and the figures to DIR")
@@ -77,6 +80,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--u-scale", type=_positive, default=1.0, metavar="K",
                         help="multiply the input by K (keeps alpha |dw1| of condition (8) "
                         "in a range the fit starts well from, e.g. 1/150 for +-150 V)")
+    parser.add_argument("--train-skip", type=float, default=0.0, metavar="S",
+                        help="seconds at the start of TRAIN simulated but left out of the fit's "
+                        "cost (an initial transient the model cannot represent)")
     parser.add_argument("--initial", choices=("rest", "level"), default="rest",
                         help="records start at rest at zero output (rest) or at the output "
                         "level measured before the input first moves (level)")
@@ -167,6 +173,24 @@ def _model(path: str | None, fs: float):
         raise _BadInput(f"--model {path}: {err}") from err
 
 
+def _structure(text: str | None):
+    if text is None:
+        return None
+    from ..model import Structure
+
+    values: dict[str, int] = {}
+    for part in text.split(","):
+        key, _, val = part.partition("=")
+        try:
+            values[key.strip()] = int(val)
+        except ValueError as err:
+            raise _BadInput(f"--structure: expected key=integer pairs, got {part!r}") from err
+    try:
+        return Structure(**{k: (bool(v) if k == "f0" else v) for k, v in values.items()})
+    except (TypeError, ValueError) as err:
+        raise _BadInput(f"--structure: {err}") from err
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``hystid diagnose``; returns the exit status (2 for bad input).
 
@@ -190,10 +214,11 @@ def run(args: argparse.Namespace) -> int:
             raise _BadInput(f"--max-rounds: expected a positive integer, got {args.max_rounds}")
         model = _model(args.model, train.fs)
         result = diagnose(
-            train, vals, model, effects=names, holdout=args.holdout, alpha=args.alpha,
+            train, vals, model, structure=_structure(args.structure), effects=names,
+            holdout=args.holdout, alpha=args.alpha,
             min_reduction=args.min_reduction, max_rounds=args.max_rounds,
-            initial=args.initial, refit_all=args.refit_all, require_excitation=strict,
-            progress=not args.quiet,
+            train_skip=args.train_skip, initial=args.initial, refit_all=args.refit_all,
+            require_excitation=strict, progress=not args.quiet,
         )
     except (_BadInput, DiagnosisError) as err:
         print(f"hystid diagnose: error: {err}", file=sys.stderr)

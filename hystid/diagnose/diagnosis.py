@@ -29,6 +29,7 @@ from .screen import compare_losses, effect_names_check, screen, zero_vector
 from .where import Segment, Where, localise
 
 __all__ = [
+    "ALIKE",
     "MIN_TRAIN_SAMPLES",
     "MIN_VAL_SAMPLES",
     "DiagnosisError",
@@ -37,6 +38,9 @@ __all__ = [
     "diagnose",
 ]
 
+#: Two candidates' held-out corrections ``da, db`` count as alike when
+#: ``1 - |da - db| / max(|da|, |db|)`` exceeds this.
+ALIKE = 0.75
 #: Fewest samples in the train part and in the held-out part.
 MIN_TRAIN_SAMPLES = 2000
 MIN_VAL_SAMPLES = 1000
@@ -78,6 +82,9 @@ class EffectOutcome:
         Greedy round in which it was accepted.
     cumulative : dict or None
         ``rms_val`` and ``gap_closed`` of the accepted set up to this effect.
+    alike : dict
+        Other candidates whose held-out correction is nearly this one's (similarity above
+        :data:`ALIKE`): the records cannot tell them apart.
     """
 
     name: str
@@ -92,6 +99,7 @@ class EffectOutcome:
     message: str = ""
     round: int | None = None
     cumulative: dict[str, float] | None = None
+    alike: dict[str, float] = field(default_factory=dict)
 
     @property
     def accepted(self) -> bool:
@@ -115,6 +123,7 @@ class EffectOutcome:
             "test": self.test,
             "round": self.round,
             "cumulative": self.cumulative,
+            "alike": self.alike,
             "message": self.message,
         })
 
@@ -306,6 +315,7 @@ def diagnose(
     min_reduction: float = 0.02,
     max_rounds: int = 3,
     transient: float = 0.0017,
+    train_skip: float = 0.0,
     initial: str = "rest",
     refit_all: bool = False,
     require_excitation: bool = False,
@@ -339,6 +349,10 @@ def diagnose(
         Greedy rounds at most.
     transient : float
         Seconds dropped at the start of each separate held-out record (the paper's 0.0017 s).
+    train_skip : float
+        Seconds at the start of the train record simulated but left out of the refits' cost
+        (an initial state the model cannot represent); the nominal model is then refitted alone
+        with the same cost before the candidates are compared with it.
     initial : {'rest', 'level'}
         ``rest``: records start at rest at zero output. ``level``: at rest at the mean output
         measured before the input first moves (the Duhem state holds the remanent value).
@@ -374,11 +388,15 @@ def diagnose(
     if not 0 <= min_reduction < 1:
         raise DiagnosisError(f"min_reduction: expected a fraction in [0, 1), got {min_reduction}")
     fs = train.fs
+    skip_tr = int(round(train_skip * fs))
+    if train_skip < 0 or skip_tr > 0.5 * train.n * (1 if vals else 1 - holdout):
+        raise DiagnosisError(f"train_skip: expected 0 <= train_skip <= half the train part, got "
+                             f"{train_skip} s")
     level = (lambda r, lab: _rest_level(r, lab)) if initial == "level" else (lambda r, lab: None)
 
     # ----------------------------------------------------------------- data
     if vals:
-        tr = FitData(train.u, train.y, fs, level(train, "train"))
+        tr = FitData(train.u, train.y, fs, level(train, "train"), slice(skip_tr, None))
         skip = int(round(transient * fs))
         vds = [FitData(v.u, v.y, fs, level(v, f"val[{i}]"), slice(skip, None))
                for i, v in enumerate(vals)]
@@ -387,7 +405,7 @@ def diagnose(
     else:
         k = int(round((1 - holdout) * train.n))
         lev = level(train, "train")
-        tr = FitData(train.u[:k], train.y[:k], fs, lev)
+        tr = FitData(train.u[:k], train.y[:k], fs, lev, slice(skip_tr, None))
         vds = [FitData(train.u, train.y, fs, lev, slice(k, None))]
         t0s = [k / fs]
         held = f"last {100 * holdout:.0f} % of the train record"
@@ -419,34 +437,44 @@ def diagnose(
             sl = vd.weight
             errs.append((vd.y[sl] - yv[sl]).copy())
             segs.append(Segment(vd.u[sl], vd.y[sl], yv[sl].copy(), w1v[sl].copy(), fs, t0))
-        return float(np.sqrt(np.mean(e_tr**2))), errs, segs, float(np.max(np.abs(np.diff(w1))))
+        scales = (float(np.max(np.abs(np.diff(w1)))), float(np.max(np.abs(w1))))
+        return float(np.sqrt(np.mean(e_tr**2))), errs, segs, scales
 
-    rms_tr_nom, errs_nom, segs_nom, _ = evaluate(nominal, phi0)
-    if not all(np.all(np.isfinite(e)) for e in errs_nom) or not np.isfinite(rms_tr_nom):
+    rms_tr_first, errs_first, _, _ = evaluate(nominal, phi0)
+    if not all(np.all(np.isfinite(e)) for e in errs_first) or not np.isfinite(rms_tr_first):
         raise DiagnosisError("the nominal model's simulation diverges on these records (the "
                              "Duhem stability condition (8) fails): scale the input down")
-    rms_val_nom = float(np.sqrt(np.mean(np.concatenate(errs_nom) ** 2)))
-    say(f"nominal model: train RMS {rms_tr_nom:.4g}, held-out RMS {rms_val_nom:.4g}")
-    where0 = localise(segs_nom)
-    say(f"noise floor {where0.noise['rms']:.4g}; " + "; ".join(where0.findings[1:3]))
+    rms_val_first = _rms(errs_first)
+    say(f"nominal model: train RMS {rms_tr_first:.4g}, held-out RMS {rms_val_first:.4g}")
 
     base_model, base_phi, base_active = nominal, phi0, []
-    base_refit_note = None
-    if given or initial == "level":
+    first_fit = None
+    if given or initial == "level" or skip_tr > 0:
+        # the candidates are refitted with this cost and initial state: so is the base
         say("refitting the nominal model alone (the base the candidates are compared with)")
-        rb = refit(nominal, tr, [], [phi0], step_scale=1.0)
-        if rb.ok and rb.cost <= rms_tr_nom**2:
+        rb = refit(nominal, tr, [], [phi0])
+        if rb.ok and rb.cost <= rms_tr_first**2:
             base_model = DuhemSandwich(rb.theta, nominal.structure, fs=fs, name=nominal.name)
-            base_refit_note = "nominal parameters refitted by output-error least squares"
-    rms_tr_base, errs_base, segs_base, step_scale = evaluate(base_model, base_phi)
-    where_base = localise(segs_base) if base_model is not nominal else where0
+            first_fit = {"rms_val": rms_val_first, "rms_train": rms_tr_first,
+                         "params": nominal.params,
+                         "note": "the given or first-identified model; the nominal figures are "
+                                 "those of its refit with the candidates' cost and initial state"}
+    rms_tr_nom, errs_nom, segs_nom, (step_scale, w1_scale) = evaluate(base_model, base_phi)
+    rms_val_nom = _rms(errs_nom)
+    if first_fit is not None:
+        say(f"nominal model refitted: train RMS {rms_tr_nom:.4g}, held-out RMS "
+            f"{rms_val_nom:.4g}")
+    where0 = localise(segs_nom)
+    say(f"noise floor {where0.noise['rms']:.4g}; " + "; ".join(where0.findings[1:3]))
+    errs_base, rms_tr_base = errs_nom, rms_tr_nom
 
     # ----------------------------------------------------------------- greedy rounds
+    base_model_nominal = base_model
     outcomes: dict[str, EffectOutcome] = {n: EffectOutcome(n, "screened out") for n in names}
     accepted: list[str] = []
     rounds: list[dict[str, Any]] = []
-    nf_estimates = [where0.noise["rms"], where_base.noise["rms"]]
-    where_cur = where_base
+    nf_estimates = [where0.noise["rms"]]
+    where_cur = where0
     errs_cur, rms_tr_cur = errs_base, rms_tr_base
     promising = 0.25 * (1.0 - (1.0 - min_reduction) ** 2)
     cand_errs: dict[str, list[np.ndarray]] = {}
@@ -456,6 +484,7 @@ def diagnose(
             break
         say(f"round {rnd}: screening {', '.join(remaining)}")
         scr = screen(base_model, base_phi, base_active, tr, remaining, step_scale=step_scale,
+                     w1_scale=w1_scale,
                      peaks_hz=where_cur.frequency["peaks_hz"] + [where_cur.frequency["peak_hz"]])
         order = sorted(remaining, key=lambda n: -scr[n].score)
         to_fit = [n for n in order if scr[n].excited
@@ -477,7 +506,7 @@ def diagnose(
         for n in to_fit:
             say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
             rf = refit(base_model, tr, base_active + [n], scr[n].starts, base_phi=base_phi,
-                       step_scale=step_scale)
+                       step_scale=step_scale, w1_scale=w1_scale)
             if not rf.ok:
                 if rnd == 1:
                     outcomes[n].status = "failed"
@@ -503,6 +532,8 @@ def diagnose(
                 o.rms_val_after = test["rms_cand"]
                 o.test = test
                 cand_errs[n] = errs
+        if rnd == 1:
+            _mark_alike(outcomes, errs_cur, cand_errs)
         level_r = alpha / max(len(to_fit), 1)
         passing = [n for n, (_, t, _) in results.items()
                    if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction]
@@ -519,7 +550,7 @@ def diagnose(
         base_phi = rf.phi
         base_active = base_active + [best]
         accepted.append(best)
-        rms_tr_cur, errs_cur, segs_cur, step_scale = evaluate(base_model, base_phi)
+        rms_tr_cur, errs_cur, segs_cur, (step_scale, w1_scale) = evaluate(base_model, base_phi)
         where_cur = localise(segs_cur)
         nf_estimates.append(where_cur.noise["rms"])
         o = outcomes[best]
@@ -556,16 +587,16 @@ def diagnose(
         "rms_val": rms_val_nom,
         "rms_train": rms_tr_nom,
         "gap": gap,
-        "params": nominal.params,
+        "params": base_model_nominal.params,
         "name": nominal.name,
     }
-    if base_refit_note:
-        nominal_info["refit"] = {"rms_val": _rms(errs_base), "rms_train": rms_tr_base,
-                                 "note": base_refit_note}
+    if first_fit is not None:
+        nominal_info["first_fit"] = first_fit
     final = {"rms_val": rms_final, "rms_train": rms_tr_cur, "gap_closed": closed(rms_final),
              "effects": final_effects, "params": base_model.params}
     settings = {"alpha": alpha, "min_reduction": min_reduction, "max_rounds": max_rounds,
                 "holdout": None if vals else holdout, "transient_s": transient,
+                "train_skip_s": train_skip,
                 "initial": initial, "candidates": list(names), "fs": fs,
                 "train_samples": len(tr.u),
                 "val_samples": int(sum(len(v.u[v.weight]) for v in vds)),
@@ -574,8 +605,33 @@ def diagnose(
               "t0s": t0s}
     say(f"done: {', '.join(accepted) if accepted else 'none'} accepted; held-out RMS "
         f"{rms_val_nom:.4g} -> {rms_final:.4g} (noise floor {nf:.4g})")
-    return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds, nominal,
+    return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds,
+                           base_model_nominal,
                            aug, where_cur, settings, series)
+
+
+def _mark_alike(outcomes: dict[str, EffectOutcome], base: list[np.ndarray],
+                cand: dict[str, list[np.ndarray]]) -> None:
+    """Note the pairs of candidates whose corrections of the held-out error are alike."""
+    eb = np.concatenate(base)
+    deltas = {n: eb - np.concatenate(e) for n, e in cand.items()}
+    names = list(deltas)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            scale = max(np.linalg.norm(deltas[a]), np.linalg.norm(deltas[b]))
+            if scale == 0:
+                continue
+            alike = 1.0 - float(np.linalg.norm(deltas[a] - deltas[b]) / scale)
+            if alike > ALIKE:
+                outcomes[a].alike[b] = alike
+                outcomes[b].alike[a] = alike
+    for n in names:
+        o = outcomes[n]
+        if o.alike:
+            others = ", ".join(f"{k} ({100 * v:.0f} %)" for k, v in o.alike.items())
+            note = f"{n} corrects the held-out error like {others}: these records cannot " \
+                   f"tell them apart"
+            o.message = (o.message + "; " if o.message else "") + note
 
 
 def _rms(errs: list[np.ndarray]) -> float:

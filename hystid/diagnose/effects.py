@@ -6,10 +6,12 @@ with creep, ``yL`` the output of L2 and ``t`` the time since the start of the re
 
     delay       ud(k) = (1 - phi) u(k - n) + phi u(k - n - 1),   n + phi = d (samples)
     slew_limit  w1(k) = w1(k-1) + clip(w1_L1(k) - w1(k-1), -1/s, 1/s),   s = inv_rate * fs
+    saturation  f(w1) = f0 sgn(w1) + f1 w1 (1 + c w1^2) in eq. (7): the anhysteretic curve bends
+    offset      y(k) = ... + y0: a constant offset of the sensor's zero
     asymmetry   alpha_k = alpha (1 + e_a sgn dw1(k)),  g_k = g0 (1 + e_g sgn dw1(k))  in eq. (7)
     creep       c(k) = c(k-1) + lam (kappa w2(k) - c(k-1)),   lam = 1 - exp(-dt / tau)
     extra_mode  m(k) = 2 r cos(W) m(k-1) - r^2 m(k-2) + g K2 (1 - 2 r cos W + r^2) v(k)
-    drift       y(k) = yL(k) + m(k) + d1 t + d2 t^2
+    drift       y(k) = yL(k) + m(k) + d1 t + d2 t^2  (+ y0 with the offset)
 
 where ``w1_L1`` is eq. (1) driven by ``ud``, ``K2`` the static gain of L2, and the mode has the
 natural frequency ``freq`` and damping ``zeta`` (``r = exp(-zeta w dt)``,
@@ -69,7 +71,8 @@ class Effect:
     description: str
 
 
-# kernel effect vector: [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate]
+# kernel effect vector:
+# [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate, cubic, y0]
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
@@ -85,10 +88,14 @@ EFFECTS: dict[str, Effect] = {
                "ascending and descending branches differ: alpha, g0 scaled by 1 +/- e"),
         Effect("slew_limit", ("inv_rate",), ("s/u",), (10,),
                "amplifier rate limit |dw1/dt| <= 1/inv_rate"),
+        Effect("saturation", ("cubic",), ("1/u^2",), (11,),
+               "the anhysteretic curve of eq. (7) bends: f1 w1 (1 + cubic w1^2)"),
+        Effect("offset", ("y0",), ("y",), (12,),
+               "a constant offset of the output (the sensor's zero)"),
     )
 }
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
-N_SLOTS = 11
+N_SLOTS = 13
 
 
 def effect_vector(effects: Mapping[str, Mapping[str, float]] | None) -> np.ndarray:
@@ -115,6 +122,9 @@ def effect_vector(effects: Mapping[str, Mapping[str, float]] | None) -> np.ndarr
 def _check_vector(phi: np.ndarray) -> None:
     if phi[1] < 0:
         raise ValueError(f"creep tau must be >= 0 s, got {phi[1]}")
+    if phi[0] < 0:
+        raise ValueError(f"creep gain must be >= 0 (creep goes on in the direction of the "
+                         f"drive), got {phi[0]}")
     if phi[6] < 0 or phi[6] >= 1:
         raise ValueError(f"extra_mode zeta must be in [0, 1), got {phi[6]}")
     if phi[5] < 0:
@@ -162,7 +172,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     g0 = theta[i_g0]
     kappa, tau, d1, d2 = phi[0], phi[1], phi[2], phi[3]
     gm, fm, zeta = phi[4], phi[5], phi[6]
-    e_a, e_g, inv_rate = phi[8], phi[9], phi[10]
+    e_a, e_g, inv_rate, cubic, y_off = phi[8], phi[9], phi[10], phi[11], phi[12]
     # creep: first-order lag, lam = 1 - exp(-dt / tau)
     lam = 1.0 - np.exp(-dt / tau) if tau > 0.0 else 1.0
     # extra mode: poles r exp(+-jW); static gain gm * K2
@@ -213,7 +223,8 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         s = _sgn(dw1)
         alpha_k = alpha * (1.0 + e_a * s)
         g_k = g0 * (1.0 + e_g * s)
-        W2[k] = w2p + alpha_k * (f0 * _sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g_k * dw1
+        f = f0 * _sgn(w1p) + f1 * w1p * (1.0 + cubic * w1p * w1p)
+        W2[k] = w2p + alpha_k * (f - w2p) * abs(dw1) + g_k * dw1
         # creep of the actuator
         C[k] = C[k - 1] + lam * (kappa * W2[k] - C[k - 1])
         V[k] = W2[k] + C[k]
@@ -226,9 +237,9 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         YL[k] = y
         # extra mode in parallel with L2
         M[k] = c1 * M[k - 1] + c2 * M[k - 2] + bm * V[k]
-        # drift, t from the start of the record
+        # drift, t from the start of the record, and the sensor offset
         t = (k - start) * dt
-        Y[k] = YL[k] + M[k] + (d1 * t + d2 * t * t)
+        Y[k] = YL[k] + M[k] + (d1 * t + d2 * t * t) + y_off
 
 
 class _Workspace:

@@ -83,7 +83,9 @@ def simulate_fit_data(model: DuhemSandwich, phi: np.ndarray, data: FitData):
     keep them past the next call)."""
     P = max(model.structure.history, 2)
     ws = data.workspace(P)
-    x0 = initial_state(model, data.level, float(data.u[0]), P)
+    # the model's own output at rest is the measured level less the sensor offset
+    level = None if data.level is None else data.level - phi[12]
+    x0 = initial_state(model, level, float(data.u[0]), P)
     if x0 is not None:
         ws.U[:P] = x0.u
         ws.past = {"w1": x0.w1, "w2": x0.w2, "y": x0.y}
@@ -103,10 +105,12 @@ class Parametrisation:
         Length of the fitting record in seconds (bounds of the time constants).
     step_scale : float
         Largest input-driven change of ``w1`` per sample (scale of the slew limit).
+    w1_scale : float
+        Largest ``|w1|`` (scale of the saturation's cubic coefficient).
     """
 
     def __init__(self, model: DuhemSandwich, active: Sequence[str], duration: float,
-                 step_scale: float = 1.0) -> None:
+                 step_scale: float = 1.0, w1_scale: float = 1.0) -> None:
         self.structure = model.structure
         self.fs = model.fs
         self.active = tuple(active)
@@ -115,17 +119,20 @@ class Parametrisation:
         self.ntheta = len(self.structure.names)
         self.duration = float(duration)
         self.step_scale = float(max(step_scale, 1e-12))
+        self.w1_scale = float(max(w1_scale, 1e-12))
         self.slots = [s for name in self.active for s in EFFECTS[name].slots]
         self.n = self.ntheta + len(self.slots)
 
     # transformed coordinates of the effect slots
     def _fwd(self, slot: int, v: float) -> float:
         if slot == 1:
-            return float(np.log(max(v, 0.5 / self.fs)))
+            return float(np.log(max(v, 0.5 / self.fs, 5e-3)))
         if slot in (5, 6):
             return float(np.log(max(v, 1e-6)))
         if slot == 10:
             return float(np.log(max(v * self.fs * self.step_scale, 1e-6)))
+        if slot == 11:
+            return float(v * self.w1_scale**2)
         return float(v)
 
     def _inv(self, slot: int, z: float) -> float:
@@ -133,12 +140,15 @@ class Parametrisation:
             return float(np.exp(z))
         if slot == 10:
             return float(np.exp(z) / (self.fs * self.step_scale))
+        if slot == 11:
+            return float(z / self.w1_scale**2)
         return float(z)
 
     def _bounds(self, slot: int) -> tuple[float, float]:
         table = {
-            0: (-1.0, 1.0),
-            1: (np.log(0.5 / self.fs), np.log(100.0 * self.duration)),
+            # creep goes on in the direction of the drive (gain >= 0) and is slow (tau >= 5 ms)
+            0: (0.0, 1.0),
+            1: (np.log(max(0.5 / self.fs, 5e-3)), np.log(100.0 * self.duration)),
             4: (-2.0, 2.0),
             5: (np.log(max(5.0 / self.duration, 20.0)), np.log(0.49 * self.fs)),
             6: (np.log(1e-3), np.log(0.3)),
@@ -146,6 +156,8 @@ class Parametrisation:
             8: (-0.95, 0.95),
             9: (-0.95, 0.95),
             10: (np.log(0.3), np.log(1e3)),
+            # f stays monotone (Assumption 2) while 1 + 3 c w1^2 > 0
+            11: (-0.3, 3.0),
         }
         return table.get(slot, (-np.inf, np.inf))
 
@@ -217,6 +229,7 @@ def refit(
     *,
     base_phi: np.ndarray | None = None,
     step_scale: float = 1.0,
+    w1_scale: float = 1.0,
     max_nfev: int = 60,
 ) -> RefitResult:
     """Least-squares refit of the nominal parameters and the active effects' parameters.
@@ -235,6 +248,8 @@ def refit(
         Values of the effect slots that are not free (zero by default).
     step_scale : float
         Scale of the slew-limit coordinate (largest ``|dw1|`` of the nominal simulation).
+    w1_scale : float
+        Scale of the saturation coordinate (largest ``|w1|`` of the nominal simulation).
     max_nfev : int
         Iterations allowed per start.
 
@@ -244,7 +259,7 @@ def refit(
         The best of the starts; ``ok`` False when every start failed.
     """
     n = len(data.u)
-    par = Parametrisation(model, active, n / data.fs, step_scale)
+    par = Parametrisation(model, active, n / data.fs, step_scale, w1_scale)
     lo, hi = par.bounds()
     y = data.y[data.weight]
     work = DuhemSandwich(model.theta.copy(), model.structure, fs=model.fs, name=model.name)
@@ -277,7 +292,9 @@ def refit(
             work.theta = theta
             w1 = simulate_fit_data(work, phi, data)[0]
             margin = theta[par.ialpha] * (1 + abs(phi[8])) * np.max(np.abs(np.diff(w1)))
-            if not margin < 2.0:
+            if 1 + 3 * phi[11] * np.max(w1**2) <= 0:
+                ok, msg = False, "the solution's anhysteretic curve is not monotone"
+            if ok and not margin < 2.0:
                 ok, msg = False, f"the solution leaves the Duhem stability condition (8) " \
                                  f"(alpha |dw1| reaches {margin:.3g})"
         res = RefitResult(theta, phi, cost, ok, msg, int(sol.nfev))

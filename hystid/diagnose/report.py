@@ -45,9 +45,10 @@ def summary_text(result: DiagnosisResult) -> str:
         f"{result.nominal['rms_train']:.4g}); noise floor {result.noise_floor_rms:.4g}; gap "
         f"{result.nominal['gap']:.4g}",
     ]
-    if "refit" in result.nominal:
-        r = result.nominal["refit"]
-        lines.append(f"  given model refitted alone: held-out RMS {r['rms_val']:.4g}")
+    if "first_fit" in result.nominal:
+        r = result.nominal["first_fit"]
+        lines.append(f"  (before its refit with the candidates' cost and initial state: held-out "
+                     f"RMS {r['rms_val']:.4g}, train {r['rms_train']:.4g})")
     lines.append("")
     lines.append("Where the error lies:")
     lines += [f"  - {f}" for f in result.where.findings[1:]] or ["  - (nothing stands out)"]

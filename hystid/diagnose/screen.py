@@ -43,6 +43,8 @@ _HINTS = {
     "delay": "the input needs fast changes",
     "asymmetry": "the input needs ascending and descending branches of different shape",
     "slew_limit": "the input needs fast steps",
+    "saturation": "the input needs a wide range of levels",
+    "offset": "the record starts at its measured level, which fixes the offset",
 }
 
 
@@ -75,9 +77,9 @@ class ScreenResult:
 
 
 def _jacobian(model: DuhemSandwich, phi: np.ndarray, active: Sequence[str], data: FitData,
-              step_scale: float) -> np.ndarray:
+              step_scale: float, w1_scale: float) -> np.ndarray:
     """Finite-difference Jacobian of the simulated output w.r.t. the search coordinates."""
-    par = Parametrisation(model, active, len(data.u) / data.fs, step_scale)
+    par = Parametrisation(model, active, len(data.u) / data.fs, step_scale, w1_scale)
     z0 = par.to_z(model.theta, phi)
     lo, hi = par.bounds()
     work = DuhemSandwich(model.theta.copy(), model.structure, fs=model.fs)
@@ -127,6 +129,7 @@ def screen(
     candidates: Sequence[str],
     *,
     step_scale: float,
+    w1_scale: float = 1.0,
     peaks_hz: Sequence[float] = (),
     n_starts: int = 2,
 ) -> dict[str, ScreenResult]:
@@ -146,6 +149,8 @@ def screen(
         Effects to screen.
     step_scale : float
         Largest ``|dw1|`` per sample of the current simulation (scale of the slew grid).
+    w1_scale : float
+        Largest ``|w1|`` of the current simulation (scale of the saturation coefficient).
     peaks_hz : sequence of float
         Frequencies where the localisation found narrow-band excess (mode grid seeds).
     n_starts : int
@@ -163,7 +168,7 @@ def screen(
     y0 = simulate_fit_data(model, phi, data)[2][data.weight].copy()
     e = y - y0
     ee = float(e @ e)
-    Q = _orth(_jacobian(model, phi, active, data, step_scale))
+    Q = _orth(_jacobian(model, phi, active, data, step_scale, w1_scale))
 
     def sim(ph):
         return simulate_fit_data(model, ph, data)[2][data.weight].copy()
@@ -178,9 +183,9 @@ def screen(
         """Yield (directions N x k, function beta -> effect vector start)."""
         h = 1e-4
         if name == "creep":
-            for tau in np.geomspace(max(3 * dt, 1e-3), 2 * T, 10):
+            for tau in np.geomspace(max(3 * dt, 5e-3), 2 * T, 10):
                 D = (sim(with_(s0=h, s1=tau)) - y0) / h
-                yield D[:, None], (lambda b, tau=tau: with_(s0=float(np.clip(b[0], -.5, .5)),
+                yield D[:, None], (lambda b, tau=tau: with_(s0=float(np.clip(b[0], 0.0, .5)),
                                                             s1=tau))
         elif name == "drift":
             D1 = (sim(with_(s2=h)) - y0) / h
@@ -211,6 +216,14 @@ def screen(
                 inv = rel / (fs * step_scale)
                 D = sim(with_(s10=inv)) - y0
                 yield D[:, None], (lambda b, inv=inv: with_(s10=inv))
+        elif name == "saturation":
+            hc = h / w1_scale**2
+            D = (sim(with_(s11=hc)) - y0) / hc
+            yield D[:, None], (lambda b: with_(s11=float(np.clip(b[0] * w1_scale**2, -0.25,
+                                                                 2.0)) / w1_scale**2))
+        elif name == "offset":
+            D = (sim(with_(s12=h)) - y0) / h
+            yield D[:, None], (lambda b: with_(s12=float(b[0])))
         else:  # pragma: no cover - names are checked by the caller
             raise ValueError(name)
 

@@ -136,12 +136,11 @@ def noise_floor(
     }
 
 
-def periodic_noise(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, float] | None:
-    """Noise from repeated periods: half the variance of ``y(k + T) - y(k)`` where ``u`` repeats.
+def input_period(u: np.ndarray) -> int | None:
+    """Period of ``u`` in samples when it repeats (relative mismatch below 1e-3), else None.
 
-    Returns ``None`` when the input does not repeat (relative mismatch above 1e-3) or holds
-    fewer than two periods. The figure is an upper bound of the sensor noise: drift and any
-    non-repeatable error add to it.
+    The candidate period is the highest peak of the overlap-normalised autocorrelation after
+    its first drop below zero; at least two periods must fit in the record.
     """
     u = np.asarray(u, float)
     n = len(u)
@@ -152,17 +151,57 @@ def periodic_noise(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, float] 
     ac = np.fft.irfft(spec * np.conj(spec))[: n // 2]
     if ac[0] <= 0:
         return None
-    lo = max(4, int(0.002 * n))
+    ac = ac / (n - np.arange(len(ac)))
+    neg = np.flatnonzero(ac < 0)
+    if len(neg) == 0:
+        return None
+    lo = int(neg[0])
     if lo >= len(ac) - 1:
         return None
     period = lo + int(np.argmax(ac[lo:]))
-    if period >= n // 2:
+    best = None
+    span = max(2, period // 50)
+    for p in range(max(2, period - span), min(n // 2, period + span + 1)):
+        du = u[p:] - u[:-p]
+        mismatch = float(np.sqrt(np.mean(du**2)))
+        if best is None or mismatch < best[1]:
+            best = (p, mismatch)
+    if best is None or best[1] > 1e-3 * np.ptp(u):
         return None
-    du = u[period:] - u[:-period]
-    if np.sqrt(np.mean(du**2)) > 1e-3 * np.ptp(u):
+    return best[0]
+
+
+def periodic_noise(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, float] | None:
+    """Noise from repeated periods: ``std(y(k + T) - y(k)) / sqrt(2)`` where ``u`` repeats.
+
+    Returns ``None`` when the input does not repeat or holds fewer than two periods. The figure
+    is an upper bound of the sensor noise: drift and any non-repeatable error add to it.
+    """
+    period = input_period(u)
+    if period is None:
         return None
-    dy = y[period:] - y[:-period]
+    dy = np.asarray(y, float)[period:] - np.asarray(y, float)[:-period]
     return {"rms": float(np.std(dy) / np.sqrt(2)), "period_s": float(period / fs)}
+
+
+def harmonics(e: np.ndarray, period: int, fs: float, top: int = 5) -> dict:
+    """Error at the harmonics of a periodic input: amplitudes over whole periods.
+
+    Returns the fundamental ``f0_hz``, the ``top`` strongest harmonics ``[(k, f, amplitude)]``
+    and the share of the error's mean square that lies at harmonics.
+    """
+    m = len(e) // period
+    x = np.asarray(e[: m * period], float)
+    spec = np.fft.rfft(x) / len(x)
+    amp = 2 * np.abs(spec[m::m])
+    power = float(np.sum(amp**2) / 2 + np.abs(spec[0]) ** 2)
+    order = np.argsort(amp)[::-1][:top]
+    return {
+        "f0_hz": float(fs / period),
+        "periods": int(m),
+        "strongest": [[int(k + 1), float((k + 1) * fs / period), float(amp[k])] for k in order],
+        "harmonic_fraction": float(power / max(np.mean(x**2), 1e-300)),
+    }
 
 
 # --------------------------------------------------------------------------- correlations
@@ -290,11 +329,14 @@ def _time_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
     n = len(e)
     w = int(max(16, min(n // 50, round(0.02 * fs))))
     roll = _rolling_rms(e, w)
-    # slow trend: quadratic in time over each segment
-    trend = np.concatenate([_poly_trend(s.e, s.t0 + np.arange(s.n) / fs) for s in segs])
+    # slow trend: quadratic in time over each segment, after the periodic part of the error
+    # when the input repeats (a periodic error is no trend)
+    e_ap = [_aperiodic(s.e, input_period(s.u)) for s in segs]
+    trend = np.concatenate([_poly_trend(a, s.t0 + np.arange(s.n) / fs)
+                            for a, s in zip(e_ap, segs, strict=True)])
     var_e = float(np.mean((e - e.mean()) ** 2)) + e.mean() ** 2
     excess = max(var_e - noise**2, 1e-300)
-    slope = np.polyfit(t, e, 1)[0] if n > 2 else 0.0
+    slope = np.polyfit(t, np.concatenate(e_ap), 1)[0] if n > 2 else 0.0
     # step-aligned averages: e after input steps, signed by the step direction
     u = np.concatenate([s.u for s in segs])
     du = np.diff(u, prepend=u[0])
@@ -325,6 +367,8 @@ def _time_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
         "rolling_rms_median": float(np.median(roll)),
         "time_of_max_s": float(t[int(np.argmax(roll))]),
         "first_tenth_rms": early,
+        "mean": float(e.mean()),
+        "mean_fraction": float(e.mean() ** 2 / excess),
         "trend_rms": float(np.sqrt(np.mean(trend**2))),
         "trend_fraction": float(np.mean(trend**2) / excess),
         "slope_per_s": float(slope),
@@ -336,6 +380,17 @@ def _time_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
     series = {"t": t, "e": e, "rolling_rms": roll, "trend": trend,
               "step_lags": np.arange(-pre, post), "step_avg": step_avg}
     return view, series
+
+
+def _aperiodic(e: np.ndarray, period: int | None) -> np.ndarray:
+    """``e`` less its average over the periods of a repeating input (unchanged otherwise)."""
+    if period is None:
+        return e
+    m = -(-len(e) // period)
+    pad = np.full(m * period, np.nan)
+    pad[: len(e)] = e
+    mean = np.nanmean(pad.reshape(m, period), axis=0)
+    return e - np.tile(mean, m)[: len(e)]
 
 
 def _poly_trend(e: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -380,7 +435,12 @@ def _frequency_view(segs: list[Segment], noise: dict) -> tuple[dict, dict]:
     # excess peaks above the flexure band, as narrow-band candidates
     peaks = _spectral_peaks(f, psd, level)
     low = f <= max(10.0 * fs / sum(s.n for s in segs), 2 * df)
+    periods = [input_period(s.u) for s in segs]
+    harm = None
+    if periods[0] is not None:
+        harm = harmonics(segs[0].e, periods[0], fs)
     view = {
+        "harmonics": harm,
         "welch_segment_s": nper / fs,
         "band_hz": band,
         "peak_hz": peak,
@@ -571,6 +631,10 @@ def _findings(w: Where) -> list[str]:
         out.append((1e8, "the error is at the noise floor: nothing to localise"))
         return [s for _, s in sorted(out, key=lambda x: -x[0])]
     t = w.time
+    if t["mean_fraction"] > 0.2:
+        out.append((t["mean_fraction"],
+                    f"a constant offset ({t['mean']:.3g}) carries {100 * t['mean_fraction']:.0f} % "
+                    f"of the excess error"))
     if t["trend_fraction"] > 0.2:
         out.append((t["trend_fraction"],
                     f"slow trend carries {100 * t['trend_fraction']:.0f} % of the excess error "
@@ -581,6 +645,12 @@ def _findings(w: Where) -> list[str]:
                     f"{t['step_error_lag_samples']} samples after the step "
                     f"({t['step_error_ratio']:.0f}x its standard error)"))
     f = w.frequency
+    if f.get("harmonics"):
+        h = f["harmonics"]
+        top = ", ".join(f"{k} x {h['f0_hz']:.3g} Hz ({a:.3g})" for k, _, a in h["strongest"][:3])
+        out.append((0.45, f"the input repeats every {1 / h['f0_hz']:.4g} s: "
+                          f"{100 * h['harmonic_fraction']:.0f} % of the error is periodic; "
+                          f"strongest harmonics {top}"))
     out.append((0.4, f"excess error power lies in {f['band_hz'][0]:.4g}-{f['band_hz'][1]:.4g} Hz"
                      f" (peak {f['peak_hz']:.4g} Hz)"))
     if f["peaks_hz"]:
