@@ -149,7 +149,8 @@ class DiagnosisResult:
     rounds : list of dict
         One entry per greedy round (base RMS, findings, accepted effect).
     model : DuhemSandwich
-        The nominal model.
+        The nominal model the candidates were compared with (refitted with their cost and
+        initial state when a model was given, ``initial='level'`` or ``train_skip``).
     augmented : AugmentedSandwich
         The final model with the accepted effects.
     where_final : Where

@@ -38,7 +38,10 @@ __all__ = [
     "EFFECT_NAMES",
     "AugmentedSandwich",
     "Effect",
+    "augmented_into",
     "augmented_output",
+    "effect_dict",
+    "effect_vector",
     "simulate_with_effect",
 ]
 

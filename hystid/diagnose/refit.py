@@ -26,7 +26,16 @@ from ..identify.constraints import (
 from ..model import DuhemSandwich, InitialCondition
 from .effects import EFFECTS, MAX_DELAY, N_SLOTS, _Workspace
 
-__all__ = ["FitData", "Parametrisation", "RefitResult", "refit", "simulate_fit_data"]
+__all__ = [
+    "FitData",
+    "LMSolution",
+    "Parametrisation",
+    "RefitResult",
+    "initial_state",
+    "levenberg_marquardt",
+    "refit",
+    "simulate_fit_data",
+]
 
 
 @dataclass
@@ -62,7 +71,9 @@ class FitData:
         return self._ws[P]
 
 
-def initial_state(model: DuhemSandwich, level: float | None, u0: float, P: int):
+def initial_state(
+    model: DuhemSandwich, level: float | None, u0: float, P: int
+) -> InitialCondition | None:
     """Past windows (u, w1, w2, y) for a record starting at rest at output ``level``."""
     if level is None:
         return None
@@ -78,7 +89,9 @@ def initial_state(model: DuhemSandwich, level: float | None, u0: float, P: int):
                             y=np.full(P, level))
 
 
-def simulate_fit_data(model: DuhemSandwich, phi: np.ndarray, data: FitData):
+def simulate_fit_data(
+    model: DuhemSandwich, phi: np.ndarray, data: FitData
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Simulate the augmented model over ``data``; returns ``(w1, w2, y)`` views (copy them to
     keep them past the next call)."""
     P = max(model.structure.history, 2)

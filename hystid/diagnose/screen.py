@@ -30,7 +30,15 @@ from ..model import DuhemSandwich
 from .effects import EFFECTS, MAX_DELAY, N_SLOTS
 from .refit import FitData, Parametrisation, simulate_fit_data
 
-__all__ = ["MIN_SEPARATION", "ScreenResult", "compare_losses", "hac_variance", "screen"]
+__all__ = [
+    "MIN_SEPARATION",
+    "ScreenResult",
+    "compare_losses",
+    "effect_names_check",
+    "hac_variance",
+    "screen",
+    "zero_vector",
+]
 
 #: Smallest share of a signature's norm left after projecting out the model's own directions
 #: for the records to show the effect.

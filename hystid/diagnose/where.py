@@ -18,7 +18,17 @@ from typing import Any
 import numpy as np
 from scipy import signal, stats
 
-__all__ = ["Segment", "Where", "cross_correlation_test", "localise", "noise_floor"]
+__all__ = [
+    "Segment",
+    "Where",
+    "cross_correlation_test",
+    "harmonics",
+    "input_period",
+    "localise",
+    "noise_floor",
+    "noise_floor_of",
+    "periodic_noise",
+]
 
 
 @dataclass
