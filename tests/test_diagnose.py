@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -317,3 +318,26 @@ def test_command_bad_input_exit_status(tmp_path, capsys):
                    "--effects", "delay", "--model", str(tmp_path / "model.json"), "--quiet"])
     assert diagnose_command.run(args) == 2
     assert "delay" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- measured data
+PIEZO = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / \
+    "piezo_sine_150V_1Hz" / "hysteresis_v_150_1hz.csv"
+
+
+def test_measured_piezo_record():
+    if not PIEZO.is_file():
+        pytest.skip(f"measured piezo record not found at {PIEZO} (../shared/data is absent)")
+    from hystid.records import load_piezo_sine_150v
+
+    rec = load_piezo_sine_150v(PIEZO)
+    start = int(3.2 * rec.fs)  # 286 samples at rest before the input steps to -87 V
+    rec = rec[start:]
+    # +-150 V scaled to +-1 so that the fit starts inside the Duhem condition (8)
+    rec = Record(rec.u / 150.0, rec.y, rec.fs, name=rec.name)
+    res = diagnose(rec, initial="level", train_skip=1.06, max_rounds=1, progress=False)
+    # the sensor noise is about 0.05 um (std at rest 0.049 um)
+    assert 0.04 < res.noise_floor_rms < 0.06
+    assert res.nominal["rms_val"] > 1.5 * res.noise_floor_rms
+    assert res.where.frequency["harmonics"]["f0_hz"] == pytest.approx(1.0)
+    assert res.accepted and res.final["rms_val"] < res.nominal["rms_val"]
