@@ -163,9 +163,9 @@ def cmd_identify(args) -> int:
     progress.say(f"identifying {args.record}: {rec.n} samples at {rec.fs:g} Hz")
     try:
         result = _identify_record(rec, args, progress)
+        report, yhat, target = _report(result, rec, val, args)
     except ValueError as err:
         raise CommandError(str(err)) from err
-    report, yhat, target = _report(result, rec, val, args)
     if args.history:
         _write_history(args.history, result)
     if args.out:

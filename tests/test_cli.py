@@ -116,3 +116,24 @@ def test_help_for_each_command(capsys):
             main([cmd, "--help"])
         assert exc.value.code == 0
         assert cmd in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("model", ["duhem", "pi"])
+def test_too_short_record_is_refused_not_fitted(tmp_path, capsys, model):
+    path = tmp_path / "short.csv"
+    path.write_text("u,y\n" + "".join(f"{0.1 * k},{0.01 * k}\n" for k in range(20)))
+    code, out, err = run(["identify", str(path), "--fs", "1000", "--model", model, "--json"],
+                         capsys)
+    assert code == 2 and "Traceback" not in err
+    assert "expected at least" in err and out == ""
+
+
+@pytest.mark.parametrize("method", ["batch", "eria", "online", "ekf"])
+def test_identify_refuses_a_record_shorter_than_the_method_needs(method):
+    from hystid.identify import identify, min_samples
+    from hystid.reference import reference_record
+
+    need = min_samples(method)
+    rec = reference_record(0.02, seed=0)[: need - 1]
+    with pytest.raises(ValueError, match=f"{need - 1} samples are too few"):
+        identify(rec, method=method)

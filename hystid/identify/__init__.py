@@ -12,9 +12,24 @@ from ..records import Record
 from .offline import fit_output_error
 from .result import IdentificationResult, converged_at
 
-__all__ = ["METHODS", "IdentificationResult", "converged_at", "fit_output_error", "identify"]
+__all__ = ["METHODS", "IdentificationResult", "converged_at", "fit_output_error", "identify",
+           "min_samples"]
 
 METHODS = ("batch", "eria", "online", "ekf")
+SAMPLES_PER_PARAMETER = 10
+
+
+def min_samples(method: str, structure: Structure | None = None, **settings) -> int:
+    """Fewest samples a record must hold for ``method`` to return an estimate.
+
+    Ten samples per parameter for every method; the on-line identifier needs its start-up
+    window (``n_start``, 400 by default) on top, since its estimate stays at ``theta0`` until
+    the window is full.
+    """
+    need = SAMPLES_PER_PARAMETER * len((structure or Structure()).names)
+    if method == "online":
+        need = max(need, int(settings.get("n_start", 400)) + 1)
+    return need
 
 
 def identify(
@@ -43,6 +58,11 @@ def identify(
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    need = min_samples(method, structure, **settings)
+    if record.n < need:
+        raise ValueError(
+            f"record {record.name!r}: {record.n} samples are too few for method={method!r} "
+            f"(expected at least {need})")
     if method == "batch":
         if progress is not None:
             progress(0, record.n)
