@@ -885,7 +885,8 @@ class PIRecursiveIdentifier:
                    else _record_thresholds(record, n_ops))
         n, H, w = len(u), self._H, self._warmup_length(u)
         if w >= n:
-            raise ValueError(f"record: {n} samples are not more than the warm-up ({w} samples)")
+            raise ValueError(f"record {record.name!r}: {n} samples are too few for the PI "
+                             f"recursion (expected at least {w + 1}: the warm-up is {w})")
         raw = np.empty((n, len(self.theta)))
         errors = np.zeros(n)
         yhats = np.zeros(n)
