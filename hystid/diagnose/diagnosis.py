@@ -4,8 +4,9 @@
 held-out simulation error (:mod:`.where`), screens the candidate effects (:mod:`.effects`,
 :mod:`.screen`), refits the promising ones from the nominal estimate (:mod:`.refit`) and accepts
 one only when it lowers the held-out error significantly for coloured residuals and by a margin
-worth having. Greedy: the best accepted effect joins the model, the error is localised again and
-the remaining candidates are screened against it, until none passes.
+worth having. Greedy: the best accepted effect (the simplest one that no other beats) joins the
+model, the error is localised again and the remaining candidates are screened against it, until
+none passes.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from ..identify.offline import fit_output_error
 from ..identify.result import IdentificationResult
 from ..model import DuhemSandwich, Structure
 from ..records import Record
-from .effects import EFFECT_NAMES, AugmentedSandwich, effect_dict
+from .effects import EFFECT_NAMES, EFFECTS, AugmentedSandwich, effect_dict
 from .refit import FitData, RefitResult, initial_state, refit, simulate_fit_data
 from .screen import compare_losses, effect_names_check, screen, zero_vector
 from .where import Segment, Where, localise
@@ -546,6 +547,7 @@ def diagnose(
                 f"minimum reduction {100 * min_reduction:.0f} %)")
             break
         best = min(passing, key=lambda n: results[n][1]["rms_cand"])
+        best = _parsimonious(best, passing, results, level_r, min_reduction)
         rf, test, errs = results[best]
         base_model = DuhemSandwich(rf.theta, base_model.structure, fs=fs, name=base_model.name)
         base_phi = rf.phi
@@ -609,6 +611,26 @@ def diagnose(
     return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds,
                            base_model_nominal,
                            aug, where_cur, settings, series)
+
+
+def _parsimonious(best: str, passing: list[str], results: dict, level: float,
+                  min_reduction: float) -> str:
+    """The passing candidate with the fewest parameters that ``best`` does not beat.
+
+    ``best`` has the lowest held-out RMS; a passing candidate with fewer new parameters is
+    preferred unless ``best`` lowers the held-out error below *its* error by the same test
+    (level ``level``, relative reduction ``min_reduction``). Two effects that correct the error
+    alike (an offset and an asymmetry that mostly shifts the output, say) then resolve to the
+    simpler one; the greedy search can still add the other in a later round.
+    """
+    size = len(EFFECTS[best].params)
+    simpler = sorted((n for n in passing if len(EFFECTS[n].params) < size),
+                     key=lambda n: (len(EFFECTS[n].params), results[n][1]["rms_cand"]))
+    for n in simpler:
+        t = compare_losses(results[n][2], results[best][2])
+        if not (t["p_value"] < level and t["rel_reduction"] >= min_reduction):
+            return n
+    return best
 
 
 def _mark_alike(outcomes: dict[str, EffectOutcome], base: list[np.ndarray],
