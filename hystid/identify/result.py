@@ -56,9 +56,9 @@ class IdentificationResult:
     model: DuhemSandwich
     method: str
     settings: dict[str, Any] = field(default_factory=dict)
-    history: np.ndarray | None = None
+    history: np.ndarray | None = field(default=None, repr=False)
     converged_at: int | None = None
-    info: dict[str, Any] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def __iter__(self) -> Iterator[Any]:
         yield self.model
