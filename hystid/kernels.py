@@ -39,7 +39,7 @@ def offsets(layout):
 
 
 @njit(cache=True, inline="always")
-def _sgn(x):
+def sgn(x):
     # eq. (6): sgn(0) = 0
     if x > 0.0:
         return 1.0
@@ -68,7 +68,7 @@ def step(theta, layout, U, W1, W2, Y, k):
     w1p = W1[k - 1]
     w2p = W2[k - 1]
     dw1 = w1 - w1p
-    W2[k] = w2p + alpha * (f0 * _sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g0 * dw1
+    W2[k] = w2p + alpha * (f0 * sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g0 * dw1
     # eq. (2), b20 = 1
     y = W2[k - q2]
     for j in range(1, n2b + 1):
@@ -96,7 +96,7 @@ def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
     w1p = W1[k - 1]
     w2p = W2[k - 1]
     dw1 = W1[k] - w1p
-    G = f0 * _sgn(w1p) + f1 * w1p - w2p
+    G = f0 * sgn(w1p) + f1 * w1p - w2p
     for p in range(npar):
         # L1
         s1 = 0.0
@@ -107,7 +107,7 @@ def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
         S1[k, i_b1 + j - 1] += U[k - q1 - j]
     for i in range(1, n1a + 1):
         S1[k, i_a1 + i - 1] -= W1[k - i]
-    sd = _sgn(dw1)
+    sd = sgn(dw1)
     absd = abs(dw1)
     for p in range(npar):
         ddw1 = S1[k, p] - S1[k - 1, p]
@@ -116,7 +116,7 @@ def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
     S2[k, i_alpha] += G * absd
     S2[k, i_f1] += alpha * w1p * absd
     if i_f0 >= 0:
-        S2[k, i_f0] += alpha * _sgn(w1p) * absd
+        S2[k, i_f0] += alpha * sgn(w1p) * absd
     S2[k, i_g0] += dw1
     for p in range(npar):
         sy = S2[k - q2, p]

@@ -11,7 +11,7 @@ import numpy as np
 from . import blocks
 from .kernels import as_layout, simulate_into
 
-__all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure"]
+__all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure", "params_vector"]
 
 
 @dataclass(frozen=True)
@@ -174,25 +174,7 @@ class DuhemSandwich:
             raise ValueError(f"fs must be a positive finite number of Hz, got {fs!r}")
         self.fs = float(fs)
         self.name = name
-        names = self.structure.names
-        if isinstance(params, Mapping):
-            missing = [n for n in names if n not in params]
-            extra = [n for n in params if n not in names]
-            if missing or extra:
-                raise ValueError(
-                    f"params: expected the names {list(names)}; missing {missing}, unknown {extra}"
-                )
-            theta = np.array([params[n] for n in names], dtype=float)
-        else:
-            theta = np.asarray(params, dtype=float).ravel()
-            if theta.shape != (len(names),):
-                raise ValueError(
-                    f"params: expected {len(names)} values {list(names)}, got shape {theta.shape}"
-                )
-        if not np.all(np.isfinite(theta)):
-            bad = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
-            raise ValueError(f"params: non-finite values for {bad}")
-        self.theta = theta
+        self.theta = params_vector(params, self.structure.names)
 
     # ----------------------------------------------------------------- parameters
     @property
@@ -367,6 +349,31 @@ class DuhemSandwich:
     def __repr__(self) -> str:
         values = ", ".join(f"{k}={v:.6g}" for k, v in self.params.items())
         return f"DuhemSandwich({values}, fs={self.fs:g})"
+
+
+def params_vector(params, names: Sequence[str]) -> np.ndarray:
+    """Parameters as a vector in the order of ``names``, from a mapping or a sequence.
+
+    Raises ``ValueError`` naming the missing, unknown or non-finite parameters.
+    """
+    if isinstance(params, Mapping):
+        missing = [n for n in names if n not in params]
+        extra = [n for n in params if n not in names]
+        if missing or extra:
+            raise ValueError(
+                f"params: expected the names {list(names)}; missing {missing}, unknown {extra}"
+            )
+        theta = np.array([params[n] for n in names], dtype=float)
+    else:
+        theta = np.asarray(params, dtype=float).ravel()
+        if theta.shape != (len(names),):
+            raise ValueError(
+                f"params: expected {len(names)} values {list(names)}, got shape {theta.shape}"
+            )
+    if not np.all(np.isfinite(theta)):
+        bad = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
+        raise ValueError(f"params: non-finite values for {bad}")
+    return theta
 
 
 def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:

@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 
 from . import blocks
-from .model import InitialCondition, SandwichResponse
+from .model import InitialCondition, SandwichResponse, params_vector
 
 __all__ = [
     "PISandwich",
@@ -478,25 +478,7 @@ class PISandwich:
             raise ValueError(f"fs must be a positive finite number of Hz, got {fs!r}")
         self.fs = float(fs)
         self.name = name
-        names = self.structure.names
-        if isinstance(params, Mapping):
-            missing = [n for n in names if n not in params]
-            extra = [n for n in params if n not in names]
-            if missing or extra:
-                raise ValueError(
-                    f"params: expected the names {list(names)}; missing {missing}, unknown {extra}"
-                )
-            theta = np.array([params[n] for n in names], dtype=float)
-        else:
-            theta = np.asarray(params, dtype=float).ravel()
-            if theta.shape != (len(names),):
-                raise ValueError(
-                    f"params: expected {len(names)} values, got shape {theta.shape}"
-                )
-        if not np.all(np.isfinite(theta)):
-            bad = [n for n, v in zip(names, theta, strict=True) if not np.isfinite(v)]
-            raise ValueError(f"params: non-finite values for {bad}")
-        self.theta = theta
+        self.theta = params_vector(params, self.structure.names)
 
     # ----------------------------------------------------------------- parameters
     @property

@@ -59,6 +59,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..kernels import sgn
+
 __all__ = [
     "BOUND",
     "EXACT",
@@ -80,20 +82,10 @@ UNREACHABLE = 2
 _ROUND_OFF = 1e-13
 
 
-@njit(cache=True, inline="always")
-def _sgn(x):
-    # eq. (6): sgn(0) = 0
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    return 0.0
-
-
 @njit(cache=True)
 def duhem_gap(w1p, w2p, f0, f1):
     """The gap ``G = f0 sgn(w1p) + f1 w1p - w2p`` of eq. (7)."""
-    return f0 * _sgn(w1p) + f1 * w1p - w2p
+    return f0 * sgn(w1p) + f1 * w1p - w2p
 
 
 @njit(cache=True)
@@ -148,7 +140,7 @@ def duhem_solutions(w2d, w1p, w2p, alpha, f0, f1, g0):
 def _towards_band(w2d, w1p, w2p, alpha, f0, f1, g0, bound):
     """Step for an unreachable ``w2d``: move the gap to zero (unique inverse there)."""
     G = duhem_gap(w1p, w2p, f0, f1)
-    direction = _sgn(w2d - w2p)
+    direction = sgn(w2d - w2p)
     rate = f1 - g0 + alpha * abs(G)  # |dG/dd| on the side that shrinks |G|
     dmax = bound / alpha
     if rate > 0.0 and G != 0.0:
@@ -173,7 +165,7 @@ def duhem_inverse_step(w2d, w1p, w2p, alpha, f0, f1, g0, bound):
     if n == 0:
         return _towards_band(w2d, w1p, w2p, alpha, f0, f1, g0, bound), UNREACHABLE
     if alpha * abs(near) > bound:
-        return _sgn(near) * bound / alpha, BOUND
+        return sgn(near) * bound / alpha, BOUND
     return near, EXACT
 
 

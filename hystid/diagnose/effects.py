@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..kernels import offsets
+from ..kernels import offsets, sgn
 from ..model import DuhemSandwich, InitialCondition, SandwichResponse
 
 __all__ = [
@@ -150,15 +150,6 @@ def effect_dict(phi: np.ndarray, names: Sequence[str] | None = None) -> dict[str
 
 
 # --------------------------------------------------------------------------- compiled kernel
-@njit(cache=True, inline="always")
-def _sgn(x):
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    return 0.0
-
-
 @njit(cache=True)
 def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt):
     """Simulate the augmented sandwich from index ``start`` on (extended arrays, past first).
@@ -223,10 +214,10 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         w1p = W1[k - 1]
         w2p = W2[k - 1]
         dw1 = w1 - w1p
-        s = _sgn(dw1)
+        s = sgn(dw1)
         alpha_k = alpha * (1.0 + e_a * s)
         g_k = g0 * (1.0 + e_g * s)
-        f = f0 * _sgn(w1p) + f1 * w1p * (1.0 + cubic * w1p * w1p)
+        f = f0 * sgn(w1p) + f1 * w1p * (1.0 + cubic * w1p * w1p)
         W2[k] = w2p + alpha_k * (f - w2p) * abs(dw1) + g_k * dw1
         # creep of the actuator
         C[k] = C[k - 1] + lam * (kappa * W2[k] - C[k - 1])

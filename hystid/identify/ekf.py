@@ -44,7 +44,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from numba import njit
 
-from ..kernels import offsets
+from ..kernels import offsets, sgn
 from ..model import DuhemSandwich, Structure
 from ..records import Record
 from ._recursive import admissible
@@ -63,16 +63,6 @@ def state_sizes(structure: Structure) -> tuple[int, int, int, int]:
     """Window lengths ``(m1, m2, m3, mu)`` of w1, w2, y in the state and of the input buffer."""
     s = structure
     return max(1, s.n1a), max(1, s.q2 + s.n2b), max(1, s.n2a), s.q1 + s.n1b + 1
-
-
-@njit(cache=True, inline="always")
-def _sgn(x):
-    # eq. (6): sgn(0) = 0
-    if x > 0.0:
-        return 1.0
-    if x < 0.0:
-        return -1.0
-    return 0.0
 
 
 @njit(cache=True)
@@ -112,8 +102,8 @@ def transition(x, ubuf, layout, m1, m2, m3, xn, F):
     w2p = x[o2]
     d = w1 - w1p
     absd = abs(d)
-    sd = _sgn(d)  # d|dw1|/d(dw1), 0 at the kink
-    sp = _sgn(w1p)
+    sd = sgn(d)  # d|dw1|/d(dw1), 0 at the kink
+    sp = sgn(w1p)
     G = f0 * sp + f1 * w1p - w2p
     w2 = w2p + alpha * G * absd + g0 * d
     for p in range(n):
