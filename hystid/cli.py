@@ -43,13 +43,22 @@ class Progress:
 
 
 # --------------------------------------------------------------------------- helpers
-def _load(path: str, fs: float | None):
+def _load(path: str, fs: float | None, columns: dict | None = None):
     from .records import RecordError, load_record
 
     try:
-        return load_record(path, fs=fs)
+        return load_record(path, fs=fs, columns=columns)
     except RecordError as err:
         raise CommandError(str(err)) from err
+
+
+def _columns_arg(text: str) -> dict:
+    from .records import parse_columns
+
+    try:
+        return parse_columns(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from err
 
 
 def _positive(kind):
@@ -155,8 +164,8 @@ def cmd_simulate(args) -> int:
 def cmd_identify(args) -> int:
     """``hystid identify``: identify a record, validate, print or write JSON."""
     progress = Progress(args.quiet or args.json)
-    rec = _load(args.record, args.fs)
-    val = _load(args.val, args.fs) if args.val else None
+    rec = _load(args.record, args.fs, args.columns)
+    val = _load(args.val, args.fs, args.columns) if args.val else None
     if val is not None and not np.isclose(val.fs, rec.fs, rtol=1e-9):
         raise CommandError(f"--val {args.val}: fs {val.fs:g} Hz differs from {rec.fs:g} Hz "
                            f"of {args.record}")
@@ -296,6 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("record", help="record file")
     p.add_argument("--fs", type=_positive(float), help="sampling rate in Hz (if no t column)")
     p.add_argument("--val", help="validation record (default: validate on the record itself)")
+    p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
+                   help="where t, u and y are in the files (names or 0-based positions)")
     p.add_argument("--model", choices=("duhem", "pi"), default="duhem", help="hysteresis block")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch for duhem, recursive for pi)")

@@ -44,6 +44,7 @@ __all__ = [
     "RecordError",
     "load_piezo_sine_150v",
     "load_record",
+    "parse_columns",
     "read_records",
 ]
 
@@ -433,6 +434,21 @@ def _save_h5(rec: Record, path: str | os.PathLike[str]) -> None:
 
 
 # --------------------------------------------------------------------------- loading
+def parse_columns(text: str) -> dict[str, str | int]:
+    """Parse a column map written ``role=column,...`` (``t=1,u=3,y=2`` or ``u=voltage,y=disp``).
+
+    Digits give 0-based positions, anything else a column or array name; the result is the
+    ``columns`` argument of :func:`load_record`. Raises ``ValueError`` on a malformed text.
+    """
+    out: dict[str, str | int] = {}
+    for part in text.split(","):
+        role, sep, col = (s.strip() for s in part.partition("="))
+        if not sep or not role or not col:
+            raise ValueError(f"expected role=column pairs like t=1,u=3,y=2, got {text!r}")
+        out[role] = int(col) if col.lstrip("-").isdigit() else col
+    return out
+
+
 def load_record(
     path: str | os.PathLike[str],
     *,

@@ -137,3 +137,17 @@ def test_identify_refuses_a_record_shorter_than_the_method_needs(method):
     rec = reference_record(0.02, seed=0)[: need - 1]
     with pytest.raises(ValueError, match=f"{need - 1} samples are too few"):
         identify(rec, method=method)
+
+
+def test_identify_reads_columns_by_position(records, tmp_path, capsys):
+    from hystid.records import load_record
+
+    rec = load_record(records / "train.csv")
+    path = tmp_path / "headerless.csv"
+    np.savetxt(path, np.column_stack([rec.y, np.arange(rec.n), rec.u]), delimiter=",")
+    code, out, err = run(["identify", str(path), "--columns", "u=2,y=0", "--fs",
+                          str(rec.fs), "--json"], capsys)
+    assert code == 0, err
+    params = json.loads(out)["params"]
+    assert all(abs(params[k] - v) < 0.02 * abs(v) for k, v in PAPER_PARAMS.items())
+    assert exit_code(["identify", str(path), "--columns", "u2,y=0"]) == 2

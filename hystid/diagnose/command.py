@@ -102,16 +102,14 @@ class _BadInput(Exception):
 
 
 def _columns(text: str | None) -> dict | None:
+    from ..records import parse_columns
+
     if text is None:
         return None
-    out: dict[str, str | int] = {}
-    for part in text.split(","):
-        if "=" not in part:
-            raise _BadInput(f"--columns: expected role=column pairs like t=1,u=3,y=2, got "
-                            f"{text!r}")
-        role, col = (s.strip() for s in part.split("=", 1))
-        out[role] = int(col) if col.lstrip("-").isdigit() else col
-    return out
+    try:
+        return parse_columns(text)
+    except ValueError as err:
+        raise _BadInput(f"--columns: {err}") from err
 
 
 def _crop(text: str | None, rec, label: str):
