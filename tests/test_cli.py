@@ -21,8 +21,9 @@ def run(args, capsys):
 def records(tmp_path_factory):
     folder = tmp_path_factory.mktemp("recs")
     for name, seed in (("train.csv", 0), ("val.npz", 1)):
-        assert main(["simulate", "--seconds", "0.1", "--seed", str(seed), "--quiet",
-                     "--out", str(folder / name)]) == 0
+        args = ["simulate", "--seconds", "0.1", "--seed", str(seed), "--quiet",
+                "--out", str(folder / name)]
+        assert main(args) == 0
     return folder
 
 

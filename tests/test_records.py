@@ -67,7 +67,8 @@ def test_record_converts_and_exposes_time():
     assert rec.u.dtype == np.float64 and rec.y.dtype == np.float64
     assert rec.n == len(rec) == 3
     np.testing.assert_allclose(rec.t, [0.0, 0.1, 0.2])
-    assert rec.duration == pytest.approx(0.3)
+    span = rec.duration  # n / fs, the record's length in time
+    assert span == pytest.approx(0.3)
     assert rec.units == {"u": "V", "y": "um"} and rec.name == "record"
     assert isinstance(rec.fs, float)
     assert "n=3" in repr(rec)
