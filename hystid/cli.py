@@ -145,7 +145,7 @@ def _write_history(path: str, result) -> None:
 
 
 # --------------------------------------------------------------------------- commands
-def cmd_simulate(args) -> int:
+def cmd_simulate(args: argparse.Namespace) -> int:
     """``hystid simulate``: a record from the built-in reference stage."""
     from .reference import reference_record
 
@@ -161,7 +161,7 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-def cmd_identify(args) -> int:
+def cmd_identify(args: argparse.Namespace) -> int:
     """``hystid identify``: identify a record, validate, print or write JSON."""
     progress = Progress(args.quiet or args.json)
     rec = _load(args.record, args.fs, args.columns)
@@ -209,7 +209,7 @@ def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None) ->
         plt.close(axes[0].figure)
 
 
-def cmd_demo(args) -> int:
+def cmd_demo(args: argparse.Namespace) -> int:
     """``hystid demo``: the main job on the built-in reference stage."""
     from .identify import METHODS, identify
     from .metrics import validate

@@ -5,8 +5,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
 
 __all__ = ["Validation", "validate", "plot_validation", "PAPER_TRANSIENT_S"]
 
@@ -83,7 +87,7 @@ def validate(
 def plot_validation(
     t: np.ndarray, y: np.ndarray, yhat: np.ndarray, path: str | Path | None = None,
     *, title: str = "model validation", unit: str = "um", skip: int = 0,
-):
+) -> Figure:
     """The paper's Fig. 4: measured and model output (top) and the error (bottom).
 
     Writes a PNG when ``path`` is given; returns the figure.

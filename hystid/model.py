@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import control as ct
 import numpy as np
 
 from . import blocks
 from .kernels import as_layout, simulate_into
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
 
 __all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure", "params_vector"]
 
@@ -124,7 +128,7 @@ class SandwichResponse:
         """max_k |dw1(k)|: condition (8) asks ``alpha * duhem_margin < 2``."""
         return float(np.max(np.abs(np.diff(self.w1)))) if len(self.w1) > 1 else 0.0
 
-    def plot(self, ax=None):
+    def plot(self, ax: Sequence[Axes] | np.ndarray | None = None) -> Sequence[Axes] | np.ndarray:
         """Plot u, w1, w2 and y against time; returns the axes."""
         import matplotlib.pyplot as plt
 
@@ -351,7 +355,9 @@ class DuhemSandwich:
         return f"DuhemSandwich({values}, fs={self.fs:g})"
 
 
-def params_vector(params, names: Sequence[str]) -> np.ndarray:
+def params_vector(
+    params: Mapping[str, float] | Sequence[float] | np.ndarray, names: Sequence[str]
+) -> np.ndarray:
     """Parameters as a vector in the order of ``names``, from a mapping or a sequence.
 
     Raises ``ValueError`` naming the missing, unknown or non-finite parameters.

@@ -158,7 +158,9 @@ def pi_simulate_into(a1, b1, q1, mu, r, a2, b2, q2, U, W1, W2, Y, p, start):
 
 
 def play_operator(
-    v: np.ndarray | Sequence[float], thresholds: np.ndarray | Sequence[float], p0=None
+    v: np.ndarray | Sequence[float],
+    thresholds: np.ndarray | Sequence[float],
+    p0: np.ndarray | Sequence[float] | None = None,
 ) -> np.ndarray:
     """Outputs of the play operators (eq. 30) on a signal.
 
@@ -188,7 +190,7 @@ def pi_operator(
     v: np.ndarray | Sequence[float],
     thresholds: np.ndarray | Sequence[float],
     weights: np.ndarray | Sequence[float],
-    p0=None,
+    p0: np.ndarray | Sequence[float] | None = None,
 ) -> np.ndarray:
     """The PI operator ``sum_i mu_i p_i(k)`` (eq. 30) on a signal, compiled.
 
@@ -584,7 +586,9 @@ class PISandwich:
             [l1, self.H, l2], inputs="u", outputs=["y", "w1", "w2"], name=self.name
         )
 
-    def operator_state(self, x0: InitialCondition | None = None, p0=None) -> np.ndarray:
+    def operator_state(
+        self, x0: InitialCondition | None = None, p0: np.ndarray | Sequence[float] | None = None
+    ) -> np.ndarray:
         """Play-operator states ``p_i(-1)`` for a start from ``x0``.
 
         ``p0`` when given; otherwise the state reached from the virgin state by a monotone move
@@ -595,7 +599,9 @@ class PISandwich:
         w1 = (x0 or InitialCondition()).window("w1", 1)[0]
         return np.maximum(w1 - self.thresholds, np.minimum(w1 + self.thresholds, 0.0))
 
-    def control_state(self, x0: InitialCondition | None = None, p0=None) -> np.ndarray:
+    def control_state(
+        self, x0: InitialCondition | None = None, p0: np.ndarray | Sequence[float] | None = None
+    ) -> np.ndarray:
         """State vector of :meth:`to_control` that continues from the past ``x0``.
 
         Parameters
@@ -677,7 +683,10 @@ class PISandwich:
 
     # ----------------------------------------------------------------- simulation
     def simulate(
-        self, u: np.ndarray | Sequence[float], x0: InitialCondition | None = None, p0=None
+        self,
+        u: np.ndarray | Sequence[float],
+        x0: InitialCondition | None = None,
+        p0: np.ndarray | Sequence[float] | None = None,
     ) -> SandwichResponse:
         """Simulate the sandwich with the compiled kernel.
 

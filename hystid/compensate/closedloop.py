@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
 import control as ct
 import numpy as np
@@ -51,6 +52,11 @@ from .compensator import (
 )
 from .feedback import FeedbackDesign
 from .tracking import TrackingMetrics, tracking_metrics
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
+
+    from ..pi import PISandwich
 
 __all__ = [
     "ClosedLoopResponse",
@@ -102,7 +108,9 @@ class ClosedLoopResponse:
             raise ValueError(f"against: expected 'y_ref' or 'yd', got {against!r}")
         return tracking_metrics(getattr(self, against), self.y, skip=skip)
 
-    def plot(self, ax=None, label: str | None = None):
+    def plot(
+        self, ax: Sequence[Axes] | np.ndarray | None = None, label: str | None = None
+    ) -> Sequence[Axes] | np.ndarray:
         """Output against reference, and the error; returns the axes."""
         import matplotlib.pyplot as plt
 
@@ -168,13 +176,13 @@ def _stage(model, plant) -> ct.InputOutputSystem:
 
 
 def closed_loop(
-    model,
+    model: DuhemSandwich | PISandwich,
     controller: FeedbackDesign | ct.LTI | None = None,
     feedforward: bool | str = True,
     *,
-    plant=None,
+    plant: DuhemSandwich | PISandwich | ct.InputOutputSystem | None = None,
     u_limits: tuple[float, float] = (0.0, 10.0),
-    reference_model=None,
+    reference_model: ct.LTI | Literal["exact"] | None = None,
     reference_lead: int | None = None,
     preview: int | None = None,
     duhem_bound: float = DUHEM_BOUND,
@@ -340,7 +348,7 @@ def _run_loop(x_ff, rs, chain_args, Ac, Bc, Cc, Dc, theta, layout, U, W1, W2, Y,
 
 
 def simulate_closed_loop(
-    model,
+    model: DuhemSandwich | PISandwich,
     y_ref: np.ndarray | Sequence[float],
     controller: FeedbackDesign | ct.LTI | None = None,
     *,
@@ -349,7 +357,7 @@ def simulate_closed_loop(
     noise: float | np.ndarray = 0.0,
     seed: int | None = 0,
     u_limits: tuple[float, float] = (0.0, 10.0),
-    reference_model=None,
+    reference_model: ct.LTI | Literal["exact"] | None = None,
     reference_lead: int | None = None,
     preview: int | None = None,
     duhem_bound: float = DUHEM_BOUND,

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
 import control as ct
 import numpy as np
@@ -48,6 +49,9 @@ from numba import njit
 
 from ..model import DuhemSandwich
 from .duhem_inverse import check_bound, duhem_forward, plan_step
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..pi import PISandwich
 
 __all__ = [
     "COMPENSATIONS",
@@ -316,7 +320,7 @@ def _reference_model(reference_model, dt: float):
     return 1, A, B[:, 0].copy(), C[0].copy(), float(D[0, 0])
 
 
-def dc_delay(reference_model) -> int:
+def dc_delay(reference_model: ct.LTI | str | None) -> int:
     """The reference model's group delay at DC, rounded to samples (0 for None / 'exact').
 
     For ``M(z) = N(z) / D(z)`` it is ``D'(1)/D(1) - N'(1)/N(1)``; a linear-phase FIR smoother
@@ -397,7 +401,7 @@ def _linear_parts(model):
     return model.a1, float(b1[0]), b1[1:], s.q1, model.a2, float(b2[0]), b2[1:], s.q2
 
 
-def hysteresis_gain(model) -> float:
+def hysteresis_gain(model: DuhemSandwich | PISandwich) -> float:
     """Slope of the hysteresis block's central (anhysteretic) line, ``dw2/dw1``.
 
     ``f1`` for the Duhem block (its ascending and descending branches are
@@ -574,10 +578,10 @@ class HysteresisInverse(ct.NonlinearIOSystem):
 
 
 def inverse(
-    model,
+    model: DuhemSandwich | PISandwich,
     *,
     u_limits: tuple[float, float] = (0.0, 10.0),
-    reference_model=None,
+    reference_model: ct.LTI | Literal["exact"] | None = None,
     reference_lead: int | None = None,
     preview: int | None = None,
     duhem_bound: float = DUHEM_BOUND,
@@ -684,11 +688,11 @@ def _run(chain: _Chain, y_ref: np.ndarray) -> Feedforward:
 
 
 def feedforward(
-    model,
+    model: DuhemSandwich | PISandwich,
     y_ref: np.ndarray | Sequence[float],
     *,
     u_limits: tuple[float, float] = (0.0, 10.0),
-    reference_model=None,
+    reference_model: ct.LTI | Literal["exact"] | None = None,
     reference_lead: int | None = None,
     preview: int | None = None,
     duhem_bound: float = DUHEM_BOUND,
@@ -725,11 +729,11 @@ def feedforward(
 
 
 def linear_feedforward(
-    model,
+    model: DuhemSandwich | PISandwich,
     y_ref: np.ndarray | Sequence[float],
     *,
     u_limits: tuple[float, float] = (0.0, 10.0),
-    reference_model=None,
+    reference_model: ct.LTI | Literal["exact"] | None = None,
     reference_lead: int | None = None,
     full_output: bool = False,
 ) -> np.ndarray | Feedforward:

@@ -23,18 +23,27 @@ minus commanded voltage, zero unless the amplifier limits are hit) fed back into
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import control as ct
 import numpy as np
 
 from .compensator import hysteresis_gain
 
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
+
+    from ..model import DuhemSandwich
+    from ..pi import PISandwich
+
 __all__ = ["FeedbackDesign", "design_feedback", "flexure_mode", "linear_plant"]
 
 
-def linear_plant(model, gain: float | None = None) -> ct.TransferFunction:
+def linear_plant(
+    model: DuhemSandwich | PISandwich, gain: float | None = None
+) -> ct.TransferFunction:
     """The stage linearised along a hysteresis branch: ``u -> y = L1 k_H L2``.
 
     Parameters
@@ -52,7 +61,7 @@ def linear_plant(model, gain: float | None = None) -> ct.TransferFunction:
                  name="plant")
 
 
-def flexure_mode(model) -> tuple[float, float]:
+def flexure_mode(model: DuhemSandwich | PISandwich) -> tuple[float, float]:
     """Natural frequency (Hz) and damping ratio of L2's most lightly damped pole pair.
 
     The z-plane pole ``p`` maps to ``s = ln(p) / T``; ``f = |s| / 2 pi``, ``zeta = -Re(s)/|s|``.
@@ -173,7 +182,7 @@ class FeedbackDesign:
         return ct.ss(A, B, C, D, T, inputs=["e", "du"], outputs=["u_fb"], states=states,
                      name=name)
 
-    def plot(self, ax=None):
+    def plot(self, ax: Sequence[Axes] | np.ndarray | None = None) -> Sequence[Axes] | np.ndarray:
         """Bode plot of the loop with the margins in the title; returns the axes."""
         import matplotlib.pyplot as plt
 
@@ -221,7 +230,7 @@ def _evaluate(plant, notch, fc: float, pi_zero: float | None, dt: float):
 
 
 def design_feedback(
-    model,
+    model: DuhemSandwich | PISandwich,
     *,
     crossover: float | None = None,
     phase_margin: float = 60.0,

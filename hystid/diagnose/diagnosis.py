@@ -16,7 +16,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -28,6 +28,10 @@ from .effects import EFFECT_NAMES, EFFECTS, AugmentedSandwich, effect_dict
 from .refit import FitData, RefitResult, initial_state, refit, simulate_fit_data
 from .screen import compare_losses, effect_names_check, screen, zero_vector
 from .where import Segment, Where, localise
+
+if TYPE_CHECKING:  # pragma: no cover
+    import os
+    from pathlib import Path
 
 __all__ = [
     "ALIKE",
@@ -203,7 +207,7 @@ class DiagnosisResult:
 
         return summary_text(self)
 
-    def plot(self, out_dir) -> list:
+    def plot(self, out_dir: str | os.PathLike[str]) -> list[Path]:
         """Write the figures (error in time, spectrum, branches, gap per candidate) to
         ``out_dir``; returns their paths."""
         from .report import plot_diagnosis

@@ -11,7 +11,7 @@ problems are tall and thin: tens of thousands of samples, about ten parameters).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -185,7 +185,9 @@ class Parametrisation:
         lo, hi = self.bounds()
         return np.clip(z, lo, hi)
 
-    def to_values(self, z: np.ndarray, base_phi: np.ndarray | None = None):
+    def to_values(
+        self, z: np.ndarray, base_phi: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """``(theta, phi)`` from search coordinates; inactive slots keep ``base_phi``."""
         theta = np.array(z[: self.ntheta], float)
         for g in self.groups:
@@ -332,7 +334,7 @@ class LMSolution:
 
 
 def levenberg_marquardt(
-    fun,
+    fun: Callable[[np.ndarray], np.ndarray],
     x0: np.ndarray,
     lo: np.ndarray,
     hi: np.ndarray,

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover
+    import os
+
     from .diagnosis import DiagnosisResult
 
 __all__ = ["plot_diagnosis", "summary_text"]
@@ -86,7 +88,7 @@ def summary_text(result: DiagnosisResult) -> str:
     return "\n".join(lines)
 
 
-def plot_diagnosis(result: DiagnosisResult, out_dir) -> list[Path]:
+def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> list[Path]:
     """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths."""
     import matplotlib
 

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from ..model import Structure
 from ..records import Record
@@ -19,7 +20,7 @@ METHODS = ("batch", "eria", "online", "ekf")
 SAMPLES_PER_PARAMETER = 10
 
 
-def min_samples(method: str, structure: Structure | None = None, **settings) -> int:
+def min_samples(method: str, structure: Structure | None = None, **settings: Any) -> int:
     """Fewest samples a record must hold for ``method`` to return an estimate.
 
     Ten samples per parameter for every method; the on-line identifier needs its start-up
@@ -38,7 +39,7 @@ def identify(
     structure: Structure | None = None,
     *,
     progress: Callable[[int, int], None] | None = None,
-    **settings,
+    **settings: Any,
 ) -> IdentificationResult:
     """Identify the Duhem sandwich from a record.
 

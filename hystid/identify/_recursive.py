@@ -187,7 +187,9 @@ class RecursiveIdentifier:
                 progress(stop, n)
         return self.result(history, diagnostics)
 
-    def result(self, history: np.ndarray | None = None, diagnostics=None) -> IdentificationResult:
+    def result(
+        self, history: np.ndarray | None = None, diagnostics: np.ndarray | None = None
+    ) -> IdentificationResult:
         """The current estimate as an :class:`IdentificationResult`."""
         info = {"n_recoveries": self.n_recoveries, "first_recovery": self.first_recovery,
                 "n_skipped": self.n_skipped, "samples": self.k}

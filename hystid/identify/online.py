@@ -31,6 +31,8 @@ low residual, with ``P`` reset.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
@@ -39,6 +41,9 @@ from ..model import Structure
 from ..records import Record
 from ._recursive import RecursiveIdentifier, admissible_into, extended, keep_tail
 from .offline import fit_output_error, output_sensitivities
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .result import IdentificationResult
 
 __all__ = ["OnlineIdentifier", "DIAGNOSTICS"]
 
@@ -416,7 +421,9 @@ class OnlineIdentifier(RecursiveIdentifier):
         """Monitored quantities at the last sample."""
         return dict(zip(DIAGNOSTICS, map(float, self._diag_last), strict=True))
 
-    def result(self, history=None, diagnostics=None):
+    def result(
+        self, history: np.ndarray | None = None, diagnostics: np.ndarray | None = None
+    ) -> IdentificationResult:
         """The current estimate as an IdentificationResult (with start-up and guard counts)."""
         res = super().result(history, diagnostics)
         res.info.update({"n_projections": self.n_projections, "n_clipped": self.n_clipped,

@@ -46,6 +46,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -1097,7 +1098,7 @@ def identify_pi(
     method: str = "recursive",
     *,
     progress: Callable[[int, int], None] | None = None,
-    **settings,
+    **settings: Any,
 ) -> IdentificationResult:
     """Identify the PI sandwich from a record (``hystid identify REC --model pi``).
 

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..model import DuhemSandwich
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
 
 __all__ = ["IdentificationResult", "converged_at"]
 
@@ -74,7 +77,11 @@ class IdentificationResult:
         """Parameter names, the columns of :attr:`history`."""
         return tuple(self.model.params)
 
-    def plot(self, truth: dict[str, float] | None = None, axes=None):
+    def plot(
+        self,
+        truth: dict[str, float] | None = None,
+        axes: Axes | Sequence[Axes] | np.ndarray | None = None,
+    ) -> np.ndarray:
         """Plot the parameter history (the paper's Fig. 3); returns the axes."""
         import matplotlib.pyplot as plt
 
