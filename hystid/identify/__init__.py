@@ -23,13 +23,15 @@ SAMPLES_PER_PARAMETER = 10
 def min_samples(method: str, structure: Structure | None = None, **settings: Any) -> int:
     """Fewest samples a record must hold for ``method`` to return an estimate.
 
-    Ten samples per parameter for every method; the on-line identifier needs its start-up
-    window (``n_start``, 400 by default) on top, since its estimate stays at ``theta0`` until
-    the window is full.
+    Ten samples per parameter for every method, and for the on-line identifier at least one
+    more than its start-up window (``n_start``): its estimate stays at ``theta0`` until the
+    window is full.
     """
     need = SAMPLES_PER_PARAMETER * len((structure or Structure()).names)
     if method == "online":
-        need = max(need, int(settings.get("n_start", 400)) + 1)
+        from .online import N_START
+
+        need = max(need, int(settings.get("n_start", N_START)) + 1)
     return need
 
 

@@ -195,6 +195,10 @@ def rpem_run(theta, P, scal, theta_good, P_good, layout, U, W1, W2, Yh, Ym, S1, 
         diag[n, 5] = np.sqrt(scal[_LONG])
 
 
+#: Default length of the start-up window, in samples.
+N_START = 400
+
+
 class OnlineIdentifier(RecursiveIdentifier):
     """Converging on-line identifier of the Duhem sandwich (recursive prediction error).
 
@@ -249,7 +253,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         fs: float = 30_000.0,
         *,
         theta0=0.01,
-        n_start: int = 400,
+        n_start: int = N_START,
         memory: float = 100_000.0,
         lambda0: float = 0.9999,
         lambda_time: float = 2_000.0,
