@@ -21,6 +21,7 @@ __all__ = [
     "duhem_output",
     "linear_block",
     "linear_coefficients",
+    "placement_blocks",
     "state_from_past",
 ]
 
@@ -175,6 +176,39 @@ def duhem_block(
         dt=dt,
         name=name,
     )
+
+
+def _shift_input(t, x, u, params):
+    return np.array([u[0] - params["u_rest"]])
+
+
+def _add_offset(t, x, u, params):
+    return np.array([u[0] + params["offset"]])
+
+
+def placement_blocks(u_rest: float, offset: float, dt: float) -> list[ct.NonlinearIOSystem]:
+    """Static blocks placing a sandwich at its rest level and sensor offset.
+
+    Parameters
+    ----------
+    u_rest : float
+        Input rest level: block ``U0`` maps ``u`` to ``v = u - u_rest`` (L1's input).
+    offset : float
+        Sensor offset: block ``Y0`` maps ``x`` (L2's output) to ``y = x + offset``.
+    dt : float
+        Sampling period in seconds.
+
+    Returns
+    -------
+    list of control.NonlinearIOSystem
+        ``[U0, Y0]``, stateless, with ``u_rest`` and ``offset`` as system ``params``.
+    """
+    return [
+        ct.nlsys(None, _shift_input, inputs=["u"], outputs=["v"], params={"u_rest": u_rest},
+                 dt=dt, name="U0"),
+        ct.nlsys(None, _add_offset, inputs=["x"], outputs=["y"], params={"offset": offset},
+                 dt=dt, name="Y0"),
+    ]
 
 
 def state_from_past(ss: ct.StateSpace, u_past: np.ndarray, y_past: np.ndarray) -> np.ndarray:

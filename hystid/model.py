@@ -6,13 +6,13 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-import control as ct
 import numpy as np
 
-from . import blocks
 from .kernels import as_layout, simulate_into
+from .operating import Envelope, warn_admissibility
 
 if TYPE_CHECKING:  # pragma: no cover
+    import control as ct
     from matplotlib.axes import Axes
 
 __all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure", "params_vector"]
@@ -107,9 +107,13 @@ class SandwichResponse:
     Attributes
     ----------
     t, u, w1, w2, y : ndarray
-        Time (s), input, internal signals and output.
+        Time (s), input, internal signals and output. ``u`` and ``y`` are in the record's units
+        (the sensor offset included); ``w1`` and ``w2`` are relative to the model's rest.
     name : str
         Name of the simulated model.
+    warnings : list of str
+        Why the response may not be trustworthy: the input left the model's envelope, or
+        condition (8) failed (empty when neither).
     """
 
     t: np.ndarray
@@ -118,6 +122,7 @@ class SandwichResponse:
     w2: np.ndarray
     y: np.ndarray
     name: str = "sandwich"
+    warnings: list[str] = field(default_factory=list)
 
     def __iter__(self) -> Iterator[np.ndarray]:
         yield self.t
@@ -157,6 +162,15 @@ class DuhemSandwich:
         Sampling rate in Hz (the paper's stage runs at 30 kHz).
     name : str
         Model name, used for the python-control systems.
+    u_rest : float
+        Input level at which the stage rests; the sandwich sees ``u - u_rest``
+        (see :mod:`hystid.operating`).
+    offset : float
+        Sensor reading at rest (the sensor's zero offset); added to the sandwich's output.
+    envelope : Envelope, optional
+        Inputs the model was identified on; simulating outside it warns.
+    units : dict, optional
+        Units of ``u`` and ``y`` (``{"u": "V", "y": "um"}`` by default).
 
     Attributes
     ----------
@@ -172,6 +186,11 @@ class DuhemSandwich:
         structure: Structure | None = None,
         fs: float = 30_000.0,
         name: str = "sandwich",
+        *,
+        u_rest: float = 0.0,
+        offset: float = 0.0,
+        envelope: Envelope | None = None,
+        units: Mapping[str, str] | None = None,
     ) -> None:
         self.structure = structure or Structure()
         if not (np.isfinite(fs) and fs > 0):
@@ -179,6 +198,9 @@ class DuhemSandwich:
         self.fs = float(fs)
         self.name = name
         self.theta = params_vector(params, self.structure.names)
+        self.u_rest, self.offset = _finite(u_rest, "u_rest"), _finite(offset, "offset")
+        self.envelope = envelope
+        self.units = dict(units) if units is not None else {"u": "V", "y": "um"}
 
     # ----------------------------------------------------------------- parameters
     @property
@@ -218,6 +240,34 @@ class DuhemSandwich:
         )
         return bool(radius < 1.0 and self.params["alpha"] > 0)
 
+    def envelope_bound(self, envelope: Envelope | None = None) -> float:
+        """Largest ``alpha |dw1|`` over every sine inside an input envelope (condition 8).
+
+        A sine of amplitude ``A`` and frequency ``w`` (rad/sample) moves ``w1`` by at most
+        ``|L1(e^jw)| 2 A sin(w/2)`` per sample; inside the envelope ``2 A sin(w/2)`` is also
+        bounded by the slew. Condition (8) holds for every such input when the returned value
+        is below 2.
+
+        Parameters
+        ----------
+        envelope : Envelope, optional
+            The model's own envelope by default.
+
+        Returns
+        -------
+        float
+            ``alpha max_w |L1(e^jw)| min(2 A sin(w/2), slew)``; 0 without an envelope.
+        """
+        env = envelope or self.envelope
+        if env is None:
+            return 0.0
+        w = np.linspace(1e-4, np.pi, 512)
+        z = np.exp(-1j * w)
+        num = 1.0 + sum(b * z ** (j + 1) for j, b in enumerate(self.b1))
+        den = 1.0 + sum(a * z ** (i + 1) for i, a in enumerate(self.a1))
+        move = np.minimum(2.0 * env.amplitude * np.sin(w / 2), env.slew)
+        return float(self.params["alpha"] * np.max(np.abs(num / den) * move))
+
     # ----------------------------------------------------------------- python-control bridge
     @property
     def dt(self) -> float:
@@ -227,6 +277,8 @@ class DuhemSandwich:
     @property
     def L1(self) -> ct.TransferFunction:
         """Amplifier + filter (eq. 1): discrete transfer function u -> w1."""
+        from . import blocks
+
         s = self.structure
         return blocks.linear_block(
             self.a1, self.b1, s.q1, self.dt, inputs="u", outputs="w1", name="L1"
@@ -235,6 +287,8 @@ class DuhemSandwich:
     @property
     def L2(self) -> ct.TransferFunction:
         """Flexure hinge + load (eq. 2): discrete transfer function w2 -> y."""
+        from . import blocks
+
         s = self.structure
         return blocks.linear_block(
             self.a2, self.b2, s.q2, self.dt, inputs="w2", outputs="y", name="L2"
@@ -243,6 +297,8 @@ class DuhemSandwich:
     @property
     def H(self) -> ct.NonlinearIOSystem:
         """Duhem hysteresis (eq. 7): discrete nonlinear system w1 -> w2."""
+        from . import blocks
+
         p = self.params
         return blocks.duhem_block(
             p["alpha"], p["f1"], p["g0"], p.get("f0", 0.0), dt=self.dt, name="H"
@@ -256,16 +312,32 @@ class DuhemSandwich:
         control.InterconnectedSystem
             Input ``u``; outputs ``y, w1, w2``; states those of ``L1`` (realised with
             ``tf2ss(method='scipy')``), ``H`` and ``L2`` in that order. Use
-            :meth:`control_state` for the state matching an :class:`InitialCondition`.
+            :meth:`control_state` for the state matching an :class:`InitialCondition`. A model
+            with a rest level or an offset also holds the static blocks ``U0`` (``u - u_rest``)
+            and ``Y0`` (``+ offset``).
         """
-        l1 = ct.tf2ss(self.L1, method="scipy", inputs="u", outputs="w1", name="L1")
-        l2 = ct.tf2ss(self.L2, method="scipy", inputs="w2", outputs="y", name="L2")
+        import control as ct
+
+        from . import blocks
+
+        placed = bool(self.u_rest or self.offset)
+        l1 = ct.tf2ss(self.L1, method="scipy", inputs="v" if placed else "u", outputs="w1",
+                      name="L1")
+        l2 = ct.tf2ss(self.L2, method="scipy", inputs="w2", outputs="x" if placed else "y",
+                      name="L2")
+        systems = [l1, self.H, l2]
+        if placed:
+            systems += blocks.placement_blocks(self.u_rest, self.offset, self.dt)
         return ct.interconnect(
-            [l1, self.H, l2], inputs="u", outputs=["y", "w1", "w2"], name=self.name
+            systems, inputs="u", outputs=["y", "w1", "w2"], name=self.name
         )
 
     def control_state(self, x0: InitialCondition | None = None) -> np.ndarray:
         """State vector of :meth:`to_control` that continues from the past ``x0``."""
+        import control as ct
+
+        from . import blocks
+
         x0 = x0 or InitialCondition()
         n = self.structure.history + 1
         l1 = ct.tf2ss(self.L1, method="scipy")
@@ -297,6 +369,11 @@ class DuhemSandwich:
         name : str
             Name of the returned model.
         """
+        import control as ct
+
+        from . import blocks
+
+        placement = {}
         if isinstance(L1, ct.InterconnectedSystem) and H is None and L2 is None:
             sys = L1
             subs = {s.name: s for s in sys.syslist}
@@ -304,6 +381,8 @@ class DuhemSandwich:
                 raise ValueError(f"expected subsystems L1, H, L2 in {sys.name!r}, got {list(subs)}")
             L1, H, L2 = (ct.ss2tf(subs["L1"]), subs["H"], ct.ss2tf(subs["L2"]))
             L1, L2 = _clean_tf(L1), _clean_tf(L2)
+            placement = {k: float(subs[b].params[k]) for b, k in (("U0", "u_rest"),
+                                                                  ("Y0", "offset")) if b in subs}
         if H is None or L2 is None:
             raise ValueError("from_control needs L1, H and L2, or one InterconnectedSystem")
         if L1.dt != L2.dt or L1.dt != H.dt or not L1.dt:
@@ -319,20 +398,29 @@ class DuhemSandwich:
             values["f0"] = f0_value
         for prefix, vec in (("a1", a1), ("b1", b1), ("a2", a2), ("b2", b2)):
             values.update({f"{prefix}{i + 1}": v for i, v in enumerate(vec)})
-        return cls(values, structure, fs=1.0 / L1.dt, name=name)
+        return cls(values, structure, fs=1.0 / L1.dt, name=name, **placement)
 
     # ----------------------------------------------------------------- simulation
     def simulate(
-        self, u: np.ndarray | Sequence[float], x0: InitialCondition | None = None
+        self,
+        u: np.ndarray | Sequence[float],
+        x0: InitialCondition | None = None,
+        *,
+        check: bool = True,
     ) -> SandwichResponse:
         """Simulate the sandwich with the compiled kernel.
 
         Parameters
         ----------
         u : array_like
-            Input samples u(0) .. u(N-1).
+            Input samples u(0) .. u(N-1), in the record's units.
         x0 : InitialCondition, optional
-            Past signal values; at rest (all zero) by default.
+            Past signal values relative to the rest (``u - u_rest``, ``y - offset``); at rest
+            by default.
+        check : bool
+            Warn (:class:`~hystid.operating.AdmissibilityWarning`) when the input leaves the
+            model's envelope or condition (8) fails; the reasons are also in
+            ``response.warnings``.
 
         Returns
         -------
@@ -345,14 +433,53 @@ class DuhemSandwich:
         U, W1, W2, Y = (
             np.concatenate([x0.window(k, P), np.zeros(len(u))]) for k in ("u", "w1", "w2", "y")
         )
-        U[P:] = u
-        simulate_into(self.theta, self.structure.layout, U, W1, W2, Y, P)
+        U[P:] = u - self.u_rest
+        with np.errstate(over="ignore", invalid="ignore"):
+            simulate_into(self.theta, self.structure.layout, U, W1, W2, Y, P)
         t = np.arange(len(u)) / self.fs
-        return SandwichResponse(t, u, W1[P:], W2[P:], Y[P:], name=self.name)
+        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name)
+        if check:
+            resp.warnings = self.admissibility(u, resp)
+            warn_admissibility(resp.warnings, self.name)
+        return resp
+
+    def admissibility(
+        self, u: np.ndarray, response: SandwichResponse | None = None
+    ) -> list[str]:
+        """Why the model may not be trusted on input ``u`` (empty when it may).
+
+        Parameters
+        ----------
+        u : ndarray
+            Input samples in the record's units.
+        response : SandwichResponse, optional
+            The simulated response to ``u`` when already at hand.
+
+        Returns
+        -------
+        list of str
+            The envelope violations (:meth:`Envelope.violations`) and, when condition (8)
+            ``alpha |dw1(k)| < 2`` fails at some sample, how often and how far.
+        """
+        out = self.envelope.violations(u) if self.envelope is not None else []
+        if response is None:
+            response = self.simulate(u, check=False)
+        if not np.all(np.isfinite(response.y)):
+            out.append("the simulation diverged (non-finite output)")
+            return out
+        ratio = self.params["alpha"] * np.abs(np.diff(response.w1))
+        bad = int(np.count_nonzero(ratio >= 2.0))
+        if bad:
+            out.append(f"condition (8) fails at {bad} samples (alpha |dw1| up to "
+                       f"{np.max(ratio):.3g}, expected < 2): the Duhem recursion amplifies "
+                       "there")
+        return out
 
     def __repr__(self) -> str:
         values = ", ".join(f"{k}={v:.6g}" for k, v in self.params.items())
-        return f"DuhemSandwich({values}, fs={self.fs:g})"
+        placed = "".join(f", {k}={getattr(self, k):.6g}" for k in ("u_rest", "offset")
+                         if getattr(self, k))
+        return f"DuhemSandwich({values}, fs={self.fs:g}{placed})"
 
 
 def params_vector(
@@ -382,8 +509,20 @@ def params_vector(
     return theta
 
 
+def _finite(value: float, name: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name}: expected a finite number, got {value!r}") from err
+    if not np.isfinite(v):
+        raise ValueError(f"{name}: expected a finite number, got {value!r}")
+    return v
+
+
 def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:
     """Round-off clean-up of a transfer function obtained from a state-space realisation."""
+    import control as ct
+
     num = np.asarray(tf.num[0][0], float)
     den = np.asarray(tf.den[0][0], float)
     scale = max(np.max(np.abs(den)), 1.0)

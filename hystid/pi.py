@@ -38,7 +38,8 @@ import numpy as np
 from numba import njit
 
 from . import blocks
-from .model import InitialCondition, SandwichResponse, params_vector
+from .model import InitialCondition, SandwichResponse, _finite, params_vector
+from .operating import Envelope, warn_admissibility
 
 __all__ = [
     "PISandwich",
@@ -452,6 +453,12 @@ class PISandwich:
         Sampling rate in Hz.
     name : str
         Model name, used for the python-control systems.
+    u_rest, offset : float
+        Input rest level and sensor offset (see :mod:`hystid.operating`).
+    envelope : Envelope, optional
+        Inputs the model was identified on; simulating outside it warns.
+    units : dict, optional
+        Units of ``u`` and ``y`` (``{"u": "V", "y": "um"}`` by default).
 
     Attributes
     ----------
@@ -468,6 +475,11 @@ class PISandwich:
         structure: PIStructure | None = None,
         fs: float = 30_000.0,
         name: str = "PI sandwich",
+        *,
+        u_rest: float = 0.0,
+        offset: float = 0.0,
+        envelope: Envelope | None = None,
+        units: Mapping[str, str] | None = None,
     ) -> None:
         self.thresholds = _check_thresholds(thresholds)
         self.structure = structure or PIStructure(n_operators=len(self.thresholds))
@@ -481,6 +493,9 @@ class PISandwich:
         self.fs = float(fs)
         self.name = name
         self.theta = params_vector(params, self.structure.names)
+        self.u_rest, self.offset = _finite(u_rest, "u_rest"), _finite(offset, "offset")
+        self.envelope = envelope
+        self.units = dict(units) if units is not None else {"u": "V", "y": "um"}
 
     # ----------------------------------------------------------------- parameters
     @property
@@ -687,17 +702,21 @@ class PISandwich:
         u: np.ndarray | Sequence[float],
         x0: InitialCondition | None = None,
         p0: np.ndarray | Sequence[float] | None = None,
+        *,
+        check: bool = True,
     ) -> SandwichResponse:
         """Simulate the sandwich with the compiled kernel.
 
         Parameters
         ----------
         u : array_like
-            Input samples u(0) .. u(N-1).
+            Input samples u(0) .. u(N-1), in the record's units.
         x0 : InitialCondition, optional
-            Past signal values; at rest by default.
+            Past signal values relative to the rest; at rest by default.
         p0 : array_like, optional
             Play-operator states; see :meth:`operator_state`.
+        check : bool
+            Warn when the input leaves the model's envelope (also in ``response.warnings``).
 
         Returns
         -------
@@ -710,13 +729,17 @@ class PISandwich:
         U, W1, W2, Y = (
             np.concatenate([x0.window(k, P), np.zeros(len(u))]) for k in ("u", "w1", "w2", "y")
         )
-        U[P:] = u
+        U[P:] = u - self.u_rest
         p = self.operator_state(x0, p0)
         s = self.structure
         pi_simulate_into(self.a1, self.b1, s.q1, self.mu, self.thresholds, self.a2, self.b2,
                          s.q2, U, W1, W2, Y, p, P)
         t = np.arange(len(u)) / self.fs
-        return SandwichResponse(t, u, W1[P:], W2[P:], Y[P:], name=self.name)
+        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name)
+        if check and self.envelope is not None:
+            resp.warnings = self.envelope.violations(u)
+            warn_admissibility(resp.warnings, self.name)
+        return resp
 
     def __repr__(self) -> str:
         lin = ", ".join(f"{k}={v:.6g}" for k, v in self.coefficients.items())

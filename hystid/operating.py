@@ -1,0 +1,152 @@
+"""Where a sandwich model sits in the world: rest level, sensor offset, units, input envelope.
+
+The sandwich of eqs. (1), (2), (7) is written about a state of rest at zero. A measured stage
+rests at some input level ``u_rest`` and its sensor reads ``offset`` there (the sensor's zero
+is not the stage's). hystid keeps the paper's equations for the signals relative to that rest
+and places the model in the record's units with two numbers::
+
+    u_model(k) = u(k) - u_rest          (the input the sandwich sees)
+    y(k)       = y_model(k) + offset    (what the sensor reads)
+
+For the Duhem block without the ``f0 sgn`` term this is no restriction: eq. (7) is unchanged
+when ``w1`` is shifted by ``c`` and ``w2`` by ``f1 c``, so a rest at ``u_rest`` is the rest at 0
+of the shifted signals.
+
+An identified model is valid for inputs like the ones it was identified on. The
+:class:`Envelope` records them (range and slew); simulating on an input that leaves it, or on
+which condition (8) ``alpha |dw1(k)| < 2`` fails, issues an :class:`AdmissibilityWarning`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["AdmissibilityWarning", "Envelope", "SLEW_QUANTILE", "warn_admissibility"]
+
+#: The envelope's slew is this quantile of |du|: a slew the input holds for at least 0.1 % of
+#: its samples. Isolated jumps (a step out of rest, a generator wrapping its last sample round)
+#: are not part of what the input does.
+SLEW_QUANTILE = 0.999
+
+
+class AdmissibilityWarning(RuntimeWarning):
+    """A model is used outside what it was identified for (input envelope or condition 8)."""
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """Range and slew of the inputs a model was identified on.
+
+    Parameters
+    ----------
+    u_min, u_max : float
+        Smallest and largest input, in the record's units.
+    slew : float
+        Largest input change per sample that the input holds (the :data:`SLEW_QUANTILE`
+        quantile of ``|u(k) - u(k-1)|``), in input units per sample.
+    """
+
+    u_min: float
+    u_max: float
+    slew: float
+
+    def __post_init__(self) -> None:
+        values = (self.u_min, self.u_max, self.slew)
+        if not all(np.isfinite(v) for v in values) or self.u_max < self.u_min or self.slew < 0:
+            raise ValueError(f"Envelope: expected finite u_min <= u_max and slew >= 0, got "
+                             f"{values}")
+
+    @classmethod
+    def of(cls, u: np.ndarray) -> Envelope:
+        """The envelope of one input signal.
+
+        Parameters
+        ----------
+        u : ndarray
+            Input samples.
+
+        Returns
+        -------
+        Envelope
+        """
+        u = np.asarray(u, dtype=float)
+        du = np.abs(np.diff(u)) if len(u) > 1 else np.zeros(1)
+        return cls(float(np.min(u)), float(np.max(u)), float(np.quantile(du, SLEW_QUANTILE)))
+
+    @property
+    def amplitude(self) -> float:
+        """Half the input range."""
+        return 0.5 * (self.u_max - self.u_min)
+
+    def violations(self, u: np.ndarray, tolerance: float = 0.1) -> list[str]:
+        """How an input leaves this envelope (empty when it stays inside).
+
+        Parameters
+        ----------
+        u : ndarray
+            Input samples.
+        tolerance : float
+            Relative allowance: the range may grow by ``tolerance`` of the span at each end and
+            the slew by ``tolerance`` of the envelope's slew.
+
+        Returns
+        -------
+        list of str
+            One sentence per violation.
+        """
+        other = Envelope.of(u)
+        span = max(self.u_max - self.u_min, 1e-300)
+        out = []
+        low, high = self.u_min - tolerance * span, self.u_max + tolerance * span
+        if other.u_min < low or other.u_max > high:
+            out.append(f"the input spans {other.u_min:.4g} .. {other.u_max:.4g}, outside the "
+                       f"identified range {self.u_min:.4g} .. {self.u_max:.4g}")
+        if other.slew > (1.0 + tolerance) * self.slew:
+            out.append(f"the input slews {other.slew:.4g} per sample, faster than the identified "
+                       f"{self.slew:.4g}")
+        return out
+
+    def to_dict(self) -> dict[str, float]:
+        """The envelope as a plain dictionary (``Envelope(**d)`` rebuilds it)."""
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Envelope:
+        """Rebuild an envelope from :meth:`to_dict`'s output.
+
+        Parameters
+        ----------
+        data : mapping
+            Keys ``u_min``, ``u_max``, ``slew``.
+
+        Returns
+        -------
+        Envelope
+        """
+        try:
+            return cls(float(data["u_min"]), float(data["u_max"]), float(data["slew"]))
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"envelope: expected numbers u_min, u_max, slew, got {data!r}") \
+                from err
+
+
+def warn_admissibility(messages: list[str], name: str, stacklevel: int = 3) -> None:
+    """Issue one :class:`AdmissibilityWarning` carrying every message (nothing when empty).
+
+    Parameters
+    ----------
+    messages : list of str
+        What is wrong, one sentence each.
+    name : str
+        The model's name.
+    stacklevel : int
+        Passed to :func:`warnings.warn`.
+    """
+    if messages:
+        warnings.warn(f"model {name!r}: " + "; ".join(messages), AdmissibilityWarning,
+                      stacklevel=stacklevel)
