@@ -443,6 +443,30 @@ class DuhemSandwich:
             warn_admissibility(resp.warnings, self.name)
         return resp
 
+    def rest_state(self, u0: float) -> InitialCondition:
+        """The past of a stage resting at input ``u0`` (record units).
+
+        L1 and L2 sit at their steady state; the Duhem state sits on ``w2 = f(w1)``, midway
+        between the branches, since the direction the stage came from is not known.
+
+        Parameters
+        ----------
+        u0 : float
+            Input level held before the record starts.
+
+        Returns
+        -------
+        InitialCondition
+            Relative to the model's rest (see :meth:`simulate`).
+        """
+        P = self.structure.history + 1
+        v = float(u0) - self.u_rest
+        w1 = v * (1.0 + np.sum(self.b1)) / (1.0 + np.sum(self.a1))
+        p = self.params
+        w2 = p.get("f0", 0.0) * np.sign(w1) + p["f1"] * w1
+        y = w2 * (1.0 + np.sum(self.b2)) / (1.0 + np.sum(self.a2))
+        return InitialCondition(*(np.full(P, x) for x in (v, w1, w2, y)))
+
     def admissibility(
         self, u: np.ndarray, response: SandwichResponse | None = None
     ) -> list[str]:

@@ -1,0 +1,335 @@
+"""What a hysteresis model must beat: a static line, a linear dynamic model, the repeat floor.
+
+A sandwich fitted to a measured stage means something only next to simple models fitted to
+the same record and validated on the same held-out records:
+
+* :class:`StaticLine` -- ``y = k u + c``, least squares;
+* :class:`LinearModel` -- ``y(k) = z^-q B(z)/A(z) (u(k) - u_rest) + c``, the sandwich's linear
+  part (orders ``n1a + n2a``, ``n1b + n2b``, delay ``q1 + q2``) with its own offset, fitted by
+  output error (an ARX start polished with :func:`scipy.optimize.least_squares`);
+* :func:`repeat_floor` -- with records of the same input, the part of the output that does
+  not repeat: no deterministic model can come closer than that.
+
+Every model starts at rest at the first input of the record it is run on
+(:func:`rest_state` for the sandwiches). :func:`compare` puts the three side by side.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import lfilter, lfiltic
+
+from .records import Record
+
+__all__ = ["BaselineComparison", "LinearModel", "StaticLine", "compare", "repeat_floor",
+           "simulate_from_rest"]
+
+
+@dataclass
+class StaticLine:
+    """``y = gain u + offset``, fitted by least squares.
+
+    Attributes
+    ----------
+    gain, offset : float
+        Slope and intercept.
+    """
+
+    gain: float
+    offset: float
+
+    @classmethod
+    def fit(cls, record: Record) -> StaticLine:
+        """Least-squares line through the record's ``(u, y)`` points.
+
+        Parameters
+        ----------
+        record : Record
+            Identification record.
+
+        Returns
+        -------
+        StaticLine
+        """
+        A = np.column_stack([record.u, np.ones(record.n)])
+        (k, c), *_ = np.linalg.lstsq(A, record.y, rcond=None)
+        return cls(float(k), float(c))
+
+    def predict(self, u: np.ndarray) -> np.ndarray:
+        """Output for input ``u``.
+
+        Parameters
+        ----------
+        u : ndarray
+            Input samples.
+
+        Returns
+        -------
+        ndarray
+        """
+        return self.gain * np.asarray(u, float) + self.offset
+
+
+@dataclass
+class LinearModel:
+    """``A(z) x(k) = B(z) v(k - q)``, ``v = u - u_rest``, ``y = x + offset``.
+
+    Attributes
+    ----------
+    a : ndarray
+        Denominator ``[1, a1, .., ana]``.
+    b : ndarray
+        Numerator ``[b0, .., bnb]``.
+    q : int
+        Delay in samples.
+    u_rest, offset : float
+        Input rest level and output offset.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    q: int
+    u_rest: float
+    offset: float
+
+    @classmethod
+    def fit(cls, record: Record, na: int, nb: int, q: int, max_nfev: int = 200) -> LinearModel:
+        """Output-error fit from an ARX start.
+
+        Parameters
+        ----------
+        record : Record
+            Identification record.
+        na, nb : int
+            Denominator and numerator orders.
+        q : int
+            Delay in samples.
+        max_nfev : int
+            Evaluations of the output-error polish.
+
+        Returns
+        -------
+        LinearModel
+        """
+        u0 = float(record.u[0])
+        v, y = record.u - u0, record.y
+        scale_v = max(float(np.std(v)), 1e-300)
+        scale_y = max(float(np.std(y)), 1e-300)
+        vn, yn = v / scale_v, (y - y[0]) / scale_y
+        lag = max(na, q + nb, 1)
+        rows = np.arange(lag, len(yn))
+        phi = ([-yn[rows - i] for i in range(1, na + 1)]
+               + [vn[rows - q - j] for j in range(nb + 1)] + [np.ones(len(rows))])
+        coef = np.linalg.lstsq(np.column_stack(phi), yn[rows], rcond=None)[0]
+        a = _stabilise(np.r_[1.0, coef[:na]])
+        b = coef[na:na + nb + 1]
+        c = coef[-1] / max(np.sum(a), 1e-6)  # the ARX constant as an output offset
+
+        def simulate(p):
+            return _filter(np.r_[1.0, p[:na]], p[na:na + nb + 1], q, vn) + p[-1]
+
+        def residual(p):
+            r = simulate(p) - yn
+            return r if np.all(np.isfinite(r)) else np.full_like(yn, 1e6)
+
+        p0 = np.r_[a[1:], b, c]
+        cost0 = np.sum(residual(p0) ** 2)
+        sol = least_squares(residual, p0, max_nfev=max_nfev, x_scale="jac")
+        p = sol.x if sol.cost * 2 <= cost0 and _is_stable(np.r_[1.0, sol.x[:na]]) else p0
+        return cls(np.r_[1.0, p[:na]], p[na:na + nb + 1] * scale_y / scale_v, q, u0,
+                   float(p[-1] * scale_y + y[0]))
+
+    def predict(self, u: np.ndarray) -> np.ndarray:
+        """Output for input ``u``, from rest at ``u[0]``.
+
+        Parameters
+        ----------
+        u : ndarray
+            Input samples.
+
+        Returns
+        -------
+        ndarray
+        """
+        u = np.asarray(u, float)
+        steady = (u[0] - self.u_rest) * np.sum(self.b) / np.sum(self.a)
+        return _filter(self.a, self.b, self.q, u - u[0]) + steady + self.offset
+
+
+def _filter(a: np.ndarray, b: np.ndarray, q: int, v: np.ndarray) -> np.ndarray:
+    num = np.r_[np.zeros(q), b]
+    return lfilter(num, a, v, zi=lfiltic(num, a, []))[0] if len(v) else v
+
+
+def _is_stable(a: np.ndarray) -> bool:
+    return len(a) < 2 or bool(np.max(np.abs(np.roots(a))) < 1.0)
+
+
+def _stabilise(a: np.ndarray) -> np.ndarray:
+    if _is_stable(a):
+        return a
+    roots = np.roots(a)
+    roots = np.where(np.abs(roots) >= 1.0, 0.99 * roots / np.abs(roots) ** 2, roots)
+    return np.real(np.poly(roots))
+
+
+def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.ndarray:
+    """A sandwich's output on ``u``, started at rest at ``u[0]`` (see :meth:`rest_state`).
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+    u : ndarray
+        Input samples.
+    check : bool
+        Passed to the model's ``simulate`` (warn outside the envelope or condition 8).
+
+    Returns
+    -------
+    ndarray
+        The simulated output.
+    """
+    x0 = model.rest_state(float(u[0])) if hasattr(model, "rest_state") else None
+    return model.simulate(u, x0, check=check).y
+
+
+def repeat_floor(records: Sequence[Record]) -> float:
+    """RMS of the part of the output that does not repeat between records of the same input.
+
+    With ``y_i = f(u) + n_i`` and independent ``n_i`` of equal power, the RMS of ``n`` is the
+    smallest RMS error any deterministic model ``f`` can reach. It is estimated from the
+    pairwise differences of the records, each with its mean removed (a sensor's zero may move
+    between repeats): ``mean_ij RMS(y_i - y_j) / sqrt(2)``.
+
+    Parameters
+    ----------
+    records : sequence of Record
+        At least two records of one input, equally long.
+
+    Returns
+    -------
+    float
+        The repeat floor, in the output's units.
+
+    Raises
+    ------
+    ValueError
+        With fewer than two records, different lengths, or inputs that differ.
+    """
+    if len(records) < 2:
+        raise ValueError("repeat_floor: expected at least two records of the same input")
+    n = records[0].n
+    for r in records[1:]:
+        if r.n != n:
+            raise ValueError(f"repeat_floor: record {r.name!r} has {r.n} samples, expected {n} "
+                             f"as {records[0].name!r}")
+        span = np.ptp(records[0].u) or 1.0
+        if np.sqrt(np.mean((r.u - records[0].u) ** 2)) > 1e-3 * span:
+            raise ValueError(f"repeat_floor: record {r.name!r} has another input than "
+                             f"{records[0].name!r} (expected repeats of one input)")
+    ys = [r.y - np.mean(r.y) for r in records]
+    pairs = [np.sqrt(np.mean((ys[i] - ys[j]) ** 2)) / np.sqrt(2.0)
+             for i in range(len(ys)) for j in range(i + 1, len(ys))]
+    return float(np.mean(pairs))
+
+
+@dataclass
+class BaselineComparison:
+    """Held-out RMS of a model and of the baselines, record by record.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per record: ``record``, ``model``, ``static_line``, ``linear`` (RMS in output
+        units) and ``beats`` (the model beats both baselines on it).
+    static_line : StaticLine
+    linear : LinearModel
+    floor : float or None
+        The repeat floor when repeats were given.
+    """
+
+    rows: list[dict[str, Any]]
+    static_line: StaticLine
+    linear: LinearModel
+    floor: float | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def beats_baselines(self) -> bool:
+        """True when the model beats both baselines on every record."""
+        return all(r["beats"] for r in self.rows)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain, JSON-ready form."""
+        rows = [{k: (v if not isinstance(v, float) or np.isfinite(v) else None)
+                 for k, v in r.items()} for r in self.rows]
+        return {"rows": rows, "beats_baselines": self.beats_baselines,
+                "repeat_floor": self.floor, "notes": list(self.notes),
+                "static_line": {"gain": self.static_line.gain, "offset": self.static_line.offset},
+                "linear": {"a": self.linear.a.tolist(), "b": self.linear.b.tolist(),
+                           "q": self.linear.q, "offset": self.linear.offset}}
+
+    def summary(self, unit: str = "") -> str:
+        """A short table and a sentence on whether the model earns its keep."""
+        head = f"{'record':<28} {'model':>10} {'line':>10} {'linear':>10}"
+        lines = [f"held-out RMS [{unit}]" if unit else "held-out RMS", head]
+        for r in self.rows:
+            lines.append(f"{r['record'][:28]:<28} {r['model']:>10.4g} {r['static_line']:>10.4g} "
+                         f"{r['linear']:>10.4g}" + ("" if r["beats"] else "  <- not better"))
+        if self.floor is not None:
+            lines.append(f"repeat floor (no deterministic model does better): {self.floor:.4g}")
+        lines += self.notes
+        return "\n".join(lines)
+
+
+def compare(model: Any, train: Record, records: Sequence[Record],
+            orders: tuple[int, int, int] | None = None,
+            repeats: Sequence[Record] | None = None) -> BaselineComparison:
+    """Fit the baselines on ``train`` and validate them and ``model`` on ``records``.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified model.
+    train : Record
+        The record the model was identified on.
+    records : sequence of Record
+        Held-out records.
+    orders : tuple of int, optional
+        ``(na, nb, q)`` of the linear baseline; by default the sandwich's linear part
+        (``n1a + n2a``, ``n1b + n2b``, ``q1 + q2``).
+    repeats : sequence of Record, optional
+        Records of one input, for :func:`repeat_floor`.
+
+    Returns
+    -------
+    BaselineComparison
+    """
+    if orders is None:
+        s = model.structure
+        orders = (s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
+    line = StaticLine.fit(train)
+    linear = LinearModel.fit(train, *orders)
+    rows, notes = [], []
+    for rec in records:
+        with np.errstate(over="ignore", invalid="ignore"):
+            yhat = simulate_from_rest(model, rec.u, check=False)
+        rms = float(np.sqrt(np.mean((yhat - rec.y) ** 2)))
+        rms = rms if np.isfinite(rms) else float("inf")
+        r_line = float(np.sqrt(np.mean((line.predict(rec.u) - rec.y) ** 2)))
+        r_lin = float(np.sqrt(np.mean((linear.predict(rec.u) - rec.y) ** 2)))
+        beats = rms < min(r_line, r_lin)
+        rows.append({"record": rec.name, "model": rms, "static_line": r_line, "linear": r_lin,
+                     "beats": bool(beats)})
+        if not beats:
+            notes.append(f"on {rec.name!r} the hysteresis model ({rms:.4g}) does not beat "
+                         f"the {'static line' if r_line <= r_lin else 'linear model'} "
+                         f"({min(r_line, r_lin):.4g})")
+    floor = repeat_floor(repeats) if repeats else None
+    return BaselineComparison(rows, line, linear, floor, notes)
