@@ -299,8 +299,11 @@ def compare(model: Any, train: Record, records: Sequence[Record],
         The identified model.
     train : Record
         The record the model was identified on.
-    records : sequence of Record
-        Held-out records.
+    records : sequence of Record or (Record, int)
+        Held-out records; a pair ``(record, k)`` scores only samples ``k:`` of a record that is
+        simulated whole (a held-out tail of the identification record, say). A record that does
+        not start at rest is scored after the burn-in of
+        :func:`hystid.identify.prepare.burn_in`, for every model alike.
     orders : tuple of int, optional
         ``(na, nb, q)`` of the linear baseline; by default the sandwich's linear part
         (``n1a + n2a``, ``n1b + n2b``, ``q1 + q2``).
@@ -317,18 +320,25 @@ def compare(model: Any, train: Record, records: Sequence[Record],
     line = StaticLine.fit(train)
     linear = LinearModel.fit(train, *orders)
     rows, notes = [], []
-    for rec in records:
+    from .identify.prepare import burn_in, rest_level
+
+    for item in records:
+        rec, k = item if isinstance(item, tuple) else (item, None)
+        if k is None:
+            k = burn_in(rec.u, rest_level(rec.u)[1])
         with np.errstate(over="ignore", invalid="ignore"):
             yhat = simulate_from_rest(model, rec.u, check=False)
-        rms = float(np.sqrt(np.mean((yhat - rec.y) ** 2)))
+        y = rec.y[k:]
+        rms = float(np.sqrt(np.mean((yhat[k:] - y) ** 2)))
         rms = rms if np.isfinite(rms) else float("inf")
-        r_line = float(np.sqrt(np.mean((line.predict(rec.u) - rec.y) ** 2)))
-        r_lin = float(np.sqrt(np.mean((linear.predict(rec.u) - rec.y) ** 2)))
+        r_line = float(np.sqrt(np.mean((line.predict(rec.u)[k:] - y) ** 2)))
+        r_lin = float(np.sqrt(np.mean((linear.predict(rec.u)[k:] - y) ** 2)))
         beats = rms < min(r_line, r_lin)
-        rows.append({"record": rec.name, "model": rms, "static_line": r_line, "linear": r_lin,
+        label = rec.name if not k else f"{rec.name} [{k}:]"
+        rows.append({"record": label, "model": rms, "static_line": r_line, "linear": r_lin,
                      "beats": bool(beats)})
         if not beats:
-            notes.append(f"on {rec.name!r} the hysteresis model ({rms:.4g}) does not beat "
+            notes.append(f"on {label!r} the hysteresis model ({rms:.4g}) does not beat "
                          f"the {'static line' if r_line <= r_lin else 'linear model'} "
                          f"({min(r_line, r_lin):.4g})")
     floor = repeat_floor(repeats) if repeats else None
