@@ -1096,13 +1096,15 @@ def _read_mat(file: str, roles: dict[str, str | int]) -> _Arrays:
     names = _names(roles, file)
     errors = (*_archive_errors(), NotImplementedError, TypeError, MatReadError)
     try:
-        listing = whosmat(file)
+        listing = _mat_v5_listing(file)
+        if listing is None:  # MATLAB v4 files are never compressed: scipy lists them cheaply
+            listing = [(name, shape) for name, shape, _ in whosmat(file)]
     except errors as err:
         hint = " (MATLAB v7.3 files are HDF5: rename to .h5)" if "7.3" in str(err) else ""
         raise RecordError(f"not a readable .mat file ({err}){hint}", file=file) from err
-    found = {name for name, _, _ in listing}
+    found = {name for name, _ in listing}
     wanted = sorted(found & ({*names.values(), "fs", "name", "units"}))
-    declared = sum(8 * int(np.prod(shape, dtype=object)) for name, shape, _ in listing
+    declared = sum(8 * int(np.prod(shape, dtype=object)) for name, shape in listing
                    if name in wanted)
     _check_declared(declared, file, f"variables {wanted}")
     try:
@@ -1114,6 +1116,61 @@ def _read_mat(file: str, roles: dict[str, str | int]) -> _Arrays:
     return _Arrays(file, "variable", arrays, labels, fs=content.get("fs"),
                    name=_text(content.get("name")), units=_units(content.get("units")),
                    default_name=Path(file).stem)
+
+
+def _mat_v5_listing(file: str) -> list[tuple[str, tuple[int, ...]]] | None:
+    """Names and declared shapes of a MATLAB v5 file's variables, without decompressing them.
+
+    Only the first bytes of each compressed variable are inflated (its tag, flags, dimensions
+    and name). Returns ``None`` for a file that is not v5 (v4); raises ``ValueError`` on a
+    malformed one.
+    """
+    import struct
+    import zlib
+
+    with open(file, "rb") as src:
+        head = src.read(128)
+        if len(head) < 128 or head[126:128] not in (b"IM", b"MI") or head[:4] == b"\0\0\0\0":
+            return None
+        order = "<" if head[126:128] == b"IM" else ">"
+        size = os.path.getsize(file)
+        out = []
+        while src.tell() + 8 <= size:
+            kind, nbytes = struct.unpack(order + "II", src.read(8))
+            if kind >> 16:  # a small data element at the top level: nothing to list
+                continue
+            payload = src.read(nbytes)
+            if len(payload) < nbytes:
+                raise ValueError(f"variable {len(out) + 1} is truncated ({len(payload)} of "
+                                 f"{nbytes} bytes)")
+            if kind == 15:  # miCOMPRESSED (not padded): inflate only the header
+                payload = zlib.decompressobj().decompress(payload, 512)
+                kind, nbytes = struct.unpack(order + "II", payload[:8])
+                payload = payload[8:]
+            else:
+                src.seek((8 - src.tell() % 8) % 8, os.SEEK_CUR)
+            if kind == 14:  # miMATRIX
+                out.append(_mat_matrix_header(payload, order))
+        return out
+
+
+def _mat_matrix_header(payload: bytes, order: str) -> tuple[str, tuple[int, ...]]:
+    """Name and dimensions from the first sub-elements of a MATLAB v5 miMATRIX."""
+    import struct
+
+    def element(pos: int) -> tuple[bytes, int]:
+        kind, nbytes = struct.unpack(order + "II", payload[pos:pos + 8])
+        if kind >> 16:  # small data element: the data sit in the tag's second word
+            small = (kind >> 16) if order == "<" else (kind & 0xFFFF)
+            return payload[pos + 4:pos + 4 + small], pos + 8
+        end = pos + 8 + nbytes
+        return payload[pos + 8:end], end + (8 - end % 8) % 8
+
+    _, pos = element(0)  # array flags
+    dims, pos = element(pos)
+    name, _ = element(pos)
+    shape = struct.unpack(f"{order}{len(dims) // 4}i", dims[: len(dims) // 4 * 4])
+    return name.decode("latin-1"), tuple(max(d, 0) for d in shape)
 
 
 def _h5_node(handle: Any, group: str | None, file: str) -> Any:
