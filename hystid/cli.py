@@ -453,6 +453,12 @@ def main(argv: list[str] | None = None) -> int:
     except CommandError as err:
         print(f"hystid {args.command}: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except OSError as err:  # a full disk, a folder removed meanwhile: no file was half-written
+        where = f" ({err.filename})" if err.filename else ""
+        print(f"hystid {args.command}: error: {err.strerror or err}{where}; no file was "
+              "half-written and files that were already there are left as they were",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         return 130
 
