@@ -21,6 +21,21 @@ noisy, ``fs`` is taken from the whole span, ``(n - 1) / (t[-1] - t[0])``, rather
 step. A sampling rate stated beside ``t`` (the ``fs=`` argument, or the comment line written by
 :meth:`Record.save`) must agree with it within :data:`FS_RTOL`; the stated value is then used.
 The time origin is not kept: :attr:`Record.t` always starts at 0.
+
+Hostile files
+-------------
+A record file is read from its own bytes only, and never decodes to much more than it holds:
+
+* HDF5 external links, datasets stored in external files and virtual datasets are refused;
+* the declared size of every array (npz member, MATLAB variable -- read from the variable
+  headers without inflating the data -- or HDF5 dataset) may exceed the file's size at most
+  :data:`MAX_EXPANSION` times, or :data:`EXPANSION_FLOOR` bytes, whichever is larger;
+* an npz member whose header declares more samples than it stores, and an uncompressed HDF5
+  dataset whose storage is smaller than its shape (unwritten or truncated), are refused;
+* truncated or corrupt archives give a :class:`RecordError` naming the file.
+
+Two roles may not read the same column (``columns={"u": "y"}`` would identify ``y`` from
+itself). :meth:`Record.save` writes atomically (see :mod:`hystid.safeio`).
 """
 
 from __future__ import annotations
