@@ -453,3 +453,20 @@ def test_python_m_hystid_reports_without_traceback(tmp_path):
                           cwd=Path(__file__).resolve().parents[1], timeout=120)
     assert proc.returncode == 2 and "--force" in proc.stderr
     assert "Traceback" not in proc.stderr and out.read_text() == "mine"
+
+
+def test_simulate_replays_a_saved_pi_sandwich(simulated, tmp_path, capsys):
+    from hystid.pi import PISandwich, PIStructure, pi_thresholds
+
+    rec_path, _ = simulated
+    rec = load_record(rec_path)
+    structure = PIStructure(n_operators=5)
+    params = dict.fromkeys(structure.names, 0.0)
+    params.update(a11=-0.5, a21=-0.9, a22=0.2, mu0=0.8, mu1=0.1, mu2=0.05)
+    model = PISandwich(params, pi_thresholds(rec.u, 5), structure, fs=rec.fs, offset=0.25)
+    model.save(tmp_path / "pi.json")
+    out = tmp_path / "pi.h5"
+    code, _, err = run(["simulate", "--model", tmp_path / "pi.json", "--input", rec_path,
+                        "--quiet", "--out", out], capsys)
+    assert code == 0, err
+    assert np.array_equal(load_record(out).y, model.simulate(rec.u).y)
