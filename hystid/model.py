@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -507,6 +509,33 @@ class DuhemSandwich:
                        f"{np.max(ratio):.3g}, expected < 2): the Duhem recursion amplifies "
                        "there")
         return out
+
+    def save(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        provenance: Mapping[str, Any] | None = None,
+        force: bool = False,
+    ) -> Path:
+        """Keep the model in a versioned JSON file (see :func:`hystid.modelfile.save_model`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file; an existing one is replaced only with ``force``.
+        provenance : mapping, optional
+            Method, record hash and settings (:func:`hystid.modelfile.make_provenance`).
+        force : bool
+            Replace an existing file.
+
+        Returns
+        -------
+        pathlib.Path
+            The written file; :func:`hystid.load_model` reads it back.
+        """
+        from .modelfile import save_model
+
+        return save_model(self, path, provenance=provenance, force=force)
 
     def __repr__(self) -> str:
         values = ", ".join(f"{k}={v:.6g}" for k, v in self.params.items())
