@@ -109,8 +109,38 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
     return "\n".join(out)
 
 
+def _crop_arg(args):
+    text = getattr(args, "crop", None)
+    if text is None:
+        return None
+    from .options import OptionError, parse_crop
+
+    try:
+        return parse_crop(text)
+    except OptionError as err:
+        raise CommandError(str(err)) from err
+
+
+def _cropped(rec, span):
+    if span is None:
+        return rec
+    from .options import OptionError, crop
+
+    try:
+        return crop(rec, span)
+    except OptionError as err:
+        raise CommandError(str(err)) from err
+
+
+def _holdout_fraction(text: str) -> float:
+    value = _non_negative_float(text)
+    if not value < 1:
+        raise argparse.ArgumentTypeError(f"expected a share in [0, 1), got {text!r}")
+    return value
+
+
 def _identify_record(rec, args, progress: Progress):
-    """Run the chosen model/method on a record; returns (result, simulate function)."""
+    """Run the chosen model/method on a record; returns the IdentificationResult."""
     from .identify import identify
 
     model_kind = getattr(args, "model", "duhem")
@@ -120,26 +150,87 @@ def _identify_record(rec, args, progress: Progress):
         method = "recursive" if args.method in (None, "online", "eria") else args.method
         return identify_pi(rec, method=method)
     method = args.method or "batch"
-    settings = {"progress": progress} if method != "batch" else {}
-    return identify(rec, method=method, **settings)
+    settings: dict = {"progress": progress} if method != "batch" else {}
+    if method == "batch":
+        settings["offset"] = getattr(args, "offset", "estimate") == "estimate"
+        if getattr(args, "skip", None) is not None:
+            settings["skip"] = int(round(args.skip * rec.fs))
+    return identify(rec, method=method, structure=_structure_arg(args), **settings)
 
 
-def _report(result, rec, val, args) -> dict:
+def _structure_arg(args):
+    text = getattr(args, "structure", None)
+    if text is None or text == "auto":
+        return text
+    from .options import OptionError, parse_structure
+
+    try:
+        return parse_structure(text)
+    except OptionError as err:
+        raise CommandError(str(err)) from err
+
+
+def _split_for_validation(rec, val, args):
+    """The identification record, the validation target and the first sample to score.
+
+    Without ``--val`` the end of the record is held out (``--holdout``) and the whole record is
+    simulated, so the held-out part starts from the model's own state.
+    """
+    if val is not None:
+        return rec, val, None
+    share = getattr(args, "holdout", 0.0) or 0.0
+    if share == 0.0:
+        return rec, rec, 0
+    k = int(round((1.0 - share) * rec.n))
+    if k < 2 or rec.n - k < 2:
+        raise CommandError(f"--holdout {share:g}: record {rec.name!r} is too short to hold out "
+                           "a part of it")
+    return rec[:k], rec, k
+
+
+def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dict, np.ndarray,
+                                                                              object]:
+    from .baselines import compare, simulate_from_rest
     from .metrics import validate
 
     target = val if val is not None else rec
-    yhat = result.model.simulate(target.u).y
-    validation = validate(target.y, yhat, target.fs)
+    k = scored_from
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yhat = simulate_from_rest(result.model, target.u, check=False)
+    problems = result.model.admissibility(target.u) if hasattr(result.model, "admissibility") \
+        else (result.model.envelope.violations(target.u) if result.model.envelope else [])
+    baselines = compare(result.model, rec, [(target, k) if k is not None else target],
+                        repeats=repeats)
+    k = k or 0
+    finite = bool(np.all(np.isfinite(yhat[k:])))
+    validation = validate(target.y[k:], yhat[k:] if finite else np.zeros(target.n - k),
+                          target.fs)
+    warnings_ = list(result.info.get("warnings", []))
+    warnings_ += [f"on the validation input: {p}" for p in problems]
+    warnings_ += baselines.notes
+    if not finite:
+        warnings_.append("the model diverges on the validation input; its figures are not "
+                         "reported")
     return {
         "model": getattr(args, "model", "duhem"),
         "method": result.method,
         "params": result.params,
-        "validation": validation.to_dict(),
-        "validated_on": "validation record" if val is not None else "identification record",
+        "u_rest": getattr(result.model, "u_rest", 0.0),
+        "offset": getattr(result.model, "offset", 0.0),
+        "units": dict(rec.units),
+        "structure": getattr(result.model.structure, "__dict__", {}),
+        "validation": validation.to_dict() if finite else None,
+        "validated_on": ("validation record" if getattr(args, "val", None) else
+                         f"held-out end of the record (samples {k}..{target.n - 1})" if k
+                         else "identification record"),
+        "baselines": baselines.to_dict(),
+        "beats_baselines": baselines.beats_baselines,
+        "warnings": warnings_,
         "converged_at": result.converged_at,
-        "settings": {k: v for k, v in result.settings.items() if _jsonable(v)},
+        "settings": {k_: v for k_, v in result.settings.items() if _jsonable(v)},
         "record": {"name": rec.name, "samples": rec.n, "fs": rec.fs},
-        "info": {k: v for k, v in result.info.items() if _jsonable(v)},
+        "info": {k_: v for k_, v in result.info.items() if _jsonable(v)},
     }, yhat, target
 
 
@@ -249,17 +340,27 @@ def cmd_identify(args: argparse.Namespace) -> int:
     inputs = (args.record, args.val)
     _check_file(args.history, "--history", args, inputs)
     _check_dir(args.out, args, inputs)
-    rec = _load(args.record, args.fs, args.columns)
-    val = _load(args.val, args.fs, args.columns) if args.val else None
-    if val is not None and not np.isclose(val.fs, rec.fs, rtol=1e-9):
-        raise CommandError(f"--val {args.val}: fs {val.fs:g} Hz differs from {rec.fs:g} Hz "
-                           f"of {args.record}")
-    progress.say(f"identifying {args.record}: {rec.n} samples at {rec.fs:g} Hz")
+    span = _crop_arg(args)
+    rec = _cropped(_load(args.record, args.fs, args.columns), span)
+    val = _cropped(_load(args.val, args.fs, args.columns), span) if args.val else None
+    repeats = [_cropped(_load(p, args.fs, args.columns), span) for p in args.repeat or []]
+    for other, label in [(val, f"--val {args.val}")] + [
+            (r, f"--repeat {p}") for r, p in zip(repeats, args.repeat or [], strict=True)]:
+        if other is not None and not np.isclose(other.fs, rec.fs, rtol=1e-9):
+            raise CommandError(f"{label}: fs {other.fs:g} Hz differs from {rec.fs:g} Hz "
+                               f"of {args.record}")
+    train, target, scored_from = _split_for_validation(rec, val, args)
+    progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
     try:
-        result = _identify_record(rec, args, progress)
-        report, yhat, target = _report(result, rec, val, args)
+        result = _identify_record(train, args, progress)
+        floor_set = [target, *repeats] if repeats else None
+        report, yhat, target = _report(result, train, target if val is not None or scored_from
+                                       is not None else None, args, scored_from, floor_set)
     except ValueError as err:
         raise CommandError(str(err)) from err
+    for w in report["warnings"]:
+        if not args.json:
+            print(f"hystid identify: warning: {w}", file=sys.stderr)
     if args.history:
         _write_history(args.history, result)
     if args.out:
@@ -271,10 +372,20 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(dumps_strict(report))
     else:
         rows = [[k, f"{v:.6g}"] for k, v in report["params"].items()]
+        rows += [[k, f"{report[k]:.6g}"] for k in ("u_rest", "offset")]
         print(_table(rows, ["parameter", "estimate"]))
         v = report["validation"]
-        print(f"\nvalidation ({report['validated_on']}): error {v['err_min']:.4g} .. "
-              f"{v['err_max']:.4g}, RMS {v['rms']:.4g}, fit {v['fit_percent']:.2f} %")
+        if v is not None:
+            print(f"\nvalidation ({report['validated_on']}): error {v['err_min']:.4g} .. "
+                  f"{v['err_max']:.4g}, RMS {v['rms']:.4g}, fit {v['fit_percent']:.2f} %")
+        b = report["baselines"]
+        for row in b["rows"]:
+            model_rms = "diverged" if row["model"] is None else f"{row['model']:.4g}"
+            print(f"held-out RMS [{rec.units.get('y', '')}]: model {model_rms}, static line "
+                  f"{row['static_line']:.4g}, linear model {row['linear']:.4g}"
+                  + ("" if row["beats"] else "  -> the hysteresis model does NOT beat them"))
+        if b["repeat_floor"] is not None:
+            print(f"repeat floor (no deterministic model does better): {b['repeat_floor']:.4g}")
         if report["converged_at"] is not None:
             print(f"converged at sample {report['converged_at']}")
     return 0
@@ -427,6 +538,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", choices=("duhem", "pi"), default="duhem", help="hysteresis block")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch for duhem, recursive for pi)")
+    p.add_argument("--structure", default=None, metavar="auto|n1a=1,n2a=2,...",
+                   help="model structure: keys n1a, n1b, n2a, n2b, q1, q2, f0 (the paper's "
+                   "experimental one by default), or 'auto' to choose on held-out error")
+    p.add_argument("--crop", default=None, metavar="START:STOP",
+                   help="keep only this time span of every record, in seconds")
+    p.add_argument("--offset", choices=("estimate", "none"), default="estimate",
+                   help="estimate the sensor offset (default) or take the output as zero at rest")
+    p.add_argument("--skip", type=_non_negative_float, default=None, metavar="S",
+                   help="seconds at the start simulated but left out of the fit (default: none "
+                   "for a record that starts at rest, else until the input has swept its range)")
+    p.add_argument("--holdout", type=_holdout_fraction, default=0.4, metavar="F",
+                   help="without --val, the share of the record held out at its end for "
+                   "validation (default 0.4; 0 validates on the record itself)")
+    p.add_argument("--repeat", nargs="+", default=None, metavar="REC",
+                   help="records of the same input as the validation record: their "
+                   "repeat-to-repeat RMS is the floor no deterministic model can beat")
     p.add_argument("--history", help="write the parameter history (CSV: k, one column a parameter)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--out", help="folder for report.json, model.json and figures")
