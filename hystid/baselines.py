@@ -200,12 +200,13 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
 
 
 def repeat_floor(records: Sequence[Record]) -> float:
-    """RMS of the part of the output that does not repeat between records of the same input.
+    """Repeat-to-repeat RMS: how far records of the same input differ from each other.
 
-    With ``y_i = f(u) + n_i`` and independent ``n_i`` of equal power, the RMS of ``n`` is the
-    smallest RMS error any deterministic model ``f`` can reach. It is estimated from the
-    pairwise differences of the records, each with its mean removed (a sensor's zero may move
-    between repeats): ``mean_ij RMS(y_i - y_j) / sqrt(2)``.
+    ``mean_ij RMS(y_i - y_j)`` over pairs, each record with its mean removed (a sensor's zero
+    may move between repeats). A model identified on one repeat and validated on another
+    carries the first one's variation as well: this is its floor. (With ``y_i = f(u) + n_i``
+    and independent ``n_i`` of equal power, a model of ``f`` itself could reach ``1/sqrt(2)``
+    of it, if it were known without the training record's own variation.)
 
     Parameters
     ----------
@@ -215,7 +216,7 @@ def repeat_floor(records: Sequence[Record]) -> float:
     Returns
     -------
     float
-        The repeat floor, in the output's units.
+        The repeat-to-repeat RMS, in the output's units.
 
     Raises
     ------
@@ -234,7 +235,7 @@ def repeat_floor(records: Sequence[Record]) -> float:
             raise ValueError(f"repeat_floor: record {r.name!r} has another input than "
                              f"{records[0].name!r} (expected repeats of one input)")
     ys = [r.y - np.mean(r.y) for r in records]
-    pairs = [np.sqrt(np.mean((ys[i] - ys[j]) ** 2)) / np.sqrt(2.0)
+    pairs = [np.sqrt(np.mean((ys[i] - ys[j]) ** 2))
              for i in range(len(ys)) for j in range(i + 1, len(ys))]
     return float(np.mean(pairs))
 

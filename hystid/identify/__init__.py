@@ -115,7 +115,7 @@ def _run_recursive(record: Record, method: str, structure: Structure | None,
                       record.name)
     result = estimator(structure, record.fs, **settings).fit(relative, progress=progress)
     model = result.model
-    model.u_rest, model.offset = prep.u_rest, prep.y_ref + model.offset
+    model.u_rest, model.offset = prep.u_rest + model.u_rest, prep.y_ref + model.offset
     model.envelope, model.units = prep.envelope, dict(record.units)
     notes = list(prep.notes) + [f"on the identification record: {w}"
                                 for w in model.admissibility(record.u) if "condition" in w

@@ -331,9 +331,10 @@ class _OutputError:
         lo, hi = np.r_[lo, -np.inf, -np.inf], np.r_[hi, np.inf, np.inf]
         if self.admissible:
             lo[self.rp.ialpha] = WIPE_OUT / max(self.env_n.u_max - self.env_n.u_min, 1e-12)
-        return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac, bounds=(lo, hi),
-                             method="trf", ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev,
-                             x_scale="jac")
+        with np.errstate(over="ignore", invalid="ignore"):
+            return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
+                                 bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
+                                 max_nfev=max_nfev, x_scale="jac")
 
 
 def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndarray,

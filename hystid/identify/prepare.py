@@ -42,8 +42,8 @@ __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "che
 REST_SAMPLES = 10
 #: A spike is a sample this many robust standard deviations off the running median.
 SPIKE_SIGMAS = 10.0
-#: A far value is this many output spreads away from the median output.
-FAR_SPREADS = 5.0
+#: A far value is this many output spreads (2 % to 98 % quantiles) away from the median.
+FAR_SPREADS = 3.0
 #: An input step this many times the envelope's slew is a jump (out of rest, a wrapped
 #: sample): what it excites is outside the envelope the model is identified for.
 JUMP_SLEWS = 10.0
@@ -185,11 +185,12 @@ def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, f
     y_ref : float
         The median output.
     y_scale : float
-        Half the spread between the 1 % and 99 % quantiles of ``y``.
+        Half the spread between the 2 % and 98 % quantiles of ``y`` (a burst or a clipped
+        stretch shorter than 2 % of the record does not move it).
     """
     dev = np.abs(u - u_rest)
     u_scale = float(np.quantile(dev, 0.999)) or float(np.max(dev))
-    lo, med, hi = np.quantile(y, [0.01, 0.5, 0.99])
+    lo, med, hi = np.quantile(y, [0.02, 0.5, 0.98])
     y_scale = 0.5 * float(hi - lo) or float(np.max(np.abs(y - med))) or 1.0
     return u_scale, float(med), y_scale
 
@@ -197,8 +198,8 @@ def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, f
 def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """Samples of ``y`` that a deterministic model should not be fitted to.
 
-    * far values: more than :data:`FAR_SPREADS` output spreads from the median (a burst, a
-      sensor glitch of 1e12);
+    * far values: more than :data:`FAR_SPREADS` output spreads (2 % to 98 % quantiles) from
+      the median (a burst, a sensor glitch of 1e12);
     * spikes: a sample off the mean of its two neighbours by more than :data:`SPIKE_SIGMAS`
       robust standard deviations of that second difference and by more than 5 % of the
       output's spread, while the neighbours agree with each other to a third of that (a
@@ -219,7 +220,7 @@ def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
         One sentence per kind found.
     """
     notes = []
-    lo, med, hi = np.quantile(y, [0.01, 0.5, 0.99])
+    lo, med, hi = np.quantile(y, [0.02, 0.5, 0.98])
     spread = max(float(hi - lo), 1e-300)
     far = np.abs(y - med) > FAR_SPREADS * spread
     z = np.pad(np.where(far, med, y), 1, mode="edge")
