@@ -21,15 +21,18 @@ the offset is estimated with the parameters (sensitivity 1). Each sample:
 Start-up: a cold start from theta = 0.01 is a local minimum for any gradient method (the
 measured facts: 400 samples are not enough for a batch fit from there). The identifier collects
 the first ``n_start`` samples and solves the output-error problem on them
-(:func:`~hystid.identify.offline.fit_output_error`, from theta0 and data-driven starts), then
-**checks** that solution (:func:`check_start`): its simulation error must reach its own noise
-estimate (the residual's sample-to-sample differences: a white residual is noise, a smooth one
-is a misfit) and beat a linear model of the same orders (:class:`hystid.baselines.LinearModel`).
-When the check fails it keeps collecting and solves again on ``start_retries`` samples (1 000,
-3 000 by default) from the same starts and the previous solution. A solution that never passes
-is used, but the result says so in ``info["warnings"]`` and never reports ``converged_at``.
-The recursion then runs from the start-up estimate with ``P`` set to the inverse Gauss-Newton
-information.
+(:func:`~hystid.identify.offline.fit_output_error`: the batch fit's preparation, rest level,
+offset and data-driven starts) and runs the recursion from that solution with ``P`` set to the
+inverse Gauss-Newton information. The start is **checked** (:func:`check_start`): the simulation
+error must reach its own noise estimate (from the residual's sample-to-sample differences: a
+white residual is noise, a smooth one is a misfit) and beat a linear model of the same orders
+(:class:`hystid.baselines.LinearModel`). The check runs on the start-up window and again, on
+the running estimate, once ``start_retries`` samples (1 000 and 3 000 by default) have come,
+most of which the start-up solve never saw -- a window can be fitted to its noise by a wrong
+solution when it does not excite the stage enough. When such a check fails the problem is
+solved again on all the samples so far (from the best solution so far and the data-driven
+starts) and the recursion restarts from the better of the two. A mismatch that persists to the
+last window is a warning in ``info["warnings"]``, and ``converged_at`` is then never reported.
 
 Divergence watch: the short-term residual RMS is compared with its long-term level; when it
 exceeds ``diverge_ratio`` times that level for ``diverge_hold`` samples the estimate is declared
@@ -56,7 +59,8 @@ from ..model import DuhemSandwich, Structure
 from ..records import Record
 from ._recursive import RecursiveIdentifier, admissible_into
 from .base import as_sample
-from .offline import fit_output_error, output_sensitivities
+from .offline import fit_output_error
+from .prepare import IdentificationDataError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .result import HistoryRecorder, IdentificationResult
@@ -71,6 +75,8 @@ DIAGNOSTICS = ("e", "sigma", "lambda", "trace_P", "rms_short", "rms_long", "offs
 N_START = 400
 #: Default longer windows solved again when the start-up check fails.
 START_RETRIES = (1_000, 3_000)
+#: Samples of a leading hold kept at the head of the start-up window (the rest level).
+REST_KEEP = 50
 #: The start-up residual may exceed its noise estimate by this factor (white: about 1).
 NOISE_RATIO = 1.3
 
@@ -418,11 +424,12 @@ class OnlineIdentifier(RecursiveIdentifier):
     start_retries : sequence of int
         Longer windows solved again, in turn, while the start-up check fails.
     u_rest : float, optional
-        Input level at which the stage rests before the record; the first input sample by
-        default.
+        Input level at which the stage rests before the record. By default the start-up solve
+        finds it as the batch fit does (:func:`hystid.identify.prepare.rest_level`: a leading
+        constant segment, or the first sample); a number is taken off the input first.
     offset : float, optional
         Sensor offset (the output at rest). By default it is estimated in the start-up solve
-        and tracked by the recursion; a number fixes it.
+        and tracked by the recursion (sensitivity 1); a number fixes it.
     memory : float
         Asymptotic memory in samples: ``lambda -> 1 - 1/memory``. Shorter tracks faster
         parameter changes, longer averages the noise better.
@@ -455,7 +462,7 @@ class OnlineIdentifier(RecursiveIdentifier):
     offset_estimate : float
         Current sensor-offset estimate.
     u_rest_ : float or None
-        The input rest level in use (None before the first sample).
+        The input rest level in use (None before the start-up solve).
     P : ndarray
         Current covariance-like matrix of the Gauss-Newton recursion (theta, then the offset).
     start_checks : list of StartUpCheck
@@ -465,8 +472,6 @@ class OnlineIdentifier(RecursiveIdentifier):
     """
 
     method = "online"
-    #: Rounds of the offset alternation in the start-up solve.
-    offset_rounds = 2
     divergence_reason = "the residual diverged (short-term RMS above diverge_ratio x long-term)"
     n_diagnostics = len(DIAGNOSTICS)
 
@@ -563,7 +568,11 @@ class OnlineIdentifier(RecursiveIdentifier):
         self.start_info: dict = {}
         self.start_warnings: list[str] = []
         self._tried: list = []
-        self._candidate = (theta.copy(), float(self._est[npar]))
+        self._filled = 0
+        self._verify_at: int | None = None
+        self._u_first: float | None = None
+        self._rest_u = self._rest_y = np.zeros(0)
+        self._candidate: DuhemSandwich | None = None
 
     _VIEWS = ("_est", "P", "_est_good", "_P_good", "_scal", "_sett", "_diag", "_windows",
               "_theta_view")
@@ -629,83 +638,80 @@ class OnlineIdentifier(RecursiveIdentifier):
             self._scal[_FIRST] = -1.0 if value is None else value
 
     # ----------------------------------------------------------------- start-up
-    def _solve(self, n: int, extra: dict[str, np.ndarray]) -> tuple[np.ndarray, float, str]:
-        """Output-error solve on the first ``n`` buffered samples; (theta, offset, start)."""
-        u = self._start_u[:n] - self.u_rest_
-        y = self._start_y[:n].copy()
-        bad = ~np.isfinite(y)
-        if bad.all():
+    def _window(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The first ``n`` buffered samples: input, output, which outputs are finite."""
+        y = self._start_y[:n]
+        return self._start_u[:n], y, np.isfinite(y)
+
+    def _solve(self, n: int) -> tuple[DuhemSandwich, str]:
+        """Output-error solve on the first ``n`` samples (the batch fit's preparation, rest
+        level, offset and starts), from theta0 or, on a retry, the best solution so far."""
+        u, y, ok = self._window(n)
+        if not ok.any():
             raise ValueError("online: every output sample of the start-up window is non-finite")
-        if bad.any():  # fill skipped samples by interpolation for the start-up solve only
+        y = y.copy()
+        if not ok.all():  # fill skipped samples by interpolation for the start-up solve only
             idx = np.arange(n)
-            y[bad] = np.interp(idx[bad], idx[~bad], y[~bad])
-        best = None
-        for label, start in {"theta0": self._theta0_vector(), **extra}.items():
-            # the offset by alternation: fit with the level fixed, re-level on the residual
-            level = float(y[0]) if self.offset is None else self.offset
-            for _ in range(1 if self.offset is not None else self.offset_rounds):
-                rec = Record(u, y - level, self.fs, name="start-up window")
-                fit = fit_output_error(rec, self.structure, start, max_nfev=100)
-                yhat = fit.model.simulate(u, check=False).y
-                shift = float(np.mean(rec.y - yhat)) if self.offset is None else 0.0
-                level, start = level + shift, fit.model.theta
-            cost = float(np.mean((y - yhat - level) ** 2))
-            name = label if label != "theta0" else fit.info.get("start", label)
-            if best is None or cost < best[0]:
-                best = (cost, fit.model.theta.copy(), level, name)
-        return best[1], best[2], best[3]
-
-    def _theta0_vector(self) -> np.ndarray:
-        from .offline import initial_theta
-
-        return initial_theta(self.structure, self.theta0)
+            y[~ok] = np.interp(idx[~ok], idx[ok], y[ok])
+        shift_u = self.u_rest or 0.0
+        shift_y = self.offset or 0.0
+        rec = Record(u - shift_u, y - shift_y, self.fs, name="start-up window")
+        start = self.theta0
+        if self._tried:
+            start = min(self._tried, key=lambda t: t[0].rms)[1].theta
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fit = fit_output_error(rec, self.structure, start, offset=self.offset is None,
+                                   max_nfev=100)
+        m = fit.model
+        model = DuhemSandwich(m.theta, self.structure, fs=self.fs, u_rest=m.u_rest + shift_u,
+                              offset=m.offset + shift_y)
+        label = fit.info.get("start", "theta0")
+        return model, label if not self._tried else f"{label} (retry on {n} samples)"
 
     def _try_start(self, n: int) -> bool:
         """Solve and check on ``n`` samples; returns whether the check passed."""
-        extra = {f"previous ({c.samples} samples)": t for c, t in self._tried}
-        theta, offset, label = self._solve(n, extra)
-        u = self._start_u[:n] - self.u_rest_
-        y = self._start_y[:n]
-        ok = np.isfinite(y)
-        yhat = output_sensitivities(theta, self.structure, u)[0] + offset
-        check = check_start(u[ok] + self.u_rest_, y[ok], yhat[ok], self.structure, self.fs,
-                            label)
+        try:
+            model, label = self._solve(n)
+        except IdentificationDataError as exc:  # e.g. the input has not moved enough yet
+            if n == self._stages[-1]:
+                raise
+            self.start_checks.append(StartUpCheck(n, np.nan, np.nan, np.nan, str(exc), False))
+            return False
+        u, y, ok = self._window(n)
+        yhat = model.simulate(u, check=False).y
+        check = check_start(u[ok], y[ok], yhat[ok], self.structure, self.fs, label)
         self.start_checks.append(check)
-        self._tried.append((check, theta))
-        self._candidate = (theta, offset)
+        self._tried.append((check, model))
+        self._candidate = model
         if check.passed:
             return True
         if n == self._stages[-1]:  # no longer window left: keep the best, say so
-            best = min(self._tried, key=lambda ct: self._rms_on(ct[1], n))
-            self._candidate = (best[1], self._offset_for(best[1], n))
+            self._candidate = min(self._tried, key=lambda t: self._rms_on(t[1], n))[1]
             self.start_warnings.append(
                 f"start-up: the solution on {n} samples fails its check: {check.reason()} "
                 f"(tried {', '.join(str(c.samples) for c in self.start_checks)} samples); the "
                 "estimate may sit in a wrong basin")
         return False
 
-    def _rms_on(self, theta: np.ndarray, n: int) -> float:
-        u = self._start_u[:n] - self.u_rest_
-        y = self._start_y[:n]
-        ok = np.isfinite(y)
-        r = y - output_sensitivities(theta, self.structure, u)[0] - self._offset_for(theta, n)
-        return float(np.sqrt(np.mean(r[ok] ** 2)))
+    def _rms_on(self, model: DuhemSandwich, n: int) -> float:
+        u, y, ok = self._window(n)
+        return float(np.sqrt(np.mean((y - model.simulate(u, check=False).y)[ok] ** 2)))
 
-    def _offset_for(self, theta: np.ndarray, n: int) -> float:
-        if self.offset is not None:
-            return self.offset
-        u = self._start_u[:n] - self.u_rest_
-        y = self._start_y[:n]
-        ok = np.isfinite(y)
-        return float(np.mean((y - output_sensitivities(theta, self.structure, u)[0])[ok]))
+    def _hold(self, model: DuhemSandwich) -> None:
+        """Show a start-up solution as the estimate (the recursion is not on yet)."""
+        self._est[:-1] = model.theta
+        self._est[-1] = model.offset
+        self.u_rest_ = model.u_rest
 
-    def _start(self, n: int) -> None:
-        """Start the recursion after the first ``n`` samples from the candidate solution."""
-        theta, offset = self._candidate
+    def _start(self, n: int, k: int) -> None:
+        """Start the recursion on the first ``n`` buffered samples (sample ``k`` of the run)."""
+        model = self._candidate
+        self._hold(model)
+        theta, offset = model.theta, model.offset
         s = self.structure
-        u = self._start_u[:n] - self.u_rest_
-        y = self._start_y[:n]
-        ok = np.isfinite(y)
+        u, y, ok = self._window(n)
+        u = u - model.u_rest
         npar = len(theta)
         Pp = s.history
         U, W1, W2, Y = (np.zeros(Pp + n) for _ in range(4))
@@ -733,7 +739,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         self._ints[_I_POS] = w
         self._scal[_SIG] = sigma
         self._scal[_SHORT] = self._scal[_LONG] = sigma**2
-        self._scal[_K] = n
+        self._scal[_K] = k
         last = self.start_checks[-1]
         self.start_info = {"rms_residual": sigma, "start": last.start, "samples": n,
                            "checks": [asdict(c) for c in self.start_checks]}
@@ -741,35 +747,89 @@ class OnlineIdentifier(RecursiveIdentifier):
 
     def _collect(self, u: np.ndarray, y: np.ndarray, history: np.ndarray,
                  diagnostics: np.ndarray) -> int:
-        """Buffer start-up samples (solving at each stage); returns how many were taken."""
-        if self.u_rest_ is None:
-            self.u_rest_ = float(u[0])
+        """Buffer start-up samples (solving at each stage); returns how many were taken.
+
+        A leading hold (the input at its first value) is not buffered beyond its last
+        :data:`REST_KEEP` samples: the windows count from the end of the hold.
+        """
         take = 0
         while take < len(u) and not self._running:
-            stage = next(s for s in self._stages if s > self.k + take)
-            m = min(len(u) - take, stage - self.k - take)
-            a = self.k + take
+            history[take:] = self.theta
+            diagnostics[take:] = np.nan
+            diagnostics[take:, -1] = self._est[-1]
+            if self._filled == 0:
+                take = self._hold_samples(u, y, take)
+                if take == len(u):
+                    break
+            stage = next(s for s in self._stages if s > self._filled)
+            m = min(len(u) - take, stage - self._filled)
+            a = self._filled
             self._start_u[a:a + m] = u[take:take + m]
             self._start_y[a:a + m] = y[take:take + m]
-            history[take:take + m] = self.theta
-            diagnostics[take:take + m] = np.nan
-            diagnostics[take:take + m, -1] = self._est[-1]
+            self._filled += m
             take += m
-            if a + m == stage:
-                if self._try_start(stage) or stage == self._stages[-1]:
-                    self._start(stage)
-                else:
-                    self._est[:-1], self._est[-1] = self._candidate
+            if self._filled == stage:
+                self._try_start(stage)
+                if self._candidate is not None:  # start; later stages check it on new samples
+                    self._start(stage, self.k + take)
+                    self._verify_at = self._next_stage(stage)
                 history[take - 1] = self.theta
         return take
+
+    def _next_stage(self, n: int) -> int | None:
+        return next((s for s in self._stages if s > n), None)
+
+    def _verify(self, n: int, k: int) -> None:
+        """Check the running estimate on all ``n`` buffered samples (most of them not seen by
+        the start-up solve); when it fails, solve again on them and restart from the better."""
+        current = self.model
+        u, y, ok = self._window(n)
+        yhat = current.simulate(u, check=False).y
+        check = check_start(u[ok], y[ok], yhat[ok], self.structure, self.fs,
+                            f"estimate at sample {n}")
+        self.start_checks.append(check)
+        self._verify_at = self._next_stage(n)
+        if check.passed:
+            return
+        self._tried.append((check, current))
+        self._try_start(n)
+        if self._rms_on(self._candidate, n) < check.rms:
+            self._start(n, k)
+
+    def _hold_samples(self, u: np.ndarray, y: np.ndarray, take: int) -> int:
+        """Pass over a leading hold; when the input moves, start the buffer with its end."""
+        if self._u_first is None:
+            self._u_first = float(u[take])
+        tol = 1e-12 * max(1.0, abs(self._u_first))
+        moving = np.flatnonzero(np.abs(u[take:] - self._u_first) > tol)
+        end = take + (int(moving[0]) if len(moving) else len(u) - take)
+        self._rest_u = np.r_[self._rest_u, u[take:end]][-REST_KEEP:]
+        self._rest_y = np.r_[self._rest_y, y[take:end]][-REST_KEEP:]
+        if end < len(u):
+            r = len(self._rest_u)
+            self._start_u[:r], self._start_y[:r] = self._rest_u, self._rest_y
+            self._filled = r
+        return end
 
     def _run(self, u, y, history, diagnostics) -> None:
         done = 0
         if not self._running:
             done = self._collect(u, y, history, diagnostics)
-        if done < len(u):
-            rpem_run(self._buf, self._ints, np.ascontiguousarray(u[done:], float),
-                     np.ascontiguousarray(y[done:], float), history[done:], diagnostics[done:])
+        while done < len(u):
+            stop = len(u)
+            if self._verify_at is not None:  # keep buffering until the next check
+                stop = min(len(u), done + self._verify_at - self._filled)
+                a = self._filled
+                self._start_u[a:a + stop - done] = u[done:stop]
+                self._start_y[a:a + stop - done] = y[done:stop]
+                self._filled += stop - done
+            rpem_run(self._buf, self._ints, np.ascontiguousarray(u[done:stop], float),
+                     np.ascontiguousarray(y[done:stop], float), history[done:stop],
+                     diagnostics[done:stop])
+            done = stop
+            if self._verify_at is not None and self._filled == self._verify_at:
+                self._verify(self._filled, self.k + done)
+                history[done - 1] = self.theta
         self._n_rec_seen = self.n_recoveries
 
     def update(self, u_k: float, y_k: float) -> np.ndarray:
@@ -787,8 +847,8 @@ class OnlineIdentifier(RecursiveIdentifier):
         ndarray
             The estimate theta(k), a copy.
         """
-        if (self._running and isinstance(u_k, float) and isinstance(y_k, float)
-                and u_k - u_k == 0.0):  # the real-time path: a finite float input
+        if (self._verify_at is None and self._running and isinstance(u_k, float)
+                and isinstance(y_k, float) and u_k - u_k == 0.0):  # the real-time path
             n_rec = rpem_one(self._buf, self._ints, u_k, y_k)
             self.k += 1
             if y_k - y_k != 0.0:
@@ -797,7 +857,7 @@ class OnlineIdentifier(RecursiveIdentifier):
                 self._warn_recoveries(self._n_rec_seen)
                 self._n_rec_seen = n_rec
             return self._theta_view.copy()
-        if not self._running:
+        if not self._running or self._verify_at is not None:
             return super().update(u_k, y_k)
         u, y = as_sample(u_k, "u_k"), as_sample(y_k, "y_k")
         if not math.isfinite(u):
