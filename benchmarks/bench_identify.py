@@ -104,7 +104,7 @@ def throughput(method: str, seconds: float) -> dict:
         warnings.simplefilter("ignore", RuntimeWarning)
         est.fit(rec[:2_000])
         t0 = time.perf_counter()
-        est.fit(rec[2_000:])
+        est.partial_fit(rec[2_000:])
         elapsed = time.perf_counter() - t0
     rate = (rec.n - 2_000) / elapsed
     return {"method": method, "samples": rec.n - 2_000, "samples_per_s": rate,
