@@ -248,7 +248,8 @@ def _write_history(path: str, result) -> None:
     if result.history is None:
         raise CommandError(f"--history: method {result.method!r} keeps no parameter history")
     names = list(result.names)
-    k = np.arange(1, len(result.history) + 1)
+    index = getattr(result, "history_index", None)  # a decimated history names its samples
+    k = np.arange(1, len(result.history) + 1) if index is None else np.asarray(index) + 1
     data = np.column_stack([k, result.history])
     with atomic_open(path, "w", newline="\n") as out:
         np.savetxt(out, data, delimiter=",", header=",".join(["k", *names]), comments="",
