@@ -27,6 +27,7 @@ import os
 import sys
 import tempfile
 import time
+import warnings
 import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -393,9 +394,12 @@ def fleet_client(workers: int | None = None, scheduler: str | None = None,
     n = int(workers) if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise FleetError(f"workers: expected at least 1, got {n}")
-    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=host,
-                                  dashboard_address=None) as cluster, \
-            distributed.Client(cluster) as client:
+    with warnings.catch_warnings():
+        # the HTTP server takes another port when another cluster holds the usual one
+        warnings.filterwarnings("ignore", message="Port .* is already in use")
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           host=host, dashboard_address=None)
+    with cluster, distributed.Client(cluster) as client:
         yield client
 
 
