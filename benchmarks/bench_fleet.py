@@ -77,9 +77,9 @@ def time_withheld(jobs: list[tuple[str, int, int]], n: int, clusters: dict) -> d
     cloudpickle.register_pickle_by_value(bench_withheld_effects)  # workers need not import it
     keys = ("diagnosis", "accepted", "top1", "rms_val_final")
     warm = (jobs[0][0], jobs[0][1], jobs[0][2] + 1)  # another case: kernels loaded everywhere
-    withheld_case(warm, n // 10)
+    withheld_case(warm, n // 3)
     for _, client, _ in clusters.values():
-        client.run(withheld_case, warm, n // 10)
+        client.run(withheld_case, warm, n // 3)
     t0 = time.perf_counter()
     serial = [withheld_case(j, n) for j in jobs]
     out = {"serial": time.perf_counter() - t0}
