@@ -5,10 +5,13 @@ identification code, so that methods can be tested on data they do not share ass
 
 - :mod:`hystid.testing.stages`: the sandwich L1 -> H -> L2 with Duhem, Bouc-Wen, Preisach or
   Maxwell-slip hysteresis, the paper's stage and its excitation;
+- :mod:`hystid.testing.effects`: unmodelled effects (creep, drift, delay, asymmetry, slew limit,
+  saturation, an extra mode), each in two or more forms, and :func:`simulate_stage`;
 - :mod:`hystid.testing.measured`: "as measured" transformations of records and look-alikes of
   two measured stages, and the suite of named records the identification tests run on.
 """
 
+from .effects import EFFECTS, EffectForm, list_effects, simulate_stage
 from .measured import (
     UNIT_FACTORS,
     as_measured_suite,
@@ -50,6 +53,10 @@ from .stages import (
 )
 
 __all__ = [
+    "EFFECTS",
+    "EffectForm",
+    "list_effects",
+    "simulate_stage",
     "PAPER",
     "UNIT_FACTORS",
     "BoucWen",
