@@ -584,8 +584,7 @@ def run_fleet(source: str | os.PathLike[str] | Sequence[Job], out: str | os.Path
         futures = {cl.submit(run_job, j, kind, settings, _job_seed(seed, j.name), pure=False,
                              key=f"hystid-{kind}-{_job_seed(seed, j.name):x}-{i}"): j
                    for i, j in enumerate(todo)}
-        rows = _collect(futures, rows, prints, out, kind, tick, write_every)
-    return _write_results(list(rows.values()), out, kind)
+        return _collect(futures, rows, prints, out, kind, tick, write_every)
 
 
 def _is_job_list(source: Any) -> bool:
@@ -617,23 +616,26 @@ def _collect(futures: dict[Any, Job], rows: dict[str, dict[str, Any]], prints: d
 
     done = failed = 0
     last_write = time.perf_counter()
-    for future in as_completed(futures):
-        job = futures[future]
-        try:
-            row = future.result()
-        except Exception as err:  # noqa: BLE001 - a lost worker fails this record only
-            row = {"name": job.name, "train": job.train, "val": ";".join(job.val),
-                   "status": "failed", "error": f"task lost: {type(err).__name__}: {err}"}
-        row["fingerprint"] = prints[job.name]
-        rows[job.name] = row
-        done += 1
-        failed += row["status"] != "ok"
-        future.release()
-        tick(done, failed)
-        if time.perf_counter() - last_write >= write_every:
-            _write_results(list(rows.values()), out, kind)
-            last_write = time.perf_counter()
-    return rows
+    try:
+        for future in as_completed(futures):
+            job = futures[future]
+            try:
+                row = future.result()
+            except Exception as err:  # noqa: BLE001 - a lost worker fails this record only
+                row = {"name": job.name, "train": job.train, "val": ";".join(job.val),
+                       "status": "failed", "error": f"task lost: {type(err).__name__}: {err}"}
+            row["fingerprint"] = prints[job.name]
+            rows[job.name] = row
+            done += 1
+            failed += row["status"] != "ok"
+            future.release()
+            tick(done, failed)
+            if time.perf_counter() - last_write >= write_every:
+                _write_results(list(rows.values()), out, kind)
+                last_write = time.perf_counter()
+    finally:  # an interrupted run keeps what it has done: the next one resumes from there
+        table = _write_results(list(rows.values()), out, kind)
+    return table
 
 
 # --------------------------------------------------------------------------- Monte Carlo
