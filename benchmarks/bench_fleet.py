@@ -28,10 +28,15 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import table, write_json
+# one BLAS thread in this process, as in Dask's worker processes: the serial loop is timed
+# like for like (must come before NumPy is imported)
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from hystid.fleet import Job, map_seeds, run_fleet, run_job
-from hystid.reference import reference_record
+from _common import table, write_json  # noqa: E402
+
+from hystid.fleet import Job, map_seeds, run_fleet, run_job  # noqa: E402
+from hystid.reference import reference_record  # noqa: E402
 
 
 def warm_up(path: str) -> float:
@@ -127,7 +132,7 @@ def start_cluster(workers: int, warm_path: str):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--records", type=int, default=24, help="records (default 24)")
+    parser.add_argument("--records", type=int, default=16, help="records (default 16)")
     parser.add_argument("--seconds", type=float, default=0.5,
                         help="length of each record in seconds (default 0.5 = 15 000 samples)")
     parser.add_argument("--repeat", type=int, default=3, help="timings per configuration")
