@@ -118,6 +118,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def _settings(args: argparse.Namespace) -> dict:
+    from .fleet import FleetError
+
     settings = {"holdout": args.holdout}
     if args.fs is not None:
         settings["fs"] = args.fs
@@ -128,7 +130,14 @@ def _settings(args: argparse.Namespace) -> dict:
     else:
         settings["initial"] = args.initial
         if args.effects:
-            settings["effects"] = [e.strip() for e in args.effects.split(",") if e.strip()]
+            from .diagnose.screen import effect_names_check
+
+            names = [e.strip() for e in args.effects.split(",") if e.strip()]
+            try:
+                effect_names_check(names)
+            except ValueError as err:
+                raise FleetError(f"--effects: {err}") from err
+            settings["effects"] = names
     return settings
 
 
