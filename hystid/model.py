@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .kernels import as_layout, simulate_into
-from .operating import Envelope, warn_admissibility
+from .operating import Envelope, Placed, warn_admissibility
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
@@ -151,7 +149,7 @@ class SandwichResponse:
         return ax
 
 
-class DuhemSandwich:
+class DuhemSandwich(Placed):
     """Sandwich model L1 -> Duhem H -> L2 of a piezo-driven positioning stage.
 
     Parameters
@@ -200,9 +198,7 @@ class DuhemSandwich:
         self.fs = float(fs)
         self.name = name
         self.theta = params_vector(params, self.structure.names)
-        self.u_rest, self.offset = _finite(u_rest, "u_rest"), _finite(offset, "offset")
-        self.envelope = envelope
-        self.units = dict(units) if units is not None else {"u": "V", "y": "um"}
+        self._place(u_rest, offset, envelope, units)
 
     # ----------------------------------------------------------------- parameters
     @property
@@ -510,32 +506,6 @@ class DuhemSandwich:
                        "there")
         return out
 
-    def save(
-        self,
-        path: str | os.PathLike[str],
-        *,
-        provenance: Mapping[str, Any] | None = None,
-        force: bool = False,
-    ) -> Path:
-        """Keep the model in a versioned JSON file (see :func:`hystid.modelfile.save_model`).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The file; an existing one is replaced only with ``force``.
-        provenance : mapping, optional
-            Method, record hash and settings (:func:`hystid.modelfile.make_provenance`).
-        force : bool
-            Replace an existing file.
-
-        Returns
-        -------
-        pathlib.Path
-            The written file; :func:`hystid.load_model` reads it back.
-        """
-        from .modelfile import save_model
-
-        return save_model(self, path, provenance=provenance, force=force)
 
     def __repr__(self) -> str:
         values = ", ".join(f"{k}={v:.6g}" for k, v in self.params.items())
@@ -570,15 +540,6 @@ def params_vector(
         raise ValueError(f"params: non-finite values for {bad}")
     return theta
 
-
-def _finite(value: float, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name}: expected a finite number, got {value!r}") from err
-    if not np.isfinite(v):
-        raise ValueError(f"{name}: expected a finite number, got {value!r}")
-    return v
 
 
 def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:

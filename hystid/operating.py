@@ -19,14 +19,16 @@ which condition (8) ``alpha |dw1(k)| < 2`` fails, issues an :class:`Admissibilit
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["AdmissibilityWarning", "Envelope", "SLEW_QUANTILE", "warn_admissibility"]
+__all__ = ["AdmissibilityWarning", "Envelope", "Placed", "SLEW_QUANTILE", "warn_admissibility"]
 
 #: The envelope's slew is this quantile of |du|: a slew the input holds for at least 0.1 % of
 #: its samples. Isolated jumps (a step out of rest, a generator wrapping its last sample round)
@@ -150,3 +152,65 @@ def warn_admissibility(messages: list[str], name: str, stacklevel: int = 3) -> N
     if messages:
         warnings.warn(f"model {name!r}: " + "; ".join(messages), AdmissibilityWarning,
                       stacklevel=stacklevel)
+
+
+class Placed:
+    """What both sandwiches share beyond their equations: rest level, offset, envelope, units.
+
+    Attributes
+    ----------
+    u_rest, offset : float
+        Input rest level and sensor offset (see the module docstring).
+    envelope : Envelope or None
+        Inputs the model was identified on.
+    units : dict
+        Units of ``u`` and ``y``.
+    """
+
+    u_rest: float
+    offset: float
+    envelope: Envelope | None
+    units: dict[str, str]
+
+    def _place(self, u_rest: float, offset: float, envelope: Envelope | None,
+               units: Mapping[str, str] | None) -> None:
+        self.u_rest, self.offset = _finite(u_rest, "u_rest"), _finite(offset, "offset")
+        self.envelope = envelope
+        self.units = dict(units) if units is not None else {"u": "V", "y": "um"}
+
+    def save(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        provenance: Mapping[str, Any] | None = None,
+        force: bool = False,
+    ) -> Path:
+        """Keep the model in a versioned JSON file (see :func:`hystid.modelfile.save_model`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file; an existing one is replaced only with ``force``.
+        provenance : mapping, optional
+            Method, record hash and settings (:func:`hystid.modelfile.make_provenance`).
+        force : bool
+            Replace an existing file.
+
+        Returns
+        -------
+        pathlib.Path
+            The written file; :func:`hystid.load_model` reads it back.
+        """
+        from .modelfile import save_model
+
+        return save_model(self, path, provenance=provenance, force=force)
+
+
+def _finite(value: float, name: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name}: expected a finite number, got {value!r}") from err
+    if not np.isfinite(v):
+        raise ValueError(f"{name}: expected a finite number, got {value!r}")
+    return v

@@ -29,20 +29,17 @@ numerator coefficient of each is derived, ``b11 = 1 + a11 + a12 - b12`` and
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
-from typing import Any
 
 import control as ct
 import numpy as np
 from numba import njit
 
 from . import blocks
-from .model import InitialCondition, SandwichResponse, _finite, params_vector
-from .operating import Envelope, warn_admissibility
+from .model import InitialCondition, SandwichResponse, params_vector
+from .operating import Envelope, Placed, warn_admissibility
 
 __all__ = [
     "PISandwich",
@@ -439,7 +436,7 @@ def unit_gain_numerator(a: np.ndarray, b_rest: np.ndarray) -> np.ndarray:
     return np.concatenate([[1.0 + np.sum(a) - np.sum(b_rest)], b_rest])
 
 
-class PISandwich:
+class PISandwich(Placed):
     """Sandwich model L1 -> Prandtl-Ishlinskii H -> L2 (eqs. 29-31).
 
     Parameters
@@ -496,9 +493,7 @@ class PISandwich:
         self.fs = float(fs)
         self.name = name
         self.theta = params_vector(params, self.structure.names)
-        self.u_rest, self.offset = _finite(u_rest, "u_rest"), _finite(offset, "offset")
-        self.envelope = envelope
-        self.units = dict(units) if units is not None else {"u": "V", "y": "um"}
+        self._place(u_rest, offset, envelope, units)
 
     # ----------------------------------------------------------------- parameters
     @property
@@ -744,32 +739,6 @@ class PISandwich:
             warn_admissibility(resp.warnings, self.name)
         return resp
 
-    def save(
-        self,
-        path: str | os.PathLike[str],
-        *,
-        provenance: Mapping[str, Any] | None = None,
-        force: bool = False,
-    ) -> Path:
-        """Keep the model in a versioned JSON file (see :func:`hystid.modelfile.save_model`).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The file; an existing one is replaced only with ``force``.
-        provenance : mapping, optional
-            Method, record hash and settings (:func:`hystid.modelfile.make_provenance`).
-        force : bool
-            Replace an existing file.
-
-        Returns
-        -------
-        pathlib.Path
-            The written file; :func:`hystid.load_model` reads it back.
-        """
-        from .modelfile import save_model
-
-        return save_model(self, path, provenance=provenance, force=force)
 
     def __repr__(self) -> str:
         lin = ", ".join(f"{k}={v:.6g}" for k, v in self.coefficients.items())
