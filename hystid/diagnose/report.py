@@ -90,9 +90,6 @@ def summary_text(result: DiagnosisResult) -> str:
 
 def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> list[Path]:
     """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     out = Path(out_dir)
