@@ -548,8 +548,10 @@ def diagnose(
             say(f"round {rnd}: no candidate passes (level {level_r:.2g}, "
                 f"minimum reduction {100 * min_reduction:.0f} %)")
             break
-        best = min(passing, key=lambda n: results[n][1]["rms_cand"])
-        best = _parsimonious(best, passing, {n: (r[0], r[1], r[2].errs)
+        # a record's own drift is the last explanation: other passing forms go first
+        pool = [n for n in passing if n != "drift"] or passing
+        best = min(pool, key=lambda n: results[n][1]["rms_cand"])
+        best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
                                              for n, r in results.items()}, level_r,
                              min_reduction)
         rf, test, ev_best = results[best]
@@ -676,6 +678,7 @@ class _Evaluation:
     scales: tuple[float, float]
     margin_val: float
     finite: bool
+    beyond_drift: list[np.ndarray]
 
     @property
     def rms_val(self) -> float:
@@ -685,9 +688,11 @@ class _Evaluation:
 class _Evaluator:
     """Simulates a model over the train and held-out parts.
 
-    With ``drift`` on, the drift is a nuisance of each record: its parameters are zero on the
-    held-out records and a drift ``d1 t + d2 t^2`` is re-estimated on each of them by least
-    squares, so the held-out error is what the model explains beyond it.
+    The drift is a nuisance of each record: with ``drift`` on, its parameters are zero on the
+    held-out records and a drift ``d1 t + d2 t^2 + d3 t^3`` is re-estimated on each of them by
+    least squares, so the held-out error is what the model explains beyond it. Without, the
+    errors beyond such a drift are kept alongside (``beyond_drift``): the other forms are
+    tested on them, so that none is credited with a record's own drift.
     """
 
     def __init__(self, tr: FitData, vds: list[FitData], t0s: list[float]) -> None:
@@ -702,20 +707,22 @@ class _Evaluator:
         phi_val = np.array(phi, float)
         if drift:
             phi_val[self.drift_slots] = 0.0
-        errs, segs, margin = [], [], 0.0
+        errs, segs, beyond, margin = [], [], [], 0.0
         for vd, t0 in zip(self.vds, self.t0s, strict=True):
             w1v, _, yv = simulate_fit_data(m, phi_val, vd)
             sl = vd.weight
             yv = yv.copy()
+            t = np.arange(len(vd.u))[sl] / vd.fs
+            own = _drift_fit(t, vd.y[sl] - yv[sl])
             if drift:
-                t = np.arange(len(vd.u)) / vd.fs
-                yv[sl] += _drift_fit(t[sl], vd.y[sl] - yv[sl])
+                yv[sl] += own
             errs.append(vd.y[sl] - yv[sl])
+            beyond.append(errs[-1] if drift else errs[-1] - own)
             segs.append(Segment(vd.u[sl], vd.y[sl], yv[sl], w1v[sl].copy(), vd.fs, t0))
             margin = max(margin, duhem_margin(m.theta, m.structure, phi_val, w1v[sl]))
         finite = bool(np.isfinite(e_tr).all() and all(np.isfinite(e).all() for e in errs))
         rms_tr = float(np.sqrt(np.mean(e_tr**2)))
-        return _Evaluation(rms_tr, errs, segs, scales, margin, finite)
+        return _Evaluation(rms_tr, errs, segs, scales, margin, finite, beyond)
 
 
 def _head(data: FitData, n: int) -> FitData:
@@ -726,8 +733,9 @@ def _head(data: FitData, n: int) -> FitData:
 
 
 def _drift_fit(t: np.ndarray, e: np.ndarray) -> np.ndarray:
-    """Least-squares drift ``d1 t + d2 t^2`` of a record's error (the record's own drift)."""
-    A = np.column_stack([t, t * t])
+    """Least-squares drift ``d1 t + d2 t^2 + d3 t^3`` of a record's error (the record's own
+    drift, zero at its start)."""
+    A = np.column_stack([t, t * t, t**3])
     coef = np.linalg.lstsq(A, e, rcond=None)[0]
     return A @ coef
 
@@ -791,7 +799,7 @@ class _Greedy:
         ev_w = ev(m, whole.phi, self.drift or name == "drift")
         if not ev_w.finite:
             return head
-        return whole, compare_losses(self.ev.errs, ev_w.errs), ev_w
+        return whole, _held_out_test(self, name, ev_w), ev_w
 
     def accept(self, name: str, rf: RefitResult, ev: _Evaluation, where: Where) -> None:
         self.model = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs,
@@ -860,7 +868,8 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
             continue
         say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
         rf = refit(state.model, tr, state.active + [n], scr[n].starts, base_phi=state.phi,
-                   step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1])
+                   step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
+                   joint_starts=len(scr[n].starts) if n == "delay" else 1)
         ev_n = None
         if rf.ok:
             ev_n = ev(DuhemSandwich(rf.theta, state.model.structure, fs=state.model.fs),
@@ -871,7 +880,7 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
             info["candidates"][n] = {"status": "failed", "message": f"refit failed: {rf.message}"}
             say(f"round {rnd}: {n}: refit failed ({rf.message})")
             continue
-        test = compare_losses(state.ev.errs, ev_n.errs)
+        test = _held_out_test(state, n, ev_n)
         results[n] = (rf, test, ev_n)
         info["candidates"][n] = {"status": "refitted", "rms_val_after": ev_n.rms_val,
                                  "p_value": test["p_value"],
@@ -880,6 +889,16 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
         say(f"round {rnd}: {n}: held-out RMS {test['rms_cand']:.4g} "
             f"({100 * test['rel_reduction']:+.1f} %), p = {test['p_value']:.2g}")
     return results
+
+
+def _held_out_test(state: _Greedy, name: str, ev: _Evaluation) -> dict[str, float]:
+    """The held-out loss test of a form against the current model: the drift form on the raw
+    errors, any other on what it explains beyond each record's own drift."""
+    if name == "drift" or state.drift:
+        return compare_losses(state.ev.errs, ev.errs)
+    test = compare_losses(state.ev.beyond_drift, ev.beyond_drift)
+    test["beyond_drift"] = True
+    return test
 
 
 def _rank(outcomes: dict[str, EffectOutcome], accepted: list[str]) -> list[EffectOutcome]:

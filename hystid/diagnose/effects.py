@@ -24,7 +24,7 @@ since the start of the record::
                  to yL: a further mode in parallel with L2 (n2 + 2)
     mode_series  ys(k) = 2 r cos(W) ys(k-1) - r^2 ys(k-2) + (1 - 2 r cos W + r^2) yL(k),
                  y = yL + g (ys - yL): a mode in series with L2 (unit static gain)
-    drift        y(k) = yL(k) + m(k) + d1 t + d2 t^2  (+ y0 with the offset)
+    drift        y(k) = yL(k) + m(k) + d1 t + d2 t^2 + d3 t^3  (+ y0 with the offset)
 
 where ``w1_L1`` is eq. (1) driven by ``ud``, ``K2`` the static gain of L2, and the modes have
 the natural frequency ``freq`` and damping ``zeta`` (``r = exp(-zeta w dt)``,
@@ -102,7 +102,7 @@ class Effect:
 
 # kernel effect vector:
 # [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate, cubic, y0,
-#  e_f, l_alpha, kappa2, tau2, kappa_log, tau_log, g_series, l_g]
+#  e_f, l_alpha, kappa2, tau2, kappa_log, tau_log, g_series, l_g, d3]
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
@@ -112,7 +112,7 @@ EFFECTS: dict[str, Effect] = {
                (0, 1, 15, 16), "creep with two time constants", "creep"),
         Effect("creep_log", ("gain", "tau"), ("1", "s"), (17, 18),
                "logarithmic creep: five lags over three decades from tau", "creep"),
-        Effect("drift", ("rate", "accel"), ("y/s", "y/s^2"), (2, 3),
+        Effect("drift", ("rate", "accel", "jerk"), ("y/s", "y/s^2", "y/s^3"), (2, 3, 21),
                "slow output drift not tied to the input, different on every record"),
         Effect("extra_mode", ("gain", "freq", "zeta"), ("1", "Hz", "1"), (4, 5, 6),
                "a further structural resonance in parallel with L2 (order n2 + 2)"),
@@ -129,7 +129,8 @@ EFFECTS: dict[str, Effect] = {
         Effect("saturation", ("cubic",), ("1/u^2",), (11,),
                "the anhysteretic curve of eq. (7) bends: f1 w1 (1 + cubic w1^2)"),
         Effect("offset", ("y0",), ("y",), (12,),
-               "a constant offset of the output (the sensor's zero)"),
+               "a constant offset of the output (the sensor's zero, or a loop shifted as a "
+               "whole)", "asymmetry"),
     )
 }
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
@@ -137,7 +138,7 @@ EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
 FAMILIES: dict[str, tuple[str, ...]] = {}
 for _e in EFFECTS.values():
     FAMILIES[_e.family] = (*FAMILIES.get(_e.family, ()), _e.name)
-N_SLOTS = 21
+N_SLOTS = 22
 
 
 def family_of(name: str) -> str:
@@ -257,6 +258,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     gm, fm, zeta = phi[4], phi[5], phi[6]
     e_a, e_g, inv_rate, cubic, y_off = phi[8], phi[9], phi[10], phi[11], phi[12]
     e_f, l_a, kappa2, k_log, g_ser, l_g = phi[13], phi[14], phi[15], phi[17], phi[19], phi[20]
+    d3 = phi[21]
     # creep: first-order lags, lam = 1 - exp(-dt / tau)
     lam = _lag_coefficient(phi[1], dt)
     lam2 = _lag_coefficient(phi[16], dt)
@@ -345,7 +347,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
             out += g_ser * (ys - YL[k])
         # drift, t from the start of the record, and the sensor offset
         t = (k - start) * dt
-        Y[k] = out + (d1 * t + d2 * t * t) + y_off
+        Y[k] = out + t * (d1 + t * (d2 + t * d3)) + y_off
 
 
 class _Workspace:

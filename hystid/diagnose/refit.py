@@ -393,11 +393,13 @@ def refit(
     w1_scale: float = 1.0,
     max_nfev: int = 10,
     effect_nfev: int = 15,
+    joint_starts: int = 1,
 ) -> RefitResult:
     """Least-squares refit of the nominal parameters and the active effects' parameters.
 
     Each start is first refitted in the new effect's parameters alone (the nominal ones and
-    the accepted effects held), the best of the starts then in all parameters together.
+    the accepted effects held), the best ``joint_starts`` of them then in all parameters
+    together; the best admissible solution wins.
 
     Parameters
     ----------
@@ -420,6 +422,9 @@ def refit(
         Residual evaluations of the joint stage (Jacobian columns not counted).
     effect_nfev : int
         Residual evaluations of each start's effect-only stage.
+    joint_starts : int
+        How many of the best effect-only solutions the joint stage starts from (a dead time's
+        cost has a minimum near every whole sample).
 
     Returns
     -------
@@ -431,10 +436,11 @@ def refit(
         return RefitResult(model.theta.copy(), np.zeros(N_SLOTS), np.inf, False, "no start given")
     duration = len(data.u) / data.fs
     new = list(active[-1:])
-    best_phi, best_cost, problem = None, np.inf, None
+    calls = 0
     messages: list[str] = []
     if new:
         par_e = Parametrisation(model, new, duration, step_scale, w1_scale, free_theta=False)
+        found = []
         for phi0 in starts:
             problem = _Problem(model, data, par_e, phi0)
             try:
@@ -442,23 +448,32 @@ def refit(
             except (ValueError, np.linalg.LinAlgError, FloatingPointError) as err:
                 messages.append(f"{type(err).__name__}: {err}")
                 continue
-            cost = float(np.mean(sol.fun[:-1] ** 2))
-            if cost < best_cost:
-                best_cost = cost
-                best_phi = par_e.to_values(sol.x, phi0)[1]
-        if best_phi is None:
+            finally:
+                calls += problem.calls
+            found.append((float(np.mean(sol.fun[:-1] ** 2)), par_e.to_values(sol.x, phi0)[1]))
+        if not found:
             return RefitResult(model.theta.copy(), np.array(starts[0], float), np.inf, False,
-                               "; ".join(messages) or "every start failed")
+                               "; ".join(messages) or "every start failed", calls)
+        found.sort(key=lambda c: c[0])
+        joint_from = [phi for _, phi in found[:max(joint_starts, 1)]]
     else:
-        best_phi = np.array(starts[0], float)
-    calls = problem.calls if problem is not None else 0
+        joint_from = [np.array(starts[0], float)]
     par = Parametrisation(model, active, duration, step_scale, w1_scale)
-    joint = _Problem(model, data, par, best_phi)
-    try:
-        sol = _solve(joint, par.to_z(model.theta, best_phi), max_nfev)
-    except (ValueError, np.linalg.LinAlgError, FloatingPointError) as err:
-        return RefitResult(model.theta.copy(), best_phi, np.inf, False,
-                           f"{type(err).__name__}: {err}", calls + joint.calls)
-    res = _judge(joint, sol.x, str(sol.message))
-    res.nfev += calls
-    return res
+    best: RefitResult | None = None
+    for phi0 in joint_from:
+        joint = _Problem(model, data, par, phi0)
+        try:
+            sol = _solve(joint, par.to_z(model.theta, phi0), max_nfev)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError) as err:
+            messages.append(f"{type(err).__name__}: {err}")
+            calls += joint.calls
+            continue
+        res = _judge(joint, sol.x, str(sol.message))
+        calls += joint.calls
+        if best is None or (res.ok and (not best.ok or res.cost < best.cost)):
+            best = res
+    if best is None:
+        return RefitResult(model.theta.copy(), joint_from[0], np.inf, False,
+                           "; ".join(messages), calls)
+    best.nfev = calls
+    return best

@@ -217,9 +217,8 @@ def screen(
                     s0=float(np.clip(b[0], 1e-4, .5)), s1=tau,
                     s15=float(np.clip(b[1], 1e-4, .5)), s16=10 * tau))
         elif name == "drift":
-            D1 = (sim(with_(s2=h)) - y0) / h
-            D2 = (sim(with_(s3=h)) - y0) / h
-            yield np.column_stack([D1, D2]), (lambda b: with_(s2=b[0], s3=b[1]))
+            cols = [(sim(with_(**{k: h})) - y0) / h for k in ("s2", "s3", "s21")]
+            yield np.column_stack(cols), (lambda b: with_(s2=b[0], s3=b[1], s21=b[2]))
         elif name in ("extra_mode", "mode_series"):
             slot = "s4" if name == "extra_mode" else "s19"
             freqs = list(np.geomspace(max(20.0 / T, 50.0), 0.45 * fs, 32)) + list(peaks_hz)
@@ -291,7 +290,7 @@ def screen(
         msg = "" if excited else (
             f"{name}: the records cannot show it: the model absorbs "
             f"{100 * (1 - sep):.2f} % of its signature; {_HINTS[name]}")
-        starts = [s[1] for s in scored[:n_starts]]
+        starts = [s[1] for s in scored[:n_starts + (1 if name == "delay" else 0)]]
         out[name] = ScreenResult(name, scored[0][0], sep, excited, starts, msg)
         best_dirs[name] = scored[0][2]
     # creep and drift are told apart only by input level changes
