@@ -148,6 +148,8 @@ def make_cross_form(effect: str, form: str, scale: float, seed: int, n: int,
 
     rng = np.random.default_rng(seed)
     strength = None if effect == "none" else scale * CROSS[effect][form].strength
+    if effect == "slew":
+        strength = min(strength, 0.8)  # the fraction of the peak rate removed stays below 1
     recs = []
     for label in ("train", "val"):
         u = excitation(n, rng)

@@ -15,13 +15,13 @@ import math
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..baselines import repeat_floor
-from ..identify.offline import fit_output_error
+from ..identify.offline import fit_output_error, linear_start
 from ..identify.result import IdentificationResult
 from ..model import DuhemSandwich, Structure
 from ..records import Record
@@ -346,6 +346,7 @@ def diagnose(
     train_skip: float = 0.0,
     initial: str = "rest",
     refit_all: bool = False,
+    min_gap_share: float = 0.1,
     refit_samples: int = 20_000,
     time_budget: float | None = None,
     require_excitation: bool = False,
@@ -394,6 +395,9 @@ def diagnose(
         measured before the input first moves (the Duhem state holds the remanent value).
     refit_all : bool
         Refit every excited form, not only the promising ones.
+    min_gap_share : float
+        Smallest share of the nominal model's gap (to the floor) a form must close to be
+        accepted, in any round.
     refit_samples : int
         The forms are compared on refits over the first ``refit_samples`` train samples (the
         model they are compared with refitted on the same span); the accepted form is then
@@ -448,6 +452,8 @@ def diagnose(
         raise DiagnosisError(f"model: sampling rate {model.fs:g} Hz differs from the records' "
                              f"{fs:g} Hz")
     repeat = _repeat_floor(train, vals, repeats)
+    if not 0 <= min_gap_share < 1:
+        raise DiagnosisError(f"min_gap_share: expected a fraction in [0, 1), got {min_gap_share}")
 
     # ----------------------------------------------------------------- data
     u_rest = model.u_rest if model is not None else 0.0
@@ -493,10 +499,11 @@ def diagnose(
     for m in admissibility:
         say(f"the nominal model is not admissible on the held-out input: {m}")
     where0 = localise(nom.segments)
+    floor_rms = max(where0.noise["rms"], repeat or 0.0)
     say(f"noise floor {where0.noise['rms']:.4g}; " + "; ".join(where0.findings[1:3]))
 
     # ----------------------------------------------------------------- greedy rounds
-    state = _Greedy(base_model, phi0, nom, where0)
+    state = _Greedy(base_model, phi0, nom, where0, nuisance=False)
     outcomes: dict[str, EffectOutcome] = {
         n: EffectOutcome(n, "screened out", family=family_of(n)) for n in names}
     rounds: list[dict[str, Any]] = []
@@ -505,16 +512,25 @@ def diagnose(
     cand_errs: dict[str, list[np.ndarray]] = {}
     budget_end = None
     for rnd in range(1, max_rounds + 1):
-        remaining = [n for n in names if family_of(n) not in state.families]
+        remaining = [n for n in names if n not in state.active
+                     and (family_of(n) not in state.families or _extends(n, state.active))]
         if not remaining:
             break
         window = state if tr_c is tr else state.on_window(tr_c, ev_c, say)
-        say(f"round {rnd}: screening {', '.join(remaining)}")
-        scr = screen(window.model, window.phi, window.active, tr_c, remaining,
-                     step_scale=window.ev.scales[0], w1_scale=window.ev.scales[1],
+        drift_result, base = None, window
+        if "drift" in remaining:
+            # the drift is a nuisance of every record: the forms are refitted with the train
+            # record's own drift and judged beyond each held-out record's own drift
+            drift_result, base = window.with_drift(tr_c, ev_c, say)
+        others = [n for n in remaining if n != "drift"]
+        say(f"round {rnd}: screening {', '.join(others)}")
+        scr = screen(base.model, base.phi, base.fit_active, tr_c, others,
+                     step_scale=base.ev.scales[0], w1_scale=base.ev.scales[1],
                      peaks_hz=state.where.frequency["peaks_hz"]
                      + [state.where.frequency["peak_hz"]])
-        plan, ruled_out = _plan(scr, remaining, promising, refit_all)
+        if drift_result is not None:
+            scr["drift"] = drift_result[3]
+        plan, ruled_out = _plan(scr, others, promising, refit_all)
         if rnd == 1:
             _record_screen(outcomes, scr, ruled_out, require_excitation)
             if time_budget is not None:
@@ -522,10 +538,13 @@ def diagnose(
         info: dict[str, Any] = {"round": rnd, "rms_val_base": state.ev.rms_val,
                                 "findings": state.where.findings, "accepted": None,
                                 "ruled_out": ruled_out, "candidates": {}}
-        if not plan:
+        if not plan and drift_result is None:
             rounds.append(info)
             break
-        results = _refit_round(window, plan, scr, tr_c, ev_c, info, say, rnd, budget_end)
+        results = _refit_round(base, plan, scr, tr_c, ev_c, info, say, rnd, budget_end)
+        if drift_result is not None:
+            results["drift"] = drift_result[:3]
+            info["candidates"]["drift"] = _candidate_info("drift", *drift_result[:3])
         if rnd == 1:
             for n, (rf, test, ev_n) in results.items():
                 o = outcomes[n]
@@ -541,15 +560,20 @@ def diagnose(
         level_r = alpha / max(len(results) + sum(
             c["status"] == "failed" for c in info["candidates"].values()), 1)
         info["test_level"] = level_r
+        needed = min_gap_share * max(nom.rms_val - floor_rms, 0.0)
         passing = [n for n, (_, t, _) in results.items()
-                   if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction]
+                   if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction
+                   and t["rms_base"] - t["rms_cand"] >= needed]
+        info["rms_reduction_needed"] = needed
         if not passing:
             rounds.append(info)
             say(f"round {rnd}: no candidate passes (level {level_r:.2g}, "
                 f"minimum reduction {100 * min_reduction:.0f} %)")
             break
-        # a record's own drift is the last explanation: other passing forms go first
-        pool = [n for n in passing if n != "drift"] or passing
+        # a further form of a family already accepted goes first (the first form did not
+        # catch the whole effect), a new family next, a record's own drift last
+        pool = ([n for n in passing if family_of(n) in state.families]
+                or [n for n in passing if n != "drift"] or passing)
         best = min(pool, key=lambda n: results[n][1]["rms_cand"])
         best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
                                              for n, r in results.items()}, level_r,
@@ -558,7 +582,8 @@ def diagnose(
         if tr_c is not tr:
             rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
         rms_before = state.ev.rms_val
-        state.accept(best, rf, ev_best, localise(ev_best.segments))
+        state.accept(best, rf, ev_best, localise(ev_best.segments),
+                     nuisance=drift_result is not None)
         nf_estimates.append(state.where.noise["rms"])
         o = outcomes[best]
         o.status, o.round = "accepted", rnd
@@ -598,7 +623,8 @@ def diagnose(
              "gap_closed": closed(state.ev.rms_val), "effects": final_effects,
              "params": state.model.params,
              "unexplained": describe_unexplained(state.where, floor["rms"])}
-    settings = {"alpha": alpha, "min_reduction": min_reduction, "max_rounds": max_rounds,
+    settings = {"alpha": alpha, "min_reduction": min_reduction, "min_gap_share": min_gap_share,
+                "refit_samples": refit_samples, "max_rounds": max_rounds,
                 "holdout": None if vals else holdout, "transient_s": transient,
                 "train_skip_s": train_skip, "initial": initial, "candidates": list(names),
                 "fs": fs, "train_samples": len(tr.u), "time_budget_s": time_budget,
@@ -688,11 +714,12 @@ class _Evaluation:
 class _Evaluator:
     """Simulates a model over the train and held-out parts.
 
-    The drift is a nuisance of each record: with ``drift`` on, its parameters are zero on the
-    held-out records and a drift ``d1 t + d2 t^2 + d3 t^3`` is re-estimated on each of them by
-    least squares, so the held-out error is what the model explains beyond it. Without, the
-    errors beyond such a drift are kept alongside (``beyond_drift``): the other forms are
-    tested on them, so that none is credited with a record's own drift.
+    The drift is a nuisance of each record: its parameters (fitted on the train record) are
+    zero on the held-out records; with ``drift`` on, a drift ``d1 t + d2 t^2 + d3 t^3`` is
+    re-estimated on each of them by least squares, so the held-out error is what the model
+    explains beyond it. Without, the errors beyond such a drift are kept alongside
+    (``beyond_drift``): the other forms are tested on them, so that none is credited with a
+    record's own drift.
     """
 
     def __init__(self, tr: FitData, vds: list[FitData], t0s: list[float]) -> None:
@@ -705,8 +732,7 @@ class _Evaluator:
         e_tr = tr.y[tr.weight] - yh[tr.weight]
         scales = (float(np.max(np.abs(np.diff(w1)))), float(np.max(np.abs(w1))))
         phi_val = np.array(phi, float)
-        if drift:
-            phi_val[self.drift_slots] = 0.0
+        phi_val[self.drift_slots] = 0.0
         errs, segs, beyond, margin = [], [], [], 0.0
         for vd, t0 in zip(self.vds, self.t0s, strict=True):
             w1v, _, yv = simulate_fit_data(m, phi_val, vd)
@@ -761,27 +787,70 @@ class _Greedy:
     forms, their families, the evaluation and the localisation."""
 
     def __init__(self, model: DuhemSandwich, phi: np.ndarray, ev: _Evaluation,
-                 where: Where) -> None:
+                 where: Where, nuisance: bool = False) -> None:
         self.model, self.phi, self.ev, self.where = model, phi, ev, where
         self.active: list[str] = []
         self.families: list[str] = []
+        self.nuisance = nuisance
 
     @property
     def drift(self) -> bool:
+        """Whether the drift is accepted (re-estimated on every held-out record)."""
         return "drift" in self.active
+
+    @property
+    def fit_active(self) -> list[str]:
+        """Forms whose parameters a refit frees: the accepted ones and, once a drift has been
+        fitted as a nuisance, the train record's own drift."""
+        extra = ["drift"] if self.nuisance and not self.drift else []
+        return self.active + extra
+
+    def _copy(self, model: DuhemSandwich, phi: np.ndarray, ev: _Evaluation) -> _Greedy:
+        out = _Greedy(model, phi, ev, self.where, self.nuisance)
+        out.active, out.families = list(self.active), list(self.families)
+        return out
+
+    def with_drift(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> tuple:
+        """The current model refitted with the train record's own drift: ``(refit, test,
+        evaluation, screen entry)`` of the drift candidate and the base for the other forms
+        (itself when the refit fails)."""
+        say("refitting with the train record's own drift (a nuisance of every record)")
+        w1, _, yh = simulate_fit_data(self.model, self.phi, tr_c)
+        sl = tr_c.weight
+        t = np.arange(len(tr_c.u))[sl] / tr_c.fs
+        A = np.column_stack([t, t * t, t**3])
+        coef = np.linalg.lstsq(A, tr_c.y[sl] - yh[sl], rcond=None)[0]
+        start = np.array(self.phi, float)
+        start[list(EFFECTS["drift"].slots)] = coef
+        rf = refit(self.model, tr_c, [n for n in self.active if n != "drift"] + ["drift"],
+                   [start], base_phi=start, step_scale=self.ev.scales[0],
+                   w1_scale=self.ev.scales[1])
+        score = 0.0
+        if rf.ok:
+            score = float(max(0.0, 1.0 - rf.cost / max(self.ev.rms_train**2, 1e-300)))
+        entry = ScreenResult("drift", score, 1.0, True, [start])
+        if not rf.ok:
+            return None, self
+        m = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs, name=self.model.name)
+        ev = ev_c(m, rf.phi, drift=True)
+        if not ev.finite:
+            return None, self
+        base = self._copy(m, rf.phi, ev)
+        base.active = [n for n in self.active if n != "drift"] + ["drift"]
+        base.nuisance = True
+        test = compare_losses(self.ev.errs, ev.errs)
+        return (rf, test, ev, entry), base
 
     def on_window(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> _Greedy:
         """The current model refitted over the head of the train part (itself when the head
         is the whole part): the base the forms refitted over the head are compared with."""
         say(f"refitting the current model over the first {len(tr_c.u)} train samples")
-        rf = refit(self.model, tr_c, self.active, [self.phi], base_phi=self.phi,
+        rf = refit(self.model, tr_c, self.fit_active, [self.phi], base_phi=self.phi,
                    step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
         if not rf.ok:
             return self
         m = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs, name=self.model.name)
-        out = _Greedy(m, rf.phi, ev_c(m, rf.phi, self.drift), self.where)
-        out.active, out.families = list(self.active), list(self.families)
-        return out
+        return self._copy(m, rf.phi, ev_c(m, rf.phi, self.drift))
 
     def refit_whole(self, name: str, rf: RefitResult, tr: FitData, ev: _Evaluator,
                     head: tuple[RefitResult, dict, _Evaluation], say: _Progress,
@@ -791,7 +860,8 @@ class _Greedy:
         when the whole-part refit fails)."""
         say(f"refitting {name} on the whole train part")
         start = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs)
-        whole = refit(start, tr, self.active + [name], [rf.phi], base_phi=rf.phi,
+        active = [n for n in self.fit_active if n != name] + [name]
+        whole = refit(start, tr, active, [rf.phi], base_phi=rf.phi,
                       step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
         if not whole.ok:
             return head
@@ -801,13 +871,16 @@ class _Greedy:
             return head
         return whole, _held_out_test(self, name, ev_w), ev_w
 
-    def accept(self, name: str, rf: RefitResult, ev: _Evaluation, where: Where) -> None:
+    def accept(self, name: str, rf: RefitResult, ev: _Evaluation, where: Where,
+               nuisance: bool = False) -> None:
+        """Add an accepted form (``nuisance``: its refit freed the train record's drift)."""
         self.model = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs,
                                    name=self.model.name)
         self.phi = rf.phi
         self.active.append(name)
         self.families.append(family_of(name))
         self.ev, self.where = ev, where
+        self.nuisance = self.nuisance or nuisance
 
 
 def _plan(scr: dict[str, ScreenResult], remaining: list[str], promising: float,
@@ -867,9 +940,11 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
                                                 "more promising forms"}
             continue
         say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
-        rf = refit(state.model, tr, state.active + [n], scr[n].starts, base_phi=state.phi,
+        rf = refit(state.model, tr, state.fit_active + [n], scr[n].starts, base_phi=state.phi,
                    step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
                    joint_starts=len(scr[n].starts) if n == "delay" else 1)
+        if n == "delay" and all(a == "drift" for a in state.active):
+            rf = _delay_as_structure(state, tr, rf, say)
         ev_n = None
         if rf.ok:
             ev_n = ev(DuhemSandwich(rf.theta, state.model.structure, fs=state.model.fs),
@@ -882,13 +957,66 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
             continue
         test = _held_out_test(state, n, ev_n)
         results[n] = (rf, test, ev_n)
-        info["candidates"][n] = {"status": "refitted", "rms_val_after": ev_n.rms_val,
-                                 "p_value": test["p_value"],
-                                 "rel_reduction": test["rel_reduction"],
-                                 "params": effect_dict(rf.phi, [n])[n]}
+        info["candidates"][n] = _candidate_info(n, rf, test, ev_n)
         say(f"round {rnd}: {n}: held-out RMS {test['rms_cand']:.4g} "
             f"({100 * test['rel_reduction']:+.1f} %), p = {test['p_value']:.2g}")
     return results
+
+
+#: Dead times (samples added to q1) scanned by the structure refit of the delay.
+STRUCTURE_DELAYS = 24
+
+
+def _delay_as_structure(state: _Greedy, tr: FitData, rf: RefitResult,
+                        say: _Progress) -> RefitResult:
+    """The dead time as a structure change: the nominal model identified afresh with
+    ``q1 + d`` (eq. 1) for the one or two ``d`` whose linear start simulates best, then refitted
+    with a fractional delay; kept when it fits the train part better than ``rf``.
+
+    A large dead time moves the nominal fit into another basin (L1 and L2 bent to mimic it),
+    from which a refit of the delay alone does not come back.
+    """
+    s = state.model.structure
+    rec = Record(tr.u, tr.y, tr.fs, name="train")
+    scores = []
+    for d in range(STRUCTURE_DELAYS + 1):
+        sd = replace(s, q1=s.q1 + d)
+        lin = linear_start(rec, sd)
+        if lin is None:
+            continue
+        with np.errstate(all="ignore"):
+            y = DuhemSandwich(lin, sd, fs=tr.fs).simulate(tr.u, check=False).y
+        if np.all(np.isfinite(y)):
+            scores.append((float(np.mean((y - tr.y) ** 2)), d))
+    scores.sort()
+    ref = dict((d, c) for c, d in scores).get(0, np.inf)
+    best = rf
+    for cost, d in scores[:2]:
+        if d == 0 or not cost < ref:
+            continue
+        say(f"identifying the nominal structure with q1 + {d}")
+        fresh = _identify(tr, replace(s, q1=s.q1 + d))
+        start = np.array(state.phi, float)
+        start[EFFECTS["delay"].slots[0]] = d
+        m = DuhemSandwich(fresh.theta, s, fs=tr.fs, name=state.model.name)
+        cand = refit(m, tr, state.fit_active + ["delay"], [start], base_phi=start,
+                     step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1])
+        if cand.ok and (not best.ok or cand.cost < best.cost):
+            best = cand
+    return best
+
+
+def _extends(name: str, active: list[str]) -> bool:
+    """Whether a form of an accepted family can join the accepted forms (no shared
+    parameters): a further form of the same effect."""
+    taken = {s for a in active for s in EFFECTS[a].slots}
+    return not taken & set(EFFECTS[name].slots)
+
+
+def _candidate_info(name: str, rf: RefitResult, test: dict, ev: _Evaluation) -> dict[str, Any]:
+    """A refitted form's figures in a round's record."""
+    return {"status": "refitted", "rms_val_after": ev.rms_val, "p_value": test["p_value"],
+            "rel_reduction": test["rel_reduction"], "params": effect_dict(rf.phi, [name])[name]}
 
 
 def _held_out_test(state: _Greedy, name: str, ev: _Evaluation) -> dict[str, float]:

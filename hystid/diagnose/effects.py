@@ -10,7 +10,11 @@ since the start of the record::
     delay        ud(k) = (1 - phi) u(k - n) + phi u(k - n - 1),   n + phi = d (samples): the
                  dead time q1 of eq. (1) (several samples), fractional
     slew_limit   w1(k) = w1(k-1) + clip(w1_L1(k) - w1(k-1), -1/s, 1/s),   s = inv_rate * fs
+    slew_input   the same limit on the input before L1 (the amplifier's own slew rate)
     saturation   f(w1) = f0 sgn(w1) + f1 w1 (1 + c w1^2) in eq. (7): the anhysteretic curve bends
+    output_curve y = v + c2 x^2 / S + c3 x^3 / S^2, x = v - centre: a curved sensor or
+                 actuator characteristic at the output (``centre`` and span ``S`` are fixed
+                 by the records, not fitted)
     offset       y(k) = ... + y0: a constant offset of the sensor's zero
     asymmetry    alpha_k = alpha (1 + e_a s_k), g_k = g0 (1 + e_g s_k), f1_k = f1 (1 + e_f s_k),
                  s_k = sgn dw1(k): ascending and descending branches differ
@@ -102,7 +106,8 @@ class Effect:
 
 # kernel effect vector:
 # [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate, cubic, y0,
-#  e_f, l_alpha, kappa2, tau2, kappa_log, tau_log, g_series, l_g, d3]
+#  e_f, l_alpha, kappa2, tau2, kappa_log, tau_log, g_series, l_g, d3, inv_rate_u,
+#  c2, c3, centre, span]
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
@@ -126,8 +131,13 @@ EFFECTS: dict[str, Effect] = {
                "the loop changes with the level: alpha, g0 scaled by 1 + l w1", "asymmetry"),
         Effect("slew_limit", ("inv_rate",), ("s/u",), (10,),
                "amplifier rate limit |dw1/dt| <= 1/inv_rate"),
+        Effect("slew_input", ("inv_rate",), ("s/u",), (22,),
+               "amplifier rate limit on the input |du/dt| <= 1/inv_rate", "slew_limit"),
         Effect("saturation", ("cubic",), ("1/u^2",), (11,),
                "the anhysteretic curve of eq. (7) bends: f1 w1 (1 + cubic w1^2)"),
+        Effect("output_curve", ("quadratic", "cubic", "centre", "span"), ("1", "1", "y", "y"),
+               (23, 24, 25, 26), "a curved characteristic at the output (sensor or actuator "
+               "range)", "saturation"),
         Effect("offset", ("y0",), ("y",), (12,),
                "a constant offset of the output (the sensor's zero, or a loop shifted as a "
                "whole)", "asymmetry"),
@@ -138,7 +148,9 @@ EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
 FAMILIES: dict[str, tuple[str, ...]] = {}
 for _e in EFFECTS.values():
     FAMILIES[_e.family] = (*FAMILIES.get(_e.family, ()), _e.name)
-N_SLOTS = 22
+N_SLOTS = 27
+#: Slots set from the records and never fitted (the output curve's centre and span).
+FIXED_SLOTS = (25, 26)
 
 
 def family_of(name: str) -> str:
@@ -207,8 +219,10 @@ def _check_vector(phi: np.ndarray) -> None:
     if max(abs(phi[8]), abs(phi[9]), abs(phi[13])) >= 1:
         raise ValueError(f"asymmetry alpha, g0, f1 must be in (-1, 1), got {phi[8]}, "
                          f"{phi[9]}, {phi[13]}")
-    if phi[10] < 0:
-        raise ValueError(f"slew_limit inv_rate must be >= 0, got {phi[10]}")
+    if phi[10] < 0 or phi[22] < 0:
+        raise ValueError(f"slew_limit inv_rate must be >= 0, got {phi[10]}, {phi[22]}")
+    if (phi[23] != 0 or phi[24] != 0) and not phi[26] > 0:
+        raise ValueError(f"output_curve span must be > 0, got {phi[26]}")
 
 
 def effect_dict(phi: np.ndarray, names: Sequence[str] | None = None) -> dict[str, dict]:
@@ -259,6 +273,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     e_a, e_g, inv_rate, cubic, y_off = phi[8], phi[9], phi[10], phi[11], phi[12]
     e_f, l_a, kappa2, k_log, g_ser, l_g = phi[13], phi[14], phi[15], phi[17], phi[19], phi[20]
     d3 = phi[21]
+    inv_rate_u, c2o, c3o, y_c, y_s = phi[22], phi[23], phi[24], phi[25], phi[26]
     # creep: first-order lags, lam = 1 - exp(-dt / tau)
     lam = _lag_coefficient(phi[1], dt)
     lam2 = _lag_coefficient(phi[16], dt)
@@ -295,6 +310,13 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         a0 = U[i0] if i0 >= 0 else U[0]
         a1 = U[i1] if i1 >= 0 else U[0]
         UD[k] = (1.0 - frac) * a0 + frac * a1
+        if inv_rate_u > 0.0 and k > 0:
+            lim_u = dt / inv_rate_u
+            step_u = UD[k] - UD[k - 1]
+            if step_u > lim_u:
+                UD[k] = UD[k - 1] + lim_u
+            elif step_u < -lim_u:
+                UD[k] = UD[k - 1] - lim_u
     lim = 1.0 / (inv_rate / dt) if inv_rate > 0.0 else 0.0
     for k in range(start, U.shape[0]):
         # eq. (1) on the delayed input, b10 = 1
@@ -345,6 +367,9 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
             ys2 = ys1
             ys1 = ys
             out += g_ser * (ys - YL[k])
+        if c2o != 0.0 or c3o != 0.0:
+            x = (out - y_c) / y_s
+            out += y_s * x * x * (c2o + c3o * x)
         # drift, t from the start of the record, and the sensor offset
         t = (k - start) * dt
         Y[k] = out + t * (d1 + t * (d2 + t * d3)) + y_off

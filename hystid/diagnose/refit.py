@@ -22,7 +22,7 @@ from scipy.optimize import least_squares
 
 from ..identify.offline import _Reparam
 from ..model import DuhemSandwich, InitialCondition
-from .effects import EFFECTS, LOG_STEP, MAX_DELAY, N_LOG, N_SLOTS, _Workspace
+from .effects import EFFECTS, FIXED_SLOTS, LOG_STEP, MAX_DELAY, N_LOG, N_SLOTS, _Workspace
 
 __all__ = [
     "MARGIN_LIMIT",
@@ -165,7 +165,8 @@ class Parametrisation:
         self.duration = float(duration)
         self.step_scale = float(max(step_scale, 1e-12))
         self.w1_scale = float(max(w1_scale, 1e-12))
-        self.slots = [s for name in self.active for s in EFFECTS[name].slots]
+        self.slots = [s for name in self.active for s in EFFECTS[name].slots
+                      if s not in FIXED_SLOTS]
         if len(set(self.slots)) != len(self.slots):
             raise ValueError(f"forms {self.active} share parameters: at most one form per family")
         self.n = self.ntheta + len(self.slots)
@@ -181,7 +182,7 @@ class Parametrisation:
             return float(np.log(max(v, 0.5 / self.fs)))
         if slot in (5, 6):
             return float(np.log(max(v, 1e-6)))
-        if slot == 10:
+        if slot in (10, 22):
             return float(np.log(max(v * self.fs * self.step_scale, 1e-6)))
         if slot == 11:
             return float(v * self.w1_scale**2)
@@ -192,7 +193,7 @@ class Parametrisation:
     def _inv(self, slot: int, z: float) -> float:
         if slot in (1, 5, 6, 16, 18):
             return float(np.exp(z))
-        if slot == 10:
+        if slot in (10, 22):
             return float(np.exp(z) / (self.fs * self.step_scale))
         if slot == 11:
             return float(z / self.w1_scale**2)
@@ -225,6 +226,11 @@ class Parametrisation:
                  np.log(max(10.0 * T / 10 ** (LOG_STEP * (N_LOG - 1)), 1.0 / self.fs))),
             19: (-1.0, 2.0),
             20: (-0.9, 0.9),
+            # input rate limit relative to the largest input step (about w1's over L1's gain)
+            22: (np.log(0.05), np.log(1e3)),
+            # the curve stays monotone over the span
+            23: (-0.6, 0.6),
+            24: (-0.3, 0.3),
         }
         return table.get(slot, (-np.inf, np.inf))
 

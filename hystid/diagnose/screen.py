@@ -54,6 +54,8 @@ _HINTS = {
     "creep_log": "the input needs level changes held over several decades of time",
     "mode_series": "the input needs broadband content near the mode",
     "loop_level": "the input needs loops at several levels",
+    "slew_input": "the input needs fast steps",
+    "output_curve": "the output needs a wide range",
     "drift": "the record needs to be longer",
     "extra_mode": "the input needs broadband content near the mode",
     "delay": "the input needs fast changes",
@@ -252,6 +254,19 @@ def screen(
                 inv = rel / (fs * step_scale)
                 D = sim(with_(s10=inv)) - y0
                 yield D[:, None], (lambda b, inv=inv: with_(s10=inv))
+        elif name == "slew_input":
+            du = float(np.max(np.abs(np.diff(data.u)))) or 1.0
+            for rel in (1.05, 1.2, 1.5, 2.0, 3.0, 5.0):
+                inv = rel / (fs * du)
+                D = sim(with_(s22=inv)) - y0
+                yield D[:, None], (lambda b, inv=inv: with_(s22=inv))
+        elif name == "output_curve":
+            centre = 0.5 * (float(np.max(y0)) + float(np.min(y0)))
+            span = float(np.ptp(y0)) or 1.0
+            cols = [(sim(with_(**{k: h}, s25=centre, s26=span)) - y0) / h for k in ("s23", "s24")]
+            yield np.column_stack(cols), (lambda b, c=centre, sp=span: with_(
+                s23=float(np.clip(b[0], -.3, .3)), s24=float(np.clip(b[1], -.2, .2)),
+                s25=c, s26=sp))
         elif name == "saturation":
             hc = h / w1_scale**2
             D = (sim(with_(s11=hc)) - y0) / hc
