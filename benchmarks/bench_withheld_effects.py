@@ -10,7 +10,8 @@ can be told from drift), white sensor noise, one effect hidden or none:
 * **cross-form**: the independent stage simulator :func:`hystid.testing.simulate_stage`, whose
   effects come in two or three forms each, written apart from the candidates (a logarithmic
   creep kernel, a random-walk or thermal drift, a dead time followed by a lag, a clipping
-  sensor, a current-limited amplifier...).
+  sensor, a current-limited amplifier...); one record of twice the length, its second half
+  held out (the simulator scales some effects to the record's own range).
 
 The diagnosis runs blind on each case. Printed per source: the confusion matrix (true family
 vs the first accepted family, ``none`` when nothing is accepted), top-1 accuracy (family of the
@@ -140,8 +141,13 @@ def make_in_form(form: str, strength: int, seed: int, n: int) -> dict:
 
 def make_cross_form(effect: str, form: str, scale: float, seed: int, n: int,
                     noise: float = 2e-3) -> dict:
-    """Train and held-out records from the independent simulator with ``effect`` / ``form``
-    (``none`` for a clean stage); every random figure (drift realisations, noise) from ``seed``.
+    """One record of ``2 n`` samples from the independent simulator with ``effect`` / ``form``
+    (``none`` for a clean stage), its second half held out; every random figure (excitation,
+    drift realisation, noise) from ``seed``.
+
+    One record rather than two: the simulator sets the slew limit, the clipping level and the
+    level-dependent loop from the record's own input and output range, so two records would
+    come from two different stages.
     """
     from hystid.testing import simulate_stage
     from hystid.testing.effects import EFFECTS as CROSS
@@ -150,21 +156,22 @@ def make_cross_form(effect: str, form: str, scale: float, seed: int, n: int,
     strength = None if effect == "none" else scale * CROSS[effect][form].strength
     if effect == "slew":
         strength = min(strength, 0.8)  # the fraction of the peak rate removed stays below 1
-    recs = []
-    for label in ("train", "val"):
-        u = excitation(n, rng)
-        sim = simulate_stage(u, FS, effect=None if effect == "none" else effect, form=form,
-                             strength=strength, seed=int(rng.integers(1 << 30)))
-        y = sim["y"] + noise * rng.standard_normal(n)
-        recs.append(Record(u, y, FS, name=f"case {seed} {label}"))
+    u = np.concatenate([excitation(n, rng), excitation(n, rng)[int(0.05 * FS):]])
+    u = u[: 2 * n]
+    sim = simulate_stage(u, FS, effect=None if effect == "none" else effect, form=form,
+                         strength=strength, seed=int(rng.integers(1 << 30)))
+    y = sim["y"] + noise * rng.standard_normal(len(u))
     truth = "none" if effect == "none" else CROSS_FAMILY[effect]
-    return {"train": recs[0], "val": recs[1], "noise": noise, "params": {"strength": strength},
-            "truth": truth, "form": f"{effect}/{form}"}
+    return {"train": Record(u, y, FS, name=f"case {seed}"), "val": None, "noise": noise,
+            "params": {"strength": strength}, "truth": truth, "form": f"{effect}/{form}"}
 
 
 def run_case(case: dict, source: str, strength: str, seed: int) -> dict:
     t0 = time.perf_counter()
-    res = diagnose(case["train"], [case["val"]], progress=False)
+    if case["val"] is None:
+        res = diagnose(case["train"], holdout=0.5, progress=False)
+    else:
+        res = diagnose(case["train"], [case["val"]], progress=False)
     elapsed = time.perf_counter() - t0
     truth = case["truth"]
     return {

@@ -1,6 +1,7 @@
 """``hystid diagnose``: the sim-to-real gap diagnosis from the command line.
 
-``hystid diagnose TRAIN [--val VAL ...] [--fs HZ] [--json] [--out DIR] [--quiet]`` identifies
+``hystid diagnose TRAIN [--val VAL ...] [--repeat REC ...] [--fs HZ] [--json] [--out DIR]
+[--quiet]`` identifies
 the nominal sandwich on TRAIN, localises its held-out error, screens and refits the candidate
 effects and prints a summary (or, with ``--json``, one JSON object). Bad input (unreadable or
 too-short records, mismatched sampling rates, records that cannot show a requested effect) gives
@@ -95,6 +96,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="greedy rounds at most (default 3)")
     parser.add_argument("--refit-all", action="store_true",
                         help="refit every excited candidate, not only the promising ones")
+    parser.add_argument("--repeat", nargs="+", metavar="REC", default=[],
+                        help="records of the same input as TRAIN or a --val record: the gap is "
+                        "then measured against their repeatability when it is above the "
+                        "sensor noise")
+    parser.add_argument("--time-budget", type=_positive, default=None, metavar="S",
+                        help="seconds for refitting further forms once every family the "
+                        "screen cannot rule out has had its best form refitted (default: no "
+                        "limit)")
 
 
 class _BadInput(Exception):
@@ -203,6 +212,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         train = _load(args.train, args, "TRAIN")
         vals = [_load(p, args, f"--val {p}") for p in args.val]
+        repeats = [_load(p, args, f"--repeat {p}") for p in args.repeat]
         if args.effects is None:
             names, strict = EFFECT_NAMES, False
         else:
@@ -216,6 +226,7 @@ def run(args: argparse.Namespace) -> int:
             holdout=args.holdout, alpha=args.alpha,
             min_reduction=args.min_reduction, max_rounds=args.max_rounds,
             train_skip=args.train_skip, initial=args.initial, refit_all=args.refit_all,
+            repeats=repeats, time_budget=args.time_budget,
             require_excitation=strict, progress=not args.quiet,
         )
     except (_BadInput, DiagnosisError) as err:
@@ -223,6 +234,7 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     report = result.to_dict()
     report["records"] = {"train": train.name, "val": [v.name for v in vals],
+                         "repeat": [r.name for r in repeats],
                          "units": train.units, "u_scale": args.u_scale, "crop": args.crop}
     if args.out:
         out = Path(args.out)

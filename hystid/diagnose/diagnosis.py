@@ -579,11 +579,12 @@ def diagnose(
                                              for n, r in results.items()}, level_r,
                              min_reduction)
         rf, test, ev_best = results[best]
-        if tr_c is not tr:
+        if tr_c is not tr or (drift_result is not None and best != "drift"):
+            # on the whole train part, and without the train record's drift unless the drift
+            # is what was accepted: the model that goes on explains the records by itself
             rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
         rms_before = state.ev.rms_val
-        state.accept(best, rf, ev_best, localise(ev_best.segments),
-                     nuisance=drift_result is not None)
+        state.accept(best, rf, ev_best, localise(ev_best.segments))
         nf_estimates.append(state.where.noise["rms"])
         o = outcomes[best]
         o.status, o.round = "accepted", rnd
@@ -861,7 +862,10 @@ class _Greedy:
         say(f"refitting {name} on the whole train part")
         start = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs)
         active = [n for n in self.fit_active if n != name] + [name]
-        whole = refit(start, tr, active, [rf.phi], base_phi=rf.phi,
+        phi = np.array(rf.phi, float)
+        if "drift" not in active:
+            phi[list(EFFECTS["drift"].slots)] = 0.0
+        whole = refit(start, tr, active, [phi], base_phi=phi,
                       step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
         if not whole.ok:
             return head
