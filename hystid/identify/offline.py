@@ -11,13 +11,16 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..kernels import sensitivities_into
+from ..kernels import sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
+from ..operating import Envelope
 from ..records import Record
 from .constraints import ALPHA_MIN, K_MAX, poly_to_reflection, polynomial_groups, reflection_to_poly
+from .prepare import Prepared, prepare
 from .result import IdentificationResult
 
-__all__ = ["fit_output_error", "initial_theta", "linear_start", "output_sensitivities"]
+__all__ = ["BOUND_MAX", "fit_output_error", "initial_theta", "linear_start",
+           "output_sensitivities", "to_normalised", "to_physical"]
 
 
 def initial_theta(structure: Structure, theta0: float | dict | np.ndarray) -> np.ndarray:
@@ -51,7 +54,9 @@ def output_sensitivities(
     return Y[P:], SY[P:]
 
 
-def linear_start(record: Record, structure: Structure, alpha: float = 1.0) -> np.ndarray | None:
+def linear_start(
+    record: Record, structure: Structure, alpha: float = 1.0, *, with_offset: bool = False
+) -> np.ndarray | tuple[np.ndarray, float] | None:
     """A data-driven start: the sandwich's linear part from an ARX fit.
 
     With ``f1 = g0`` and ``w2`` at rest the Duhem block is the gain ``g0``, so the sandwich is the
@@ -59,7 +64,9 @@ def linear_start(record: Record, structure: Structure, alpha: float = 1.0) -> np
     product polynomials; the denominator's roots are split between ``A1`` (real roots farthest
     from the unit circle) and ``A2`` (complex pairs, the flexure mode, first), numerator roots
     likewise, and unstable roots are reflected into the unit circle. Returns ``None`` when the
-    roots cannot be split into real polynomials of the required orders.
+    roots cannot be split into real polynomials of the required orders. With ``with_offset``
+    the regression also holds a constant, and ``(theta, offset)`` is returned: the output's
+    level at zero input.
     """
     s = structure
     na, nb, q = s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2
@@ -69,7 +76,11 @@ def linear_start(record: Record, structure: Structure, alpha: float = 1.0) -> np
         return None
     rows = np.arange(lag, len(y))
     phi = [-y[rows - i] for i in range(1, na + 1)] + [u[rows - q - j] for j in range(nb + 1)]
+    if with_offset:
+        phi.append(np.ones(len(rows)))
     coef = np.linalg.lstsq(np.column_stack(phi), y[rows], rcond=None)[0]
+    constant = coef[-1] if with_offset else 0.0
+    coef = coef[:na + nb + 1]
     den, num = np.r_[1.0, coef[:na]], coef[na:]
     gain = num[0]
     if not np.isfinite(gain) or gain == 0:
@@ -81,7 +92,10 @@ def linear_start(record: Record, structure: Structure, alpha: float = 1.0) -> np
     values = {"alpha": alpha, "f1": gain, "g0": gain, "f0": 0.0}
     for prefix, poly in (("a1", A1), ("a2", A2), ("b1", B1), ("b2", B2)):
         values.update({f"{prefix}{i + 1}": c for i, c in enumerate(poly)})
-    return np.array([values[n] for n in s.names])
+    theta = np.array([values[n] for n in s.names])
+    if with_offset:
+        return theta, float(constant / np.sum(den))
+    return theta
 
 
 def _split_roots(roots: np.ndarray, n_first: int):
@@ -107,6 +121,9 @@ class _Reparam:
         self.groups = polynomial_groups(structure)
         self.ialpha = structure.names.index("alpha")
         self.n = len(structure.names)
+        #: entries of z that the envelope bound depends on (alpha, L1's polynomials)
+        self.l1_and_alpha = [self.ialpha] + [
+            structure.names.index(n) for n in structure.names if n[:2] in ("a1", "b1")]
 
     def to_z(self, theta: np.ndarray) -> np.ndarray:
         z = np.array(theta, float)
@@ -131,6 +148,232 @@ class _Reparam:
         return lo, hi
 
 
+#: Fits keep ``alpha max |L1| min(2 A sin(w/2), slew)`` (condition 8 over every sine inside the
+#: training input's envelope, :meth:`DuhemSandwich.envelope_bound`) below this.
+BOUND_MAX = 1.95
+#: Fits keep ``alpha`` times the normalised input's span at least this: one sweep of the input
+#: forgets all but ``exp(-WIPE_OUT)`` of the hysteresis state it started from (the wiping-out
+#: of a piezo's memory by a full stroke). A model with less memory loss carries the unknown
+#: initial state through the whole record and cannot be validated on records that start
+#: elsewhere.
+WIPE_OUT = 1.0
+#: Evaluations given to each start before the best ones are polished.
+SCREEN_NFEV = 25
+
+
+def to_physical(theta_n: np.ndarray, structure: Structure, u_scale: float,
+                y_scale: float) -> np.ndarray:
+    """Parameters in record units from parameters fitted on normalised signals.
+
+    With ``u = u_scale un`` and ``y = y_scale yn`` eq. (7) keeps its form when ``w1`` scales like
+    ``u`` and ``w2`` like ``y``: ``alpha = alpha_n / u_scale``, ``f1 = f1_n y_scale / u_scale``,
+    ``g0 = g0_n y_scale / u_scale``, ``f0 = f0_n y_scale``; L1 and L2 (monic) are unchanged.
+
+    Parameters
+    ----------
+    theta_n : ndarray
+        Parameters on normalised signals.
+    structure : Structure
+        Model structure.
+    u_scale, y_scale : float
+        The scales.
+
+    Returns
+    -------
+    ndarray
+    """
+    return _rescale(theta_n, structure, u_scale, y_scale, inverse=False)
+
+
+def to_normalised(theta: np.ndarray, structure: Structure, u_scale: float,
+                  y_scale: float) -> np.ndarray:
+    """The inverse of :func:`to_physical`.
+
+    Parameters
+    ----------
+    theta : ndarray
+        Parameters in record units.
+    structure : Structure
+        Model structure.
+    u_scale, y_scale : float
+        The scales.
+
+    Returns
+    -------
+    ndarray
+    """
+    return _rescale(theta, structure, u_scale, y_scale, inverse=True)
+
+
+def _rescale(theta, structure, su, sy, inverse):
+    factor = {"alpha": 1.0 / su, "f1": sy / su, "g0": sy / su, "f0": sy}
+    out = np.array(theta, dtype=float)
+    for name, f in factor.items():
+        if name in structure.names:
+            i = structure.names.index(name)
+            out[..., i] = out[..., i] / f if inverse else out[..., i] * f
+    return out
+
+
+class _OutputError:
+    """The output-error problem on a prepared record: residuals and Jacobian in ``z``.
+
+    ``z`` holds the reparametrised model (:class:`_Reparam`), then the normalised sensor offset
+    ``y0`` and the hysteresis state at the start ``e0`` (``w2`` off its rest value: a stage at
+    rest still remembers how it got there; fitted for records that start at rest, its
+    derivative by a finite difference). The signal and sensitivity arrays are allocated once
+    and reused by every evaluation. One extra residual keeps the model admissible over the
+    training envelope: it is ``weight * max(0, bound - BOUND_MAX)``.
+    """
+
+    def __init__(self, prep: Prepared, structure: Structure, x0: InitialCondition,
+                 fit_offset: bool, admissible: bool, fit_state: bool = False):
+        self.structure, self.prep = structure, prep
+        self.rp = _Reparam(structure)
+        self.fit_offset, self.admissible = fit_offset, admissible
+        self.fit_state = fit_state and prep.at_rest
+        P, n, npar = structure.history, len(prep.un), len(structure.names)
+        self.P = P
+        self.U, self.W1, self.W2, self.Y = (
+            np.concatenate([x0.window(k, P), np.zeros(n)]) for k in ("u", "w1", "w2", "y"))
+        self.past = [a[:P].copy() for a in (self.W1, self.W2, self.Y)]
+        self.U[P:] = prep.un
+        self.S1, self.S2, self.SY = (np.zeros((P + n, npar)) for _ in range(3))
+        self.idx = np.flatnonzero(prep.weight)
+        self.target = prep.yn[self.idx]
+        self.ceiling = 1e6 * (np.max(np.abs(self.target)) + 1.0)
+        self.pen_weight = 10.0 * np.sqrt(len(self.idx))
+        un = prep.un[prep.skip:]
+        self.env_n = Envelope.of(un)
+        self.npar = npar
+        self._cache: dict = {}
+
+    def bound(self, theta_n: np.ndarray) -> float:
+        """Condition (8) over the training envelope (scale-free)."""
+        return DuhemSandwich(theta_n, self.structure).envelope_bound(self.env_n)
+
+    def _penalty(self, z: np.ndarray) -> tuple[float, np.ndarray]:
+        grad = np.zeros(len(z))
+        if not self.admissible:
+            return 0.0, grad
+        n = self.npar
+        theta = self.rp.to_theta(z[:n])[0]
+        b = self.bound(theta)
+        if b <= BOUND_MAX:
+            return 0.0, grad
+        for i in self.rp.l1_and_alpha:
+            dz = np.zeros(len(z))
+            dz[i] = 1e-6 * max(abs(z[i]), 1.0)
+            grad[i] = (self.bound(self.rp.to_theta(z[:n] + dz[:n])[0]) - b) / dz[i]
+        return self.pen_weight * (b - BOUND_MAX), self.pen_weight * grad
+
+    def evaluate(self, z: np.ndarray) -> None:
+        if "z" in self._cache and np.array_equal(self._cache["z"], z):
+            return
+        n = self.npar
+        theta, dtheta = self.rp.to_theta(z[:n])
+        y0 = z[n] if self.fit_offset else 0.0
+        e0 = z[n + 1] if self.fit_state else 0.0
+        with np.errstate(over="ignore", invalid="ignore"):
+            yhat, S = self._run(theta, e0, sensitivities=True)
+            if self.fit_state:
+                h = 1e-6 * max(abs(e0), 1.0)
+                de0 = (self._run(theta, e0 + h) - yhat) / h
+            blown = not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(S)))
+            blown = blown or float(np.max(np.abs(yhat))) > self.ceiling
+        m = len(self.idx)
+        pen, dpen = self._penalty(z)
+        if blown:
+            # the Duhem recursion left condition (8): a large, flat residual steers back
+            r = np.full(m + 1, 1e6)
+            J = np.zeros((m + 1, len(z)))
+        else:
+            r = np.empty(m + 1)
+            r[:m] = yhat + y0 - self.target
+            r[m] = pen
+            J = np.zeros((m + 1, len(z)))
+            J[:m, :n] = S @ dtheta
+            J[:m, n] = 1.0 if self.fit_offset else 0.0
+            if self.fit_state:
+                J[:m, n + 1] = de0
+            J[m] = dpen
+        self._cache = {"z": z.copy(), "r": r, "J": J}
+
+    def _run(self, theta: np.ndarray, e0: float, sensitivities: bool = False):
+        """Simulate from the past with the Duhem state ``e0`` off rest (and L2 settled on it)."""
+        P = self.P
+        for a, past in zip((self.W1, self.W2, self.Y), self.past, strict=True):
+            a[:P] = past
+        if e0:
+            s = self.structure
+            a2 = theta[[s.names.index(f"a2{i}") for i in range(1, s.n2a + 1)]]
+            b2 = theta[[s.names.index(f"b2{i}") for i in range(1, s.n2b + 1)]]
+            self.W2[:P] += e0
+            self.Y[:P] += e0 * (1.0 + np.sum(b2)) / (1.0 + np.sum(a2))
+        if not sensitivities:
+            simulate_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y, P)
+            return self.Y[P:][self.idx].copy()
+        self.S1[:P] = self.S2[:P] = self.SY[:P] = 0.0
+        sensitivities_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y,
+                           self.S1, self.S2, self.SY, P)
+        return self.Y[P:][self.idx].copy(), self.SY[P:][self.idx]
+
+    def fun(self, z: np.ndarray) -> np.ndarray:
+        self.evaluate(z)
+        return self._cache["r"]
+
+    def jac(self, z: np.ndarray) -> np.ndarray:
+        self.evaluate(z)
+        return self._cache["J"]
+
+    def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
+        lo, hi = self.rp.bounds()
+        lo, hi = np.r_[lo, -np.inf, -np.inf], np.r_[hi, np.inf, np.inf]
+        if self.admissible:
+            lo[self.rp.ialpha] = WIPE_OUT / max(self.env_n.u_max - self.env_n.u_min, 1e-12)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
+                                 bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
+                                 max_nfev=max_nfev, x_scale="jac")
+
+
+def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndarray,
+            linear_init: bool) -> dict[str, np.ndarray]:
+    """Data-driven starts on the normalised record, ``[theta_n, y0_n]`` each.
+
+    ``theta0`` (the paper's 0.01 for every parameter, in normalised units when a scalar, in
+    record units when a vector or dict), and from the linear sandwich's ARX fit with an offset
+    (:func:`linear_start`): the linear model itself (``f1 = g0``) and loops opened around it
+    (``g0`` a half and a fifth of the gain, ``alpha`` 1 and 5, a level at which the normalised
+    loop is about as wide as the signals).
+    """
+    starts = {}
+    if np.isscalar(theta0):
+        starts["theta0"] = np.r_[initial_theta(structure, theta0), 0.0]
+    else:
+        phys = initial_theta(structure, theta0)
+        starts["theta0"] = np.r_[to_normalised(phys, structure, prep.u_scale, prep.y_scale), 0.0]
+    if not linear_init:
+        return starts
+    fill = np.where(prep.weight, prep.yn, np.nan)
+    good = np.flatnonzero(prep.weight)
+    fill = np.interp(np.arange(len(fill)), good, prep.yn[good])
+    rec = Record(prep.un, fill, prep.record.fs, name=prep.record.name)
+    lin = linear_start(rec, structure, with_offset=True)
+    if lin is None:
+        return starts
+    theta, y0 = lin
+    names = structure.names
+    ia, i1, ig = names.index("alpha"), names.index("f1"), names.index("g0")
+    starts["linear"] = np.r_[theta, y0]
+    for alpha in (1.0, 5.0):
+        for share in (0.5, 0.2):
+            t = theta.copy()
+            t[ia], t[ig] = alpha, share * theta[i1]
+            starts[f"loop alpha={alpha:g} g0={share:g}f1"] = np.r_[t, y0]
+    return starts
+
+
 def fit_output_error(
     record: Record,
     structure: Structure | None = None,
@@ -138,90 +381,132 @@ def fit_output_error(
     *,
     x0: InitialCondition | None = None,
     linear_init: bool = True,
+    offset: bool = True,
+    admissible: bool = True,
+    skip: int | None = None,
     max_nfev: int = 300,
     tol: float = 1e-12,
     name: str = "identified stage",
 ) -> IdentificationResult:
     """Identify the sandwich off-line by output-error least squares.
 
+    The steps: :func:`~hystid.identify.prepare.prepare` the record (excitation check, rest
+    level, robust scales, outliers and saturation left out, burn-in when it does not start at
+    rest); fit on the normalised signals from several starts (:func:`_starts`), each for
+    :data:`SCREEN_NFEV` evaluations; polish the two best; keep the best admissible one; place
+    the model at the record's rest level, offset and units.
+
     Parameters
     ----------
     record : Record
-        Measured input ``u`` and output ``y``; the record is assumed to start from ``x0``.
+        Measured input ``u`` and output ``y``, in any units.
     structure : Structure, optional
         Model structure; the paper's experimental one by default.
     theta0 : float, dict or array
-        Start: one value for every parameter (the paper's 0.01) or a full vector / dict.
+        A start besides the data-driven ones: one value for every parameter (the paper's 0.01,
+        on normalised signals) or a full vector / dict in record units.
     x0 : InitialCondition, optional
-        Past of the record (at rest by default).
+        Past of the record in record units; given, the model rests at ``u = 0`` with no
+        offset (the behaviour of a record known to start from ``x0``).
     linear_init : bool
-        Also start from :func:`linear_start` and keep the better of the two fits. From
-        ``theta0 = 0.01`` alone the search ends in a local minimum on short records.
+        Also start from :func:`linear_start` and the loops opened around it.
+    offset : bool
+        Estimate the sensor offset (default). Without it the output is taken as zero at rest.
+    admissible : bool
+        Keep condition (8) over the training input's envelope (:data:`BOUND_MAX`).
+    skip : int, optional
+        Leading samples simulated but left out of the cost; by default none for a record that
+        starts at rest, else until the input has swept its range once.
     max_nfev : int
-        Maximum number of residual evaluations of ``scipy.optimize.least_squares``.
+        Evaluations of each polish with ``scipy.optimize.least_squares``.
     tol : float
         ``ftol``, ``xtol`` and ``gtol`` of the solver.
+    name : str
+        Name of the identified model.
 
     Returns
     -------
     IdentificationResult
-        ``method='batch'``; ``info`` holds the final RMS residual, the number of evaluations and
-        the solver status.
+        ``method='batch'``; ``info`` holds the RMS residual (record units), the number of
+        evaluations, the start kept, the solver status, the envelope bound and ``warnings``.
     """
     structure = structure or Structure()
-    theta_start = initial_theta(structure, theta0)
-    rp = _Reparam(structure)
-    u, y = record.u, record.y
-    ceiling = 1e6 * (np.max(np.abs(y)) + 1.0)
-
-    def residual_and_jac(z):
-        theta, dtheta = rp.to_theta(z)
-        with np.errstate(over="ignore", invalid="ignore"):
-            yhat, S = output_sensitivities(theta, structure, u, x0)
-            blown = not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(S)))
-            blown = blown or np.max(np.abs(yhat)) > ceiling
-        if blown:
-            # the Duhem recursion left condition (8): a large, flat residual steers back
-            return np.full(len(y), 1e6), np.zeros((len(y), len(z)))
-        return yhat - y, S @ dtheta
-
-    cache: dict = {}
-
-    def fun(z):
-        cache["z"] = z.copy()
-        cache["r"], cache["J"] = residual_and_jac(z)
-        return cache["r"]
-
-    def jac(z):
-        if "z" not in cache or not np.array_equal(cache["z"], z):
-            fun(z)
-        return cache["J"]
-
-    lo, hi = rp.bounds()
-    starts = {"theta0": theta_start}
-    if linear_init:
-        lin = linear_start(record, structure)
-        if lin is not None:
-            starts["linear"] = lin
-    best, best_start = None, None
+    prep = prepare(record, skip=skip)
+    if x0 is not None:
+        prep = _pinned_at_zero(prep)
+    elif not offset:
+        prep.y_ref, prep.yn = 0.0, record.y / prep.y_scale
+    x0n = _normalise_past(x0, prep) if x0 is not None else InitialCondition()
+    problem = _OutputError(prep, structure, x0n, offset and x0 is None, admissible,
+                           fit_state=x0 is None)
+    starts = _starts(prep, structure, theta0, linear_init)
+    screened = []
     for label, start in starts.items():
-        cache.clear()
-        sol = least_squares(
-            fun, rp.to_z(start), jac=jac, bounds=(lo, hi), method="trf",
-            ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev,
-        )
-        if best is None or sol.cost < best.cost:
-            best, best_start = sol, label
-    sol = best
-    theta = rp.to_theta(sol.x)[0]
-    model = DuhemSandwich(theta, structure, fs=record.fs, name=name)
+        z0 = np.r_[problem.rp.to_z(start[:-1]), start[-1], 0.0]
+        sol = problem.solve(z0, SCREEN_NFEV if len(starts) > 1 else max_nfev, tol)
+        screened.append((sol.cost, label, sol))
+    screened.sort(key=lambda item: item[0])
+    polished = []
+    for _, label, sol in screened[:2]:
+        if len(starts) > 1:
+            sol = problem.solve(sol.x, max_nfev, tol)
+        polished.append((sol.cost, label, sol))
+    cost, label, sol = min(polished, key=lambda item: item[0])
+    return _result(prep, structure, problem, sol, label, name,
+                   {"theta0": np.atleast_1d(theta0).tolist() if np.isscalar(theta0) else
+                    initial_theta(structure, theta0).tolist(),
+                    "linear_init": linear_init, "offset": offset, "admissible": admissible,
+                    "skip": prep.skip, "max_nfev": max_nfev, "tol": tol, "samples": record.n,
+                    "starts": list(starts)})
+
+
+def _pinned_at_zero(prep: Prepared) -> Prepared:
+    """The record's rest at ``u = 0`` and its output reference at 0 (for a given past)."""
+    u, y = prep.record.u, prep.record.y
+    prep.u_rest, prep.y_ref = 0.0, 0.0
+    prep.un, prep.yn = u / prep.u_scale, y / prep.y_scale
+    return prep
+
+
+def _normalise_past(x0: InitialCondition, prep: Prepared) -> InitialCondition:
+    return InitialCondition(np.asarray(x0.u, float) / prep.u_scale,
+                            np.asarray(x0.w1, float) / prep.u_scale,
+                            np.asarray(x0.w2, float) / prep.y_scale,
+                            np.asarray(x0.y, float) / prep.y_scale)
+
+
+def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, label: str,
+            name: str, settings: dict) -> IdentificationResult:
+    """Place the fitted model in record units and say what is worth knowing about it."""
+    n = problem.npar
+    theta_n = problem.rp.to_theta(sol.x[:n])[0]
+    y0n = float(sol.x[n]) if problem.fit_offset else 0.0
+    theta = to_physical(theta_n, structure, prep.u_scale, prep.y_scale)
+    rec = prep.record
+    model = DuhemSandwich(theta, structure, fs=rec.fs, name=name, u_rest=prep.u_rest,
+                          offset=prep.offset(y0n),
+                          envelope=prep.envelope, units=rec.units)
+    m = len(problem.idx)
+    bound = problem.bound(theta_n)
+    notes = list(prep.notes)
+    if bound >= 2.0:
+        notes.append(f"the model is not admissible over its own training envelope "
+                     f"(condition 8 bound {bound:.3g} >= 2): it may diverge on inputs like the "
+                     "training input")
+    train_issues = [w for w in model.admissibility(rec.u) if "condition (8)" in w
+                    or "diverged" in w]
+    notes += [f"on the training record: {w}" for w in train_issues]
     info = {
-        "rms_residual": float(np.sqrt(np.mean(sol.fun**2))),
+        "rms_residual": float(np.sqrt(np.mean(sol.fun[:m] ** 2)) * prep.y_scale),
         "nfev": int(sol.nfev),
         "status": int(sol.status),
         "message": str(sol.message),
-        "start": best_start,
+        "start": label,
+        "envelope_bound": bound,
+        "scales": {"u": prep.u_scale, "y": prep.y_scale},
+        "at_rest": prep.at_rest,
+        "warnings": notes,
     }
-    settings = {"theta0": theta_start.tolist(), "linear_init": linear_init,
-                "max_nfev": max_nfev, "tol": tol, "samples": len(u)}
     return IdentificationResult(model, "batch", settings, info=info)
+
+

@@ -1,0 +1,333 @@
+"""A record as it comes, made ready for identification.
+
+Measured records do not look like the reference stage: the sensor's zero is not the stage's,
+the stage rests at some input level before the excitation (or is already moving), the units
+may be V or kV, um or m, and there are outliers, clipped sensors and generators that wrap
+their last sample round. :func:`prepare` turns a :class:`~hystid.records.Record` into a
+:class:`Prepared` problem, in named steps:
+
+1. :func:`check_excitation` -- refuse a record that cannot identify a stage (a constant input,
+   a single step, an output equal to the input);
+2. :func:`rest_level` -- the input level the stage rests at (the leading constant segment, or
+   the first sample), and whether the record starts at rest;
+3. :func:`scales` -- robust input and output scales, so that the fit runs on numbers of order
+   one whatever the units (quantiles scale exactly with the units, so the identified model's
+   output does not depend on them);
+4. :func:`bad_samples` -- outliers (spikes against a running median, far values against the
+   output's spread) and a saturated sensor, left out of the cost with a note;
+5. :func:`burn_in` -- for a record that does not start at rest, the samples until the input
+   has swept its range once are simulated but not fitted: the stage's state before the record
+   began is unknown, and the Duhem block forgets it as ``w1`` moves. The same holds after an
+   isolated input jump (many times the slew the input otherwise holds: a step out of rest, a
+   generator wrapping its last sample round): what it excites lies outside the input envelope
+   the model is identified for.
+
+The sensor offset is not removed here: it is a parameter of every fit (``y0``), started from
+the output's level at rest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..operating import Envelope
+from ..records import Record
+
+__all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "check_excitation",
+           "prepare", "rest_level", "scales"]
+
+#: Samples of a leading constant segment needed to call a record "at rest".
+REST_SAMPLES = 10
+#: A spike is a sample this many robust standard deviations off the running median.
+SPIKE_SIGMAS = 10.0
+#: A far value is this many output spreads (2 % to 98 % quantiles) away from the median.
+FAR_SPREADS = 3.0
+#: An input step this many times the envelope's slew is a jump (out of rest, a wrapped
+#: sample): what it excites is outside the envelope the model is identified for.
+JUMP_SLEWS = 10.0
+#: Share of samples pinned at an extreme for the sensor to count as saturated.
+SATURATION_SHARE = 0.005
+
+
+class IdentificationDataError(ValueError):
+    """The record cannot identify a stage; the message names the record and the reason."""
+
+
+@dataclass
+class Prepared:
+    """A record ready to fit, in normalised units.
+
+    Attributes
+    ----------
+    record : Record
+        The record as given.
+    u_rest : float
+        Input rest level (record units).
+    u_scale, y_scale : float
+        Input and output scales: the fit sees ``un = (u - u_rest) / u_scale`` and
+        ``yn = (y - y_ref) / y_scale``.
+    y_ref : float
+        Output reference (the output at rest, or the median output).
+    un, yn : ndarray
+        The normalised input and output.
+    weight : ndarray of bool
+        Samples in the cost.
+    at_rest : bool
+        Whether the record starts at rest (a leading constant input segment).
+    skip : int
+        Leading samples left out of the cost (burn-in).
+    envelope : Envelope
+        The input envelope over the fitted samples (record units).
+    notes : list of str
+        What was found and done (outliers, saturation, not at rest, a wrapped last sample).
+    """
+
+    record: Record
+    u_rest: float
+    u_scale: float
+    y_ref: float
+    y_scale: float
+    un: np.ndarray
+    yn: np.ndarray
+    weight: np.ndarray
+    at_rest: bool
+    skip: int
+    envelope: Envelope
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def y0_start(self) -> float:
+        """Start value of the normalised offset: the output at rest (0 by construction)."""
+        return 0.0
+
+    def offset(self, y0n: float) -> float:
+        """The sensor offset in record units from its normalised value."""
+        return float(self.y_ref + self.y_scale * y0n)
+
+
+def check_excitation(record: Record) -> None:
+    """Refuse a record whose input cannot identify a stage.
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+
+    Raises
+    ------
+    IdentificationDataError
+        When ``u`` is constant, takes only two levels with a single transition (a single
+        step), or when ``y`` is ``u`` (the same column read twice).
+    """
+    u, y = record.u, record.y
+    where = f"record {record.name!r}"
+    span = float(np.ptp(u))
+    if span <= 1e-12 * max(float(np.max(np.abs(u))), 1e-300):
+        raise IdentificationDataError(
+            f"{where}: the input u is constant ({u[0]:.6g}); it does not excite the stage "
+            "(expected an input that moves: PRBS, sines, triangles)")
+    moves = np.flatnonzero(np.abs(np.diff(u)) > 1e-9 * span)
+    if len(moves) <= 1:
+        raise IdentificationDataError(
+            f"{where}: the input is a single step (it moves once, at sample {moves[0] + 1}); "
+            "a step excites neither the loop nor the dynamics enough to identify the stage "
+            "(expected an input that moves back and forth)")
+    if np.array_equal(u, y):
+        raise IdentificationDataError(
+            f"{where}: the output y equals the input u sample for sample (the same column read "
+            "twice?); expected the measured displacement as y")
+
+
+def rest_level(u: np.ndarray) -> tuple[float, bool, int]:
+    """The input level the stage rests at.
+
+    Parameters
+    ----------
+    u : ndarray
+        Input samples.
+
+    Returns
+    -------
+    u_rest : float
+        Median of the leading constant segment (the first sample when there is none).
+    at_rest : bool
+        True when the record starts with at least :data:`REST_SAMPLES` constant samples, or
+        when its input starts at exactly zero (a generator ramping up from rest).
+    n_lead : int
+        Length of the leading constant segment.
+    """
+    span = float(np.ptp(u))
+    moved = np.flatnonzero(np.abs(u - u[0]) > 1e-6 * span)
+    n_lead = int(moved[0]) if len(moved) else len(u)
+    from_zero = abs(float(u[0])) <= 1e-12 * span
+    return float(np.median(u[:max(n_lead, 1)])), n_lead >= REST_SAMPLES or from_zero, n_lead
+
+
+def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, float]:
+    """Robust scales of the input about its rest and of the output.
+
+    Quantiles scale exactly with the units, so the normalised record (and the fit) is the same
+    in V or kV, um or m.
+
+    Parameters
+    ----------
+    u, y : ndarray
+        Input and output samples.
+    u_rest : float
+        Input rest level.
+
+    Returns
+    -------
+    u_scale : float
+        The 99.9 % quantile of ``|u - u_rest|``.
+    y_ref : float
+        The median output.
+    y_scale : float
+        Half the spread between the 2 % and 98 % quantiles of ``y`` (a burst or a clipped
+        stretch shorter than 2 % of the record does not move it).
+    """
+    dev = np.abs(u - u_rest)
+    u_scale = float(np.quantile(dev, 0.999)) or float(np.max(dev))
+    lo, med, hi = np.quantile(y, [0.02, 0.5, 0.98])
+    y_scale = 0.5 * float(hi - lo) or float(np.max(np.abs(y - med))) or 1.0
+    return u_scale, float(med), y_scale
+
+
+def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Samples of ``y`` that a deterministic model should not be fitted to.
+
+    * far values: more than :data:`FAR_SPREADS` output spreads (2 % to 98 % quantiles) from
+      the median (a burst, a sensor glitch of 1e12);
+    * spikes: a sample off the mean of its two neighbours by more than :data:`SPIKE_SIGMAS`
+      robust standard deviations of that second difference and by more than 5 % of the
+      output's spread, while the neighbours agree with each other to a third of that (a
+      lightly damped mode's peaks have neighbours that agree, but a far smaller excursion);
+    * saturation: runs of samples pinned at the output's minimum or maximum, when they hold
+      more than :data:`SATURATION_SHARE` of the record.
+
+    Parameters
+    ----------
+    y : ndarray
+        Output samples.
+
+    Returns
+    -------
+    bad : ndarray of bool
+        True for the samples to leave out.
+    notes : list of str
+        One sentence per kind found.
+    """
+    notes = []
+    lo, med, hi = np.quantile(y, [0.02, 0.5, 0.98])
+    spread = max(float(hi - lo), 1e-300)
+    far = np.abs(y - med) > FAR_SPREADS * spread
+    z = np.pad(np.where(far, med, y), 1, mode="edge")
+    local = z[1:-1] - 0.5 * (z[:-2] + z[2:])
+    apart = np.abs(z[2:] - z[:-2])
+    sigma = 1.4826 * float(np.median(np.abs(local - np.median(local)))) + 1e-300
+    spike = ((np.abs(local) > SPIKE_SIGMAS * sigma) & (np.abs(local) > 0.05 * spread)
+             & (apart < np.abs(local) / 3.0) & ~far)
+    if far.any():
+        notes.append(f"{int(far.sum())} output samples lie far outside the output's range "
+                     f"(e.g. {y[far][0]:.4g} at sample {int(np.flatnonzero(far)[0])}); left out "
+                     "of the fit")
+    if spike.any():
+        notes.append(f"{int(spike.sum())} output spikes (first at sample "
+                     f"{int(np.flatnonzero(spike)[0])}); left out of the fit")
+    good = y[~(far | spike)]
+    ymin, ymax = float(np.min(good)), float(np.max(good))
+    tol = 1e-9 * max(ymax - ymin, 1e-300)
+    pinned = np.zeros(len(y), bool)
+    for level, label in ((ymax, "maximum"), (ymin, "minimum")):
+        at = (np.abs(y - level) <= tol) & ~(far | spike)
+        if at.sum() > SATURATION_SHARE * len(y) and at.sum() > 3:
+            pinned |= at
+            notes.append(f"the sensor looks saturated: {int(at.sum())} samples "
+                         f"({100 * at.mean():.1f} %) sit exactly at the output's {label} "
+                         f"{level:.6g}; left out of the fit")
+    return far | spike | pinned, notes
+
+
+def burn_in(u: np.ndarray, at_rest: bool, limit: float = 0.25, sweeps: float = 2.0) -> int:
+    """Leading samples to leave out of the cost of a record that does not start at rest.
+
+    Parameters
+    ----------
+    u : ndarray
+        Input samples.
+    at_rest : bool
+        Whether the record starts at rest (then nothing is left out).
+    limit : float
+        Largest share of the record left out.
+    sweeps : float
+        Travel of the input, in input ranges, that the burn-in waits for.
+
+    Returns
+    -------
+    int
+        The samples until the input has travelled ``sweeps`` times its range (2: down and up
+        once), at most ``limit`` of the record.
+    """
+    if at_rest:
+        return 0
+    travel = np.cumsum(np.abs(np.diff(u, prepend=u[0])))
+    k = int(np.searchsorted(travel, sweeps * float(np.ptp(u))))
+    return min(k, int(limit * len(u)))
+
+
+def prepare(record: Record, *, skip: int | None = None) -> Prepared:
+    """Run the preparation steps of this module on a record.
+
+    Parameters
+    ----------
+    record : Record
+        The record as it comes.
+    skip : int, optional
+        Leading samples to leave out of the cost; by default :func:`burn_in`'s choice.
+
+    Returns
+    -------
+    Prepared
+
+    Raises
+    ------
+    IdentificationDataError
+        When the record cannot identify a stage (see :func:`check_excitation`).
+    """
+    check_excitation(record)
+    u, y = record.u, record.y
+    u_rest, at_rest, n_lead = rest_level(u)
+    u_scale, y_med, y_scale = scales(u, y, u_rest)
+    bad, notes = bad_samples(y)
+    y_ref = float(np.median(y[:n_lead][~bad[:n_lead]])) if at_rest and (~bad[:n_lead]).any() \
+        else y_med
+    if not at_rest:
+        notes.append("the record does not start at rest (no leading constant input); the "
+                     "start is simulated but left out of the fit")
+    skip = burn_in(u, at_rest) if skip is None else int(skip)
+    if not 0 <= skip < len(u) - 1:
+        raise IdentificationDataError(f"record {record.name!r}: skip={skip} leaves no samples "
+                                      f"to fit (expected 0 <= skip < {len(u) - 1})")
+    weight = ~bad
+    weight[:skip] = False
+    du = np.abs(np.diff(u))
+    slew = np.quantile(du, 0.999) if len(du) else 0.0
+    if len(du) and du[-1] > JUMP_SLEWS * max(slew, 1e-300):
+        weight[-1] = False
+        notes.append(f"the input jumps by {du[-1]:.4g} on its last sample (a generator "
+                     "wrapping round?); that sample is left out of the fit")
+    for j in np.flatnonzero(du[:-1] > JUMP_SLEWS * max(slew, 1e-300)) + 1:
+        n = burn_in(u[j:], False, sweeps=0.5)
+        weight[j:j + n] = False
+        notes.append(f"the input jumps by {du[j - 1]:.4g} at sample {j}, {du[j - 1] / slew:.0f} "
+                     f"times the slew it otherwise holds; the {n} samples after it (until the "
+                     "input has travelled half its range) are simulated but left out of the fit")
+    if weight.sum() < 0.5 * len(u):
+        raise IdentificationDataError(
+            f"record {record.name!r}: only {int(weight.sum())} of {len(u)} samples are usable "
+            f"({'; '.join(notes)})")
+    fitted = slice(skip, len(u) - (0 if weight[-1] else 1))
+    return Prepared(record, u_rest, u_scale, y_ref, y_scale, (u - u_rest) / u_scale,
+                    (y - y_ref) / y_scale, weight, at_rest, skip, Envelope.of(u[fitted]), notes)
