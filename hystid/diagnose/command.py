@@ -1,11 +1,12 @@
 """``hystid diagnose``: the sim-to-real gap diagnosis from the command line.
 
 ``hystid diagnose TRAIN [--val VAL ...] [--repeat REC ...] [--fs HZ] [--model MODEL.json]
-[--json] [--out DIR] [--force] [--quiet]`` identifies the nominal sandwich on TRAIN (or takes the saved model given
-with ``--model``), localises its held-out error, screens and refits the candidate effects and
-prints a summary (or, with ``--json``, one JSON object). Bad input (unreadable or too-short
-records, mismatched sampling rates, records that cannot show a requested effect, an output folder
-that would overwrite files) gives a message on stderr and exit status 2 before any work.
+[--json] [--out DIR] [--force] [--quiet]`` identifies the nominal sandwich on TRAIN (or takes the
+saved model given with ``--model``), localises its held-out error, screens and refits the
+candidate effects and prints a summary (or, with ``--json``, one JSON object). Bad input
+(unreadable or too-short records, mismatched sampling rates, records that cannot show a
+requested effect, an output folder that would overwrite files) gives a message on stderr and
+exit status 2 before any work.
 """
 
 from __future__ import annotations
