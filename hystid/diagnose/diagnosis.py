@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..baselines import repeat_floor
+from ..identify import identify
 from ..identify.offline import fit_output_error, linear_start
 from ..identify.result import IdentificationResult
 from ..model import DuhemSandwich, Structure
@@ -36,6 +37,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "ALIKE",
+    "DEFAULT_EFFECTS",
+    "IN_NOMINAL",
     "MIN_TRAIN_SAMPLES",
     "MIN_VAL_SAMPLES",
     "DiagnosisError",
@@ -47,6 +50,12 @@ __all__ = [
 #: Two candidates' held-out corrections ``da, db`` count as alike when
 #: ``1 - |da - db| / max(|da|, |db|)`` exceeds this.
 ALIKE = 0.75
+#: Forms that are parameters of the nominal model (the sensor offset is estimated by every fit).
+IN_NOMINAL = ("offset",)
+#: The candidates by default: every form that is not part of the nominal model.
+DEFAULT_EFFECTS = tuple(n for n in EFFECT_NAMES if n not in IN_NOMINAL)
+
+
 #: Fewest samples in the train part and in the held-out part.
 MIN_TRAIN_SAMPLES = 2000
 MIN_VAL_SAMPLES = 1000
@@ -336,7 +345,7 @@ def diagnose(
     model: DuhemSandwich | IdentificationResult | None = None,
     *,
     structure: Structure | None = None,
-    effects: Sequence[str] = EFFECT_NAMES,
+    effects: Sequence[str] = DEFAULT_EFFECTS,
     repeats: Sequence[Record] | None = None,
     holdout: float = 0.4,
     alpha: float = 0.01,
@@ -362,15 +371,15 @@ def diagnose(
         Held-out records. Without them the last ``holdout`` share of ``train`` is held out (the
         model runs through the whole record; only the head is fitted).
     model : DuhemSandwich or IdentificationResult, optional
-        The model to diagnose; identified on ``train`` by output-error least squares when
-        omitted. A given model is also refitted alone, so that candidates are compared with a
-        model fitted the same way. Its ``u_rest`` is taken off the input and its ``offset``
-        starts the sensor-offset parameter.
+        The model to diagnose; identified on ``train`` by :func:`hystid.identify.identify`
+        (batch: sensor offset and rest level estimated) when omitted. It is then refitted
+        alone, so that candidates are compared with a model fitted the same way. Its
+        ``u_rest`` is taken off the input and its ``offset`` is the sensor-offset parameter.
     structure : Structure, optional
         Structure for the identification; the paper's experimental one by default.
     effects : sequence of str
-        Candidate families or forms (all of :data:`~hystid.diagnose.effects.EFFECT_NAMES` by
-        default); a family name stands for all its forms.
+        Candidate families or forms (all of :data:`DEFAULT_EFFECTS` by default); a family name
+        stands for all its forms. The sensor offset is a parameter of the nominal model.
     repeats : sequence of Record, optional
         Records of the same input as ``train`` or a held-out record: the floor of the gap is
         then the repeatability (:func:`hystid.baselines.repeat_floor`) when it is above the
@@ -462,11 +471,15 @@ def diagnose(
         f"({held}) at {fs:g} Hz; candidates: {', '.join(names)}")
 
     # ----------------------------------------------------------------- nominal model
-    given = model is not None
     t_nominal = time.perf_counter()
     if model is None:
-        say("identifying the nominal sandwich (output-error least squares)")
+        say("identifying the nominal sandwich (hystid.identify, batch: offset and rest level "
+            "estimated)")
         nominal = _identify(tr, structure)
+        if nominal.u_rest != 0.0:
+            u_rest = nominal.u_rest
+            tr, vds, t0s, held = _split(train, vals, holdout, transient, skip_tr, initial,
+                                        u_rest)
     else:
         nominal = model
     phi0 = zero_vector()
@@ -480,16 +493,15 @@ def diagnose(
                              "Duhem stability condition (8) fails): scale the input down")
     say(f"nominal model: train RMS {first.rms_train:.4g}, held-out RMS {first.rms_val:.4g}")
     base_model, first_fit = nominal, None
-    if given or initial == "level" or skip_tr > 0:
-        # the candidates are refitted with this cost and initial state: so is the base
-        say("refitting the nominal model alone (the base the candidates are compared with)")
-        rb = refit(nominal, tr, [], [phi0])
-        if rb.ok and rb.cost <= first.rms_train**2:
-            base_model = DuhemSandwich(rb.theta, nominal.structure, fs=fs, name=nominal.name)
-            first_fit = {"rms_val": first.rms_val, "rms_train": first.rms_train,
-                         "params": nominal.params,
-                         "note": "the given or first-identified model; the nominal figures are "
-                                 "those of its refit with the candidates' cost and initial state"}
+    # the candidates are refitted with this cost and initial state: so is the base
+    say("refitting the nominal model alone (the base the candidates are compared with)")
+    rb = refit(nominal, tr, [], [phi0])
+    if rb.ok and rb.cost <= first.rms_train**2:
+        base_model = DuhemSandwich(rb.theta, nominal.structure, fs=fs, name=nominal.name)
+        first_fit = {"rms_val": first.rms_val, "rms_train": first.rms_train,
+                     "params": nominal.params,
+                     "note": "the given or identified model; the nominal figures are those of "
+                             "its refit with the candidates' cost and initial state"}
     t_nominal = time.perf_counter() - t_nominal
     nom = ev(base_model, phi0, drift=False) if first_fit is not None else first
     if first_fit is not None:
@@ -643,10 +655,14 @@ def diagnose(
 
 # --------------------------------------------------------------------------- stages
 def _expand_families(effects: Sequence[str]) -> list[str]:
-    """Family names stand for all their forms (``creep`` -> ``creep, creep_2tau, ...``)."""
+    """Family names stand for all their forms (``creep`` -> ``creep, creep_2tau, ...``); forms
+    that are part of the nominal model are refused."""
     out: list[str] = []
     for n in effects:
-        forms = FAMILIES.get(n, (n,))
+        if n in IN_NOMINAL:
+            raise ValueError(f"effects: {n!r} is a parameter of the nominal model (the sensor "
+                             "offset is estimated with it), not a candidate")
+        forms = [f for f in FAMILIES.get(n, (n,)) if f not in IN_NOMINAL]
         out += [f for f in forms if f not in out]
     return out
 
@@ -990,18 +1006,21 @@ def _delay_as_structure(state: _Greedy, tr: FitData, rf: RefitResult,
             continue
         with np.errstate(all="ignore"):
             y = DuhemSandwich(lin, sd, fs=tr.fs).simulate(tr.u, check=False).y
-        if np.all(np.isfinite(y)):
-            scores.append((float(np.mean((y - tr.y) ** 2)), d))
+            cost = float(np.mean((y - tr.y) ** 2)) if np.all(np.isfinite(y)) else np.inf
+        if np.isfinite(cost):
+            scores.append((cost, d))
     scores.sort()
     ref = dict((d, c) for c, d in scores).get(0, np.inf)
     best = rf
-    for cost, d in scores[:2]:
-        if d == 0 or not cost < ref:
+    for cost, d in scores[:1]:
+        # a dead time worth a fresh identification: its linear start is clearly better
+        if d == 0 or not cost < 0.9 * ref:
             continue
         say(f"identifying the nominal structure with q1 + {d}")
         fresh = _identify(tr, replace(s, q1=s.q1 + d))
         start = np.array(state.phi, float)
         start[EFFECTS["delay"].slots[0]] = d
+        start[EFFECTS["offset"].slots[0]] = fresh.offset
         m = DuhemSandwich(fresh.theta, s, fs=tr.fs, name=state.model.name)
         cand = refit(m, tr, state.fit_active + ["delay"], [start], base_phi=start,
                      step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1])
@@ -1131,13 +1150,14 @@ def _rms(errs: list[np.ndarray]) -> float:
 
 
 def _identify(tr: FitData, structure: Structure | None) -> DuhemSandwich:
-    """The nominal identification: output-error least squares on the train part.
+    """The nominal identification: :func:`hystid.identify.identify` (batch) on the train part,
+    which places the model at the record's rest level and sensor offset.
 
-    With an initial output level, a first fit from rest gives the L2 gain that sets the
-    initial Duhem state, and a second fit starts from it.
+    With an initial output level, a first fit gives the L2 gain that sets the initial Duhem
+    state, and a second fit from that past (at rest at ``u = 0``, no offset) follows.
     """
     rec = Record(tr.u, tr.y, tr.fs, name="train")
-    res = fit_output_error(rec, structure)
+    res = identify(rec, "batch", structure)
     if tr.level is not None:
         P = res.model.structure.history
         x0 = initial_state(res.model, tr.level, float(tr.u[0]), P)

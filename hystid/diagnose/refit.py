@@ -26,6 +26,7 @@ from .effects import EFFECTS, FIXED_SLOTS, LOG_STEP, MAX_DELAY, N_LOG, N_SLOTS, 
 
 __all__ = [
     "MARGIN_LIMIT",
+    "NOMINAL_SLOTS",
     "FitData",
     "Parametrisation",
     "RefitResult",
@@ -37,6 +38,8 @@ __all__ = [
 
 #: Condition (8) asks ``alpha |dw1| < 2``; the refits are held below this value.
 MARGIN_LIMIT = 1.9
+#: Effect-vector slots that belong to the nominal model: the sensor offset.
+NOMINAL_SLOTS = (EFFECTS["offset"].slots[0],)
 
 
 @dataclass
@@ -150,7 +153,9 @@ class Parametrisation:
         Largest ``|w1|`` (scale of the saturation's and the level-dependent loop's
         coefficients).
     free_theta : bool
-        Whether the nominal parameters are free (False: the effects' parameters alone).
+        Whether the nominal parameters are free (False: the effects' parameters alone). With
+        them, the sensor offset (:data:`NOMINAL_SLOTS`) is free too: it is a parameter of the
+        nominal model, as in :func:`hystid.identify.offline.fit_output_error`.
     """
 
     def __init__(self, model: DuhemSandwich, active: Sequence[str], duration: float,
@@ -167,6 +172,8 @@ class Parametrisation:
         self.w1_scale = float(max(w1_scale, 1e-12))
         self.slots = [s for name in self.active for s in EFFECTS[name].slots
                       if s not in FIXED_SLOTS]
+        if free_theta:
+            self.slots = [s for s in NOMINAL_SLOTS if s not in self.slots] + self.slots
         if len(set(self.slots)) != len(self.slots):
             raise ValueError(f"forms {self.active} share parameters: at most one form per family")
         self.n = self.ntheta + len(self.slots)

@@ -273,8 +273,8 @@ def screen(
             yield D[:, None], (lambda b: with_(s11=float(np.clip(b[0] * w1_scale**2, -0.25,
                                                                  2.0)) / w1_scale**2))
         elif name == "offset":
-            D = (sim(with_(s12=h)) - y0) / h
-            yield D[:, None], (lambda b: with_(s12=float(b[0])))
+            D = (sim(with_(s12=phi[12] + h)) - y0) / h
+            yield D[:, None], (lambda b: with_(s12=float(phi[12] + b[0])))
         else:  # pragma: no cover - names are checked by the caller
             raise ValueError(name)
 
