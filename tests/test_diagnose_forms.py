@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hystid.baselines import repeat_floor
-from hystid.diagnose import DiagnosisError, diagnose
+from hystid.diagnose import AugmentedSandwich, DiagnosisError, diagnose
 from hystid.diagnose import diagnosis as diagnosis_module
 from hystid.diagnose.refit import RefitResult
 from hystid.records import Record
@@ -92,10 +92,10 @@ def test_failed_refits_are_reported_as_failed(clean_stage, monkeypatch):
 
     real = diagnosis_module.refit
     monkeypatch.setattr(diagnosis_module, "refit", failing)
-    res = diagnose(*clean_stage, effects=["delay", "offset", "drift"], refit_all=True,
+    res = diagnose(*clean_stage, effects=["delay", "saturation", "drift"], refit_all=True,
                    progress=False)
     failed = {e.name: e for e in res.effects if e.status == "failed"}
-    assert set(failed) == {"delay", "offset"}
+    assert set(failed) == {"delay", "saturation", "output_curve"}
     assert all("condition (8)" in e.message for e in failed.values())
     text = res.summary()
     assert "refit failed" in text and "condition (8)" in text
@@ -106,7 +106,7 @@ def test_inadmissible_nominal_model_is_reported_first(clean_stage):
     # held-out input: a step from rest to 5 V, where condition (8) fails for the paper's stage
     u = np.where(np.arange(4000) < 200, 0.0, 5.0)
     val = Record(u, reference_model().simulate(u, check=False).y, FS, name="step")
-    res = diagnose(train, val, reference_model(), effects=["offset"], progress=False)
+    res = diagnose(train, val, reference_model(), effects=["saturation"], progress=False)
     assert res.nominal["admissibility"]
     assert "condition (8)" in res.nominal["admissibility"][0]
     assert res.summary().startswith("WARNING: the nominal model is not admissible")
@@ -118,10 +118,9 @@ def test_accepted_effects_carry_their_round_figures():
     recs = []
     for label in ("train", "val"):
         u = paper_excitation(N, FS, seed=int(rng.integers(1 << 30))) + _level_steps(N, rng)
-        from hystid.diagnose import AugmentedSandwich
-
-        y = AugmentedSandwich(model, {"offset": {"y0": 0.03},
-                                      "creep": {"gain": 0.03, "tau": 0.05}}).simulate(u).y
+        y = AugmentedSandwich(model, {
+            "extra_mode": {"gain": 0.1, "freq": 5000.0, "zeta": 0.02},
+            "creep": {"gain": 0.02, "tau": 0.05}}).simulate(u).y
         recs.append(Record(u, y + NOISE * rng.standard_normal(N), FS, name=label))
     res = diagnose(recs[0], recs[1], progress=False)
     assert len(res.accepted) >= 2
@@ -137,7 +136,7 @@ def test_accepted_effects_carry_their_round_figures():
 
 
 def test_unexplained_part_is_described(clean_stage):
-    res = diagnose(*clean_stage, effects=["offset"], progress=False)
+    res = diagnose(*clean_stage, effects=["saturation"], progress=False)
     u = res.final["unexplained"]
     assert {"band_hz", "periodic", "worst_zone", "branch", "text"} <= set(u)
     assert u["band_hz"][0] <= u["band_hz"][1]
@@ -156,10 +155,10 @@ def test_repeats_set_the_floor():
         reps.append(Record(u, y + slow + NOISE * rng.standard_normal(N), FS, name=f"rep {k}"))
     u2 = paper_excitation(N, FS, seed=8)
     train = Record(u2, model.simulate(u2).y + NOISE * rng.standard_normal(N), FS, name="train")
-    res = diagnose(train, reps[0], repeats=reps[1:], effects=["offset"], progress=False)
+    res = diagnose(train, reps[0], repeats=reps[1:], effects=["saturation"], progress=False)
     assert res.floor["kind"] == "repeatability"
     assert res.floor["rms"] == pytest.approx(repeat_floor(reps))
     assert res.floor["rms"] > 3 * res.noise_floor_rms
     assert res.nominal["gap"] == pytest.approx(res.nominal["rms_val"] - res.floor["rms"])
     with pytest.raises(DiagnosisError, match="repeats"):
-        diagnose(train, reps[0], repeats=[train], effects=["offset"], progress=False)
+        diagnose(train, reps[0], repeats=[train], effects=["saturation"], progress=False)

@@ -39,7 +39,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The sub-command's parser.
     """
-    from .effects import EFFECT_NAMES
+    from .diagnosis import DEFAULT_EFFECTS
+    from .effects import FAMILIES
 
     parser.add_argument("train", metavar="TRAIN",
                         help="record to identify on (csv, npz, mat, h5 or file.h5:group)")
@@ -62,7 +63,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="replace files already in DIR")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument("--effects", default=None, metavar="NAMES",
-                        help=f"comma-separated candidates (default all: {','.join(EFFECT_NAMES)});"
+                        help=f"comma-separated families or forms (default all forms of "
+                        f"{','.join(FAMILIES)}: {','.join(DEFAULT_EFFECTS)});"
                         " a named candidate that the records cannot show is an error")
     parser.add_argument("--holdout", type=_fraction, default=0.4,
                         help="share of TRAIN held out when no --val is given (default 0.4)")
@@ -74,9 +76,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--train-skip", type=number(0.0), default=0.0, metavar="S",
                         help="seconds at the start of TRAIN simulated but left out of the fit's "
                         "cost (an initial transient the model cannot represent)")
-    parser.add_argument("--initial", choices=("rest", "level"), default="rest",
+    parser.add_argument("--initial", choices=("auto", "rest", "level"), default="auto",
                         help="records start at rest at zero output (rest) or at the output "
-                        "level measured before the input first moves (level)")
+                        "level measured before the input first moves (level); auto (default): "
+                        "level for a record that starts with 10 samples at rest")
     parser.add_argument("--alpha", type=_fraction, default=0.01,
                         help="family-wise level of the held-out test per round (default 0.01)")
     parser.add_argument("--min-reduction", type=_fraction, default=0.02,
@@ -209,8 +212,7 @@ def run(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         Parsed arguments (see :func:`configure_parser`).
     """
-    from .diagnosis import DiagnosisError, diagnose
-    from .effects import EFFECT_NAMES
+    from .diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
 
     try:
         _check_out(args)
@@ -218,7 +220,7 @@ def run(args: argparse.Namespace) -> int:
         vals = [_load(p, args, f"--val {p}") for p in args.val]
         repeats = [_load(p, args, f"--repeat {p}") for p in args.repeat]
         if args.effects is None:
-            names, strict = EFFECT_NAMES, False
+            names, strict = DEFAULT_EFFECTS, False
         else:
             names = tuple(n.strip() for n in args.effects.split(",") if n.strip())
             strict = True

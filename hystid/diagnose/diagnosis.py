@@ -22,12 +22,13 @@ import numpy as np
 
 from ..baselines import repeat_floor
 from ..identify import identify
-from ..identify.offline import fit_output_error, linear_start
+from ..identify.offline import linear_start
+from ..identify.prepare import prepare
 from ..identify.result import IdentificationResult
 from ..model import DuhemSandwich, Structure
 from ..records import Record
 from .effects import EFFECT_NAMES, EFFECTS, FAMILIES, AugmentedSandwich, effect_dict, family_of
-from .refit import FitData, RefitResult, duhem_margin, initial_state, refit, simulate_fit_data
+from .refit import FitData, RefitResult, duhem_margin, refit, simulate_fit_data
 from .screen import ScreenResult, compare_losses, effect_names_check, screen, zero_vector
 from .where import Segment, Where, localise
 
@@ -291,10 +292,14 @@ def _as_records(val) -> list[Record]:
     return out
 
 
-def _rest_level(rec: Record, label: str) -> float:
+def _rest_level(rec: Record, label: str, required: bool = True) -> float | None:
+    """Mean output before the input first moves (None, when not required, for a record that
+    does not start with 10 samples at rest)."""
     moved = np.flatnonzero(rec.u != rec.u[0])
     k = int(moved[0]) if len(moved) else rec.n
     if k < 10:
+        if not required:
+            return None
         raise DiagnosisError(
             f"{label} {rec.name!r}: initial='level' needs at least 10 samples at rest before "
             f"the input first moves, found {k}")
@@ -353,10 +358,11 @@ def diagnose(
     max_rounds: int = 3,
     transient: float = 0.0017,
     train_skip: float = 0.0,
-    initial: str = "rest",
+    initial: str = "auto",
     refit_all: bool = False,
     min_gap_share: float = 0.1,
-    refit_samples: int = 20_000,
+    min_gap_share_later: float = 0.25,
+    refit_samples: int | None = None,
     time_budget: float | None = None,
     require_excitation: bool = False,
     progress: bool | Callable[[str], None] = True,
@@ -399,18 +405,24 @@ def diagnose(
         Seconds at the start of the train record simulated but left out of the refits' cost
         (an initial state the model cannot represent); the nominal model is then refitted alone
         with the same cost before the candidates are compared with it.
-    initial : {'rest', 'level'}
+    initial : {'auto', 'rest', 'level'}
         ``rest``: records start at rest at zero output. ``level``: at rest at the mean output
-        measured before the input first moves (the Duhem state holds the remanent value).
+        measured before the input first moves (the Duhem state holds the remanent value, as
+        the identification's fitted state at rest). ``auto`` (default): ``level`` for a record
+        that starts with 10 samples at rest, ``rest`` otherwise.
     refit_all : bool
         Refit every excited form, not only the promising ones.
     min_gap_share : float
         Smallest share of the nominal model's gap (to the floor) a form must close to be
-        accepted, in any round.
-    refit_samples : int
-        The forms are compared on refits over the first ``refit_samples`` train samples (the
-        model they are compared with refitted on the same span); the accepted form is then
-        refitted on the whole train part. Bounds the cost on long records.
+        accepted in the first round.
+    min_gap_share_later : float
+        The same in later rounds: a further effect must explain a good part of the gap, not
+        what the first form's imperfect fit leaves.
+    refit_samples : int, optional
+        Compare the forms on refits over the first ``refit_samples`` train samples only (the
+        model they are compared with refitted on the same span); an accepted form is then
+        refitted on the whole train part and must pass again. Bounds the cost on long records
+        whose head is well excited (all samples by default).
     time_budget : float, optional
         Seconds the refits of further forms may take once every family that the screen
         cannot rule out has had its most promising form refitted (unlimited by default).
@@ -437,13 +449,13 @@ def diagnose(
         names = effect_names_check(_expand_families(effects))
     except ValueError as err:
         raise DiagnosisError(str(err)) from err
-    if initial not in ("rest", "level"):
-        raise DiagnosisError(f"initial: expected 'rest' or 'level', got {initial!r}")
+    if initial not in ("auto", "rest", "level"):
+        raise DiagnosisError(f"initial: expected 'auto', 'rest' or 'level', got {initial!r}")
     if not 0 < alpha < 1:
         raise DiagnosisError(f"alpha: expected a level in (0, 1), got {alpha}")
     if not 0 <= min_reduction < 1:
         raise DiagnosisError(f"min_reduction: expected a fraction in [0, 1), got {min_reduction}")
-    if refit_samples < MIN_TRAIN_SAMPLES:
+    if refit_samples is not None and refit_samples < MIN_TRAIN_SAMPLES:
         raise DiagnosisError(f"refit_samples: expected at least {MIN_TRAIN_SAMPLES}, got "
                              f"{refit_samples}")
     if time_budget is not None and not time_budget >= 0:
@@ -461,8 +473,10 @@ def diagnose(
         raise DiagnosisError(f"model: sampling rate {model.fs:g} Hz differs from the records' "
                              f"{fs:g} Hz")
     repeat = _repeat_floor(train, vals, repeats)
-    if not 0 <= min_gap_share < 1:
-        raise DiagnosisError(f"min_gap_share: expected a fraction in [0, 1), got {min_gap_share}")
+    for label, v in (("min_gap_share", min_gap_share),
+                     ("min_gap_share_later", min_gap_share_later)):
+        if not 0 <= v < 1:
+            raise DiagnosisError(f"{label}: expected a fraction in [0, 1), got {v}")
 
     # ----------------------------------------------------------------- data
     u_rest = model.u_rest if model is not None else 0.0
@@ -482,10 +496,15 @@ def diagnose(
                                         u_rest)
     else:
         nominal = model
+    left_out = _cost_mask(tr, u_rest)
+    if left_out is not None:
+        say(f"{int(np.count_nonzero(~left_out))} train samples simulated but left out of every "
+            "cost, as the identification leaves them out (burn-in, jumps, outliers, a "
+            "saturated sensor)")
     phi0 = zero_vector()
     phi0[EFFECTS["offset"].slots[0]] = getattr(nominal, "offset", 0.0)
     ev = _Evaluator(tr, vds, t0s)
-    tr_c = _head(tr, refit_samples)
+    tr_c = tr if refit_samples is None else _head(tr, refit_samples)
     ev_c = ev if tr_c is tr else _Evaluator(tr_c, vds, t0s)
     first = ev(nominal, phi0, drift=False)
     if not first.finite:
@@ -498,6 +517,7 @@ def diagnose(
     rb = refit(nominal, tr, [], [phi0])
     if rb.ok and rb.cost <= first.rms_train**2:
         base_model = DuhemSandwich(rb.theta, nominal.structure, fs=fs, name=nominal.name)
+        phi0 = rb.phi
         first_fit = {"rms_val": first.rms_val, "rms_train": first.rms_train,
                      "params": nominal.params,
                      "note": "the given or identified model; the nominal figures are those of "
@@ -532,7 +552,8 @@ def diagnose(
         drift_result, base = None, window
         if "drift" in remaining:
             # the drift is a nuisance of every record: the forms are refitted with the train
-            # record's own drift and judged beyond each held-out record's own drift
+            # record's own drift (so that they do not take it up) and judged on the held-out
+            # records as they are: a drift fitted on one record does not carry to another
             drift_result, base = window.with_drift(tr_c, ev_c, say)
         others = [n for n in remaining if n != "drift"]
         say(f"round {rnd}: screening {', '.join(others)}")
@@ -572,7 +593,8 @@ def diagnose(
         level_r = alpha / max(len(results) + sum(
             c["status"] == "failed" for c in info["candidates"].values()), 1)
         info["test_level"] = level_r
-        needed = min_gap_share * max(nom.rms_val - floor_rms, 0.0)
+        share = min_gap_share if rnd == 1 else max(min_gap_share, min_gap_share_later)
+        needed = share * max(nom.rms_val - floor_rms, 0.0)
         passing = [n for n, (_, t, _) in results.items()
                    if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction
                    and t["rms_base"] - t["rms_cand"] >= needed]
@@ -586,15 +608,33 @@ def diagnose(
         # catch the whole effect), a new family next, a record's own drift last
         pool = ([n for n in passing if family_of(n) in state.families]
                 or [n for n in passing if n != "drift"] or passing)
-        best = min(pool, key=lambda n: results[n][1]["rms_cand"])
-        best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
-                                             for n, r in results.items()}, level_r,
-                             min_reduction)
-        rf, test, ev_best = results[best]
-        if tr_c is not tr or (drift_result is not None and best != "drift"):
-            # on the whole train part, and without the train record's drift unless the drift
-            # is what was accepted: the model that goes on explains the records by itself
-            rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
+        chosen = None
+        while pool and chosen is None:
+            best = min(pool, key=lambda n: results[n][1]["rms_cand"])
+            best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
+                                              for n, r in results.items()}, level_r,
+                                 min_reduction)
+            rf, test, ev_best = results[best]
+            if tr_c is not tr or (drift_result is not None and best != "drift"):
+                # on the whole train part, and without the train record's drift unless the
+                # drift is what was accepted: the model that goes on explains the records by
+                # itself; it must pass the same test again
+                rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
+                if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
+                        and test["rms_base"] - test["rms_cand"] >= needed):
+                    info["candidates"][best].update({
+                        "status": "not confirmed",
+                        "message": f"passed on its refit over the train head, not once "
+                                   f"refitted on the whole train part (held-out RMS "
+                                   f"{test['rms_cand']:.4g}, p = {test['p_value']:.2g})"})
+                    say(f"round {rnd}: {best} not confirmed on the whole train part")
+                    pool.remove(best)
+                    continue
+            chosen = best
+        if chosen is None:
+            rounds.append(info)
+            break
+        best = chosen
         rms_before = state.ev.rms_val
         state.accept(best, rf, ev_best, localise(ev_best.segments))
         nf_estimates.append(state.where.noise["rms"])
@@ -637,6 +677,7 @@ def diagnose(
              "params": state.model.params,
              "unexplained": describe_unexplained(state.where, floor["rms"])}
     settings = {"alpha": alpha, "min_reduction": min_reduction, "min_gap_share": min_gap_share,
+                "min_gap_share_later": min_gap_share_later,
                 "refit_samples": refit_samples, "max_rounds": max_rounds,
                 "holdout": None if vals else holdout, "transient_s": transient,
                 "train_skip_s": train_skip, "initial": initial, "candidates": list(names),
@@ -695,7 +736,9 @@ def _split(train: Record, vals: list[Record], holdout: float, transient: float, 
     fs = train.fs
 
     def level(rec: Record, label: str) -> float | None:
-        return _rest_level(rec, label) if initial == "level" else None
+        if initial == "rest":
+            return None
+        return _rest_level(rec, label, required=initial == "level")
 
     if vals:
         tr = FitData(train.u - u_rest, train.y, fs, level(train, "train"),
@@ -721,7 +764,6 @@ class _Evaluation:
     scales: tuple[float, float]
     margin_val: float
     finite: bool
-    beyond_drift: list[np.ndarray]
 
     @property
     def rms_val(self) -> float:
@@ -734,9 +776,7 @@ class _Evaluator:
     The drift is a nuisance of each record: its parameters (fitted on the train record) are
     zero on the held-out records; with ``drift`` on, a drift ``d1 t + d2 t^2 + d3 t^3`` is
     re-estimated on each of them by least squares, so the held-out error is what the model
-    explains beyond it. Without, the errors beyond such a drift are kept alongside
-    (``beyond_drift``): the other forms are tested on them, so that none is credited with a
-    record's own drift.
+    explains beyond it.
     """
 
     def __init__(self, tr: FitData, vds: list[FitData], t0s: list[float]) -> None:
@@ -750,29 +790,28 @@ class _Evaluator:
         scales = (float(np.max(np.abs(np.diff(w1)))), float(np.max(np.abs(w1))))
         phi_val = np.array(phi, float)
         phi_val[self.drift_slots] = 0.0
-        errs, segs, beyond, margin = [], [], [], 0.0
+        errs, segs, margin = [], [], 0.0
         for vd, t0 in zip(self.vds, self.t0s, strict=True):
             w1v, _, yv = simulate_fit_data(m, phi_val, vd)
             sl = vd.weight
             yv = yv.copy()
-            t = np.arange(len(vd.u))[sl] / vd.fs
-            own = _drift_fit(t, vd.y[sl] - yv[sl])
             if drift:
-                yv[sl] += own
+                t = np.arange(len(vd.u))[sl] / vd.fs
+                yv[sl] += _drift_fit(t, vd.y[sl] - yv[sl])
             errs.append(vd.y[sl] - yv[sl])
-            beyond.append(errs[-1] if drift else errs[-1] - own)
             segs.append(Segment(vd.u[sl], vd.y[sl], yv[sl], w1v[sl].copy(), vd.fs, t0))
             margin = max(margin, duhem_margin(m.theta, m.structure, phi_val, w1v[sl]))
         finite = bool(np.isfinite(e_tr).all() and all(np.isfinite(e).all() for e in errs))
         rms_tr = float(np.sqrt(np.mean(e_tr**2)))
-        return _Evaluation(rms_tr, errs, segs, scales, margin, finite, beyond)
+        return _Evaluation(rms_tr, errs, segs, scales, margin, finite)
 
 
 def _head(data: FitData, n: int) -> FitData:
     """The first ``n`` samples of a train part (the part itself when shorter)."""
     if len(data.u) <= n:
         return data
-    return FitData(data.u[:n], data.y[:n], data.fs, data.level, data.weight)
+    weight = data.weight[:n] if isinstance(data.weight, np.ndarray) else data.weight
+    return FitData(data.u[:n], data.y[:n], data.fs, data.level, weight)
 
 
 def _drift_fit(t: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -839,9 +878,8 @@ class _Greedy:
         coef = np.linalg.lstsq(A, tr_c.y[sl] - yh[sl], rcond=None)[0]
         start = np.array(self.phi, float)
         start[list(EFFECTS["drift"].slots)] = coef
-        rf = refit(self.model, tr_c, [n for n in self.active if n != "drift"] + ["drift"],
-                   [start], base_phi=start, step_scale=self.ev.scales[0],
-                   w1_scale=self.ev.scales[1])
+        rf = refit(self.model, tr_c, self.active + ["drift"], [start], base_phi=start,
+                   step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
         score = 0.0
         if rf.ok:
             score = float(max(0.0, 1.0 - rf.cost / max(self.ev.rms_train**2, 1e-300)))
@@ -850,10 +888,11 @@ class _Greedy:
             return None, self
         m = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs, name=self.model.name)
         ev = ev_c(m, rf.phi, drift=True)
-        if not ev.finite:
+        raw = ev_c(m, rf.phi, drift=False)
+        if not (ev.finite and raw.finite):
             return None, self
-        base = self._copy(m, rf.phi, ev)
-        base.active = [n for n in self.active if n != "drift"] + ["drift"]
+        # the base of the other forms: fitted with the drift, judged without it
+        base = self._copy(m, rf.phi, raw)
         base.nuisance = True
         test = compare_losses(self.ev.errs, ev.errs)
         return (rf, test, ev, entry), base
@@ -1043,13 +1082,10 @@ def _candidate_info(name: str, rf: RefitResult, test: dict, ev: _Evaluation) -> 
 
 
 def _held_out_test(state: _Greedy, name: str, ev: _Evaluation) -> dict[str, float]:
-    """The held-out loss test of a form against the current model: the drift form on the raw
-    errors, any other on what it explains beyond each record's own drift."""
-    if name == "drift" or state.drift:
-        return compare_losses(state.ev.errs, ev.errs)
-    test = compare_losses(state.ev.beyond_drift, ev.beyond_drift)
-    test["beyond_drift"] = True
-    return test
+    """The held-out loss test of a form against the current model. Both errors are raw (or
+    both beyond each record's drift once the drift is accepted): a form refitted with the train
+    record's own drift as a nuisance must predict the held-out records by itself."""
+    return compare_losses(state.ev.errs, ev.errs)
 
 
 def _rank(outcomes: dict[str, EffectOutcome], accepted: list[str]) -> list[EffectOutcome]:
@@ -1139,7 +1175,8 @@ def _mark_alike(outcomes: dict[str, EffectOutcome], base: list[np.ndarray],
     for n in names:
         o = outcomes[n]
         if o.alike:
-            others = ", ".join(f"{k} ({100 * v:.0f} %)" for k, v in o.alike.items())
+            top = sorted(o.alike.items(), key=lambda kv: -kv[1])[:3]
+            others = ", ".join(f"{k} ({100 * v:.0f} %)" for k, v in top)
             note = f"{n} corrects the held-out error like {others}: these records cannot " \
                    f"tell them apart"
             o.message = (o.message + "; " if o.message else "") + note
@@ -1149,19 +1186,34 @@ def _rms(errs: list[np.ndarray]) -> float:
     return float(np.sqrt(np.mean(np.concatenate(errs) ** 2)))
 
 
+def _cost_mask(tr: FitData, u_rest: float) -> np.ndarray | None:
+    """Make the train part's cost leave out what the identification leaves out
+    (:func:`hystid.identify.prepare.prepare`: burn-in, samples after an input jump, outliers,
+    a saturated sensor); returns the samples kept, or None when all are kept (or the record
+    cannot be prepared)."""
+    try:
+        prep = prepare(Record(tr.u + u_rest, tr.y, tr.fs, name="train"))
+    except ValueError:
+        return None
+    keep = np.asarray(prep.weight, bool).copy()
+    own = np.zeros(len(tr.u), bool)
+    own[tr.weight] = True
+    keep &= own
+    if keep.all() or keep.sum() < MIN_TRAIN_SAMPLES // 2:
+        return None
+    tr.weight = keep
+    return keep
+
+
 def _identify(tr: FitData, structure: Structure | None) -> DuhemSandwich:
     """The nominal identification: :func:`hystid.identify.identify` (batch) on the train part,
     which places the model at the record's rest level and sensor offset.
 
-    With an initial output level, a first fit gives the L2 gain that sets the initial Duhem
-    state, and a second fit from that past (at rest at ``u = 0``, no offset) follows.
+    Its fitted Duhem state at rest is not part of the model: the diagnosis' simulations start
+    at the measured rest level instead (``initial='auto'`` or ``'level'``), which sets it.
     """
     rec = Record(tr.u, tr.y, tr.fs, name="train")
     res = identify(rec, "batch", structure)
-    if tr.level is not None:
-        P = res.model.structure.history
-        x0 = initial_state(res.model, tr.level, float(tr.u[0]), P)
-        res = fit_output_error(rec, structure, res.model.theta, x0=x0, linear_init=False)
     model = res.model
     model.name = "nominal sandwich"
     return model

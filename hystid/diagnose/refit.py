@@ -55,7 +55,7 @@ class FitData:
     level : float or None
         When set, the record starts at rest with this output level (the Duhem state ``w2`` is
         set so that L2's static output equals it); at rest from zero otherwise.
-    weight : slice
+    weight : slice or ndarray of bool
         Samples that enter the least-squares cost (all by default).
     """
 
@@ -63,7 +63,7 @@ class FitData:
     y: np.ndarray
     fs: float
     level: float | None = None
-    weight: slice = field(default_factory=lambda: slice(None))
+    weight: slice | np.ndarray = field(default_factory=lambda: slice(None))
 
     def __post_init__(self) -> None:
         self._ws: dict[int, _Workspace] = {}

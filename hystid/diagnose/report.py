@@ -99,7 +99,7 @@ def summary_text(result: DiagnosisResult) -> str:
             lines.append(f"  {e.name}: {e.message}")
     for rnd in result.rounds[1:]:
         for n, c in rnd.get("candidates", {}).items():
-            if c["status"] == "failed":
+            if c["status"] in ("failed", "not confirmed"):
                 lines.append(f"  {n} (round {rnd['round']}): {c['message']}")
     lines.append("")
     if result.accepted:
