@@ -160,5 +160,6 @@ def test_repeats_set_the_floor():
     assert res.floor["rms"] == pytest.approx(repeat_floor(reps))
     assert res.floor["rms"] > 3 * res.noise_floor_rms
     assert res.nominal["gap"] == pytest.approx(res.nominal["rms_val"] - res.floor["rms"])
+    other = Record(paper_excitation(N, FS, seed=9), reps[1].y, FS, name="other input")
     with pytest.raises(DiagnosisError, match="repeats"):
-        diagnose(train, reps[0], repeats=[train], effects=["saturation"], progress=False)
+        diagnose(train, reps[0], repeats=[other], effects=["saturation"], progress=False)

@@ -551,10 +551,9 @@ def diagnose(
         window = state if tr_c is tr else state.on_window(tr_c, ev_c, say)
         drift_result, base = None, window
         if "drift" in remaining:
-            # the drift is a nuisance of every record: the forms are refitted with the train
-            # record's own drift (so that they do not take it up) and judged on the held-out
-            # records as they are: a drift fitted on one record does not carry to another
-            drift_result, base = window.with_drift(tr_c, ev_c, say)
+            # the drift is a nuisance of every record: refitted with the train record's own
+            # drift, judged with each held-out record's own drift re-estimated
+            drift_result, _ = window.with_drift(tr_c, ev_c, say)
         others = [n for n in remaining if n != "drift"]
         say(f"round {rnd}: screening {', '.join(others)}")
         scr = screen(base.model, base.phi, base.fit_active, tr_c, others,
@@ -605,9 +604,10 @@ def diagnose(
                 f"minimum reduction {100 * min_reduction:.0f} %)")
             break
         # a further form of a family already accepted goes first (the first form did not
-        # catch the whole effect), a new family next, a record's own drift last
+        # catch the whole effect), a new family next; a record's own drift (re-estimated on
+        # the held-out records themselves) only when it beats the best other form
         pool = ([n for n in passing if family_of(n) in state.families]
-                or [n for n in passing if n != "drift"] or passing)
+                or _drift_last(passing, results, level_r, min_reduction))
         chosen = None
         while pool and chosen is None:
             best = min(pool, key=lambda n: results[n][1]["rms_cand"])
@@ -1066,6 +1066,21 @@ def _delay_as_structure(state: _Greedy, tr: FitData, rf: RefitResult,
         if cand.ok and (not best.ok or cand.cost < best.cost):
             best = cand
     return best
+
+
+def _drift_last(passing: list[str], results: dict, level: float,
+                min_reduction: float) -> list[str]:
+    """The passing forms without the drift, unless the drift lowers the held-out error below
+    the best other form's by the same test (its drift is fitted on the held-out records
+    themselves: it must do more than match an input-tied form)."""
+    others = [n for n in passing if n != "drift"]
+    if "drift" not in passing or not others:
+        return list(passing)
+    best = min(others, key=lambda n: results[n][1]["rms_cand"])
+    t = compare_losses(results[best][2].errs, results["drift"][2].errs)
+    if t["p_value"] < level and t["rel_reduction"] >= min_reduction:
+        return ["drift"]
+    return others
 
 
 def _extends(name: str, active: list[str]) -> bool:

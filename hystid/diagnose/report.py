@@ -123,8 +123,9 @@ def summary_text(result: DiagnosisResult) -> str:
             lines.append(f"accepted: none -- every refit failed ({len(failed)} of "
                          f"{len(tried)}; reasons above): the candidates could not be tested")
         else:
-            lines.append("accepted: none (no candidate lowers the held-out error significantly "
-                         f"and by at least {100 * s['min_reduction']:.0f} %"
+            lines.append("accepted: none (no candidate lowers the held-out error significantly, "
+                         f"by at least {100 * s['min_reduction']:.0f} % and by "
+                         f"{100 * s.get('min_gap_share', 0):.0f} % of the gap"
                          + (f"; {len(failed)} refits failed" if failed else "") + ")")
     unexplained = result.final.get("unexplained")
     if unexplained and result.final["gap_closed"] < 0.9:
