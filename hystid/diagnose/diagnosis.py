@@ -535,7 +535,7 @@ def diagnose(
     say(f"noise floor {where0.noise['rms']:.4g}; " + "; ".join(where0.findings[1:3]))
 
     # ----------------------------------------------------------------- greedy rounds
-    state = _Greedy(base_model, phi0, nom, where0, nuisance=False)
+    state = _Greedy(base_model, phi0, nom, where0)
     outcomes: dict[str, EffectOutcome] = {
         n: EffectOutcome(n, "screened out", family=family_of(n)) for n in names}
     rounds: list[dict[str, Any]] = []
@@ -553,10 +553,10 @@ def diagnose(
         if "drift" in remaining:
             # the drift is a nuisance of every record: refitted with the train record's own
             # drift, judged with each held-out record's own drift re-estimated
-            drift_result, _ = window.with_drift(tr_c, ev_c, say)
+            drift_result = window.with_drift(tr_c, ev_c, say)
         others = [n for n in remaining if n != "drift"]
         say(f"round {rnd}: screening {', '.join(others)}")
-        scr = screen(base.model, base.phi, base.fit_active, tr_c, others,
+        scr = screen(base.model, base.phi, base.active, tr_c, others,
                      step_scale=base.ev.scales[0], w1_scale=base.ev.scales[1],
                      peaks_hz=state.where.frequency["peaks_hz"]
                      + [state.where.frequency["peak_hz"]])
@@ -615,10 +615,9 @@ def diagnose(
                                               for n, r in results.items()}, level_r,
                                  min_reduction)
             rf, test, ev_best = results[best]
-            if tr_c is not tr or (drift_result is not None and best != "drift"):
-                # on the whole train part, and without the train record's drift unless the
-                # drift is what was accepted: the model that goes on explains the records by
-                # itself; it must pass the same test again
+            if tr_c is not tr:
+                # on the whole train part: the model that goes on must pass the same test
+                # again
                 rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
                 if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
                         and test["rms_base"] - test["rms_cand"] >= needed):
@@ -843,33 +842,25 @@ class _Greedy:
     forms, their families, the evaluation and the localisation."""
 
     def __init__(self, model: DuhemSandwich, phi: np.ndarray, ev: _Evaluation,
-                 where: Where, nuisance: bool = False) -> None:
+                 where: Where) -> None:
         self.model, self.phi, self.ev, self.where = model, phi, ev, where
         self.active: list[str] = []
         self.families: list[str] = []
-        self.nuisance = nuisance
 
     @property
     def drift(self) -> bool:
         """Whether the drift is accepted (re-estimated on every held-out record)."""
         return "drift" in self.active
 
-    @property
-    def fit_active(self) -> list[str]:
-        """Forms whose parameters a refit frees: the accepted ones and, once a drift has been
-        fitted as a nuisance, the train record's own drift."""
-        extra = ["drift"] if self.nuisance and not self.drift else []
-        return self.active + extra
-
     def _copy(self, model: DuhemSandwich, phi: np.ndarray, ev: _Evaluation) -> _Greedy:
-        out = _Greedy(model, phi, ev, self.where, self.nuisance)
+        out = _Greedy(model, phi, ev, self.where)
         out.active, out.families = list(self.active), list(self.families)
         return out
 
-    def with_drift(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> tuple:
-        """The current model refitted with the train record's own drift: ``(refit, test,
-        evaluation, screen entry)`` of the drift candidate and the base for the other forms
-        (itself when the refit fails)."""
+    def with_drift(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> tuple | None:
+        """The drift candidate: the current model refitted with the train record's own drift,
+        judged with each held-out record's own drift re-estimated. Returns ``(refit, test,
+        evaluation, screen entry)``, or None when the refit fails."""
         say("refitting with the train record's own drift (a nuisance of every record)")
         w1, _, yh = simulate_fit_data(self.model, self.phi, tr_c)
         sl = tr_c.weight
@@ -880,28 +871,21 @@ class _Greedy:
         start[list(EFFECTS["drift"].slots)] = coef
         rf = refit(self.model, tr_c, self.active + ["drift"], [start], base_phi=start,
                    step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
-        score = 0.0
-        if rf.ok:
-            score = float(max(0.0, 1.0 - rf.cost / max(self.ev.rms_train**2, 1e-300)))
-        entry = ScreenResult("drift", score, 1.0, True, [start])
         if not rf.ok:
-            return None, self
+            return None
         m = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs, name=self.model.name)
         ev = ev_c(m, rf.phi, drift=True)
-        raw = ev_c(m, rf.phi, drift=False)
-        if not (ev.finite and raw.finite):
-            return None, self
-        # the base of the other forms: fitted with the drift, judged without it
-        base = self._copy(m, rf.phi, raw)
-        base.nuisance = True
-        test = compare_losses(self.ev.errs, ev.errs)
-        return (rf, test, ev, entry), base
+        if not ev.finite:
+            return None
+        score = float(max(0.0, 1.0 - rf.cost / max(self.ev.rms_train**2, 1e-300)))
+        entry = ScreenResult("drift", score, 1.0, True, [start])
+        return rf, compare_losses(self.ev.errs, ev.errs), ev, entry
 
     def on_window(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> _Greedy:
         """The current model refitted over the head of the train part (itself when the head
         is the whole part): the base the forms refitted over the head are compared with."""
         say(f"refitting the current model over the first {len(tr_c.u)} train samples")
-        rf = refit(self.model, tr_c, self.fit_active, [self.phi], base_phi=self.phi,
+        rf = refit(self.model, tr_c, self.active, [self.phi], base_phi=self.phi,
                    step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
         if not rf.ok:
             return self
@@ -916,11 +900,8 @@ class _Greedy:
         when the whole-part refit fails)."""
         say(f"refitting {name} on the whole train part")
         start = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs)
-        active = [n for n in self.fit_active if n != name] + [name]
-        phi = np.array(rf.phi, float)
-        if "drift" not in active:
-            phi[list(EFFECTS["drift"].slots)] = 0.0
-        whole = refit(start, tr, active, [phi], base_phi=phi,
+        active = [n for n in self.active if n != name] + [name]
+        whole = refit(start, tr, active, [rf.phi], base_phi=rf.phi,
                       step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
         if not whole.ok:
             return head
@@ -930,16 +911,14 @@ class _Greedy:
             return head
         return whole, _held_out_test(self, name, ev_w), ev_w
 
-    def accept(self, name: str, rf: RefitResult, ev: _Evaluation, where: Where,
-               nuisance: bool = False) -> None:
-        """Add an accepted form (``nuisance``: its refit freed the train record's drift)."""
+    def accept(self, name: str, rf: RefitResult, ev: _Evaluation, where: Where) -> None:
+        """Add an accepted form with its refit, evaluation and localisation."""
         self.model = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs,
                                    name=self.model.name)
         self.phi = rf.phi
         self.active.append(name)
         self.families.append(family_of(name))
         self.ev, self.where = ev, where
-        self.nuisance = self.nuisance or nuisance
 
 
 def _plan(scr: dict[str, ScreenResult], remaining: list[str], promising: float,
@@ -999,7 +978,7 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
                                                 "more promising forms"}
             continue
         say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
-        rf = refit(state.model, tr, state.fit_active + [n], scr[n].starts, base_phi=state.phi,
+        rf = refit(state.model, tr, state.active + [n], scr[n].starts, base_phi=state.phi,
                    step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
                    joint_starts=len(scr[n].starts) if n == "delay" else 1)
         if n == "delay" and all(a == "drift" for a in state.active):
@@ -1061,7 +1040,7 @@ def _delay_as_structure(state: _Greedy, tr: FitData, rf: RefitResult,
         start[EFFECTS["delay"].slots[0]] = d
         start[EFFECTS["offset"].slots[0]] = fresh.offset
         m = DuhemSandwich(fresh.theta, s, fs=tr.fs, name=state.model.name)
-        cand = refit(m, tr, state.fit_active + ["delay"], [start], base_phi=start,
+        cand = refit(m, tr, state.active + ["delay"], [start], base_phi=start,
                      step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1])
         if cand.ok and (not best.ok or cand.cost < best.cost):
             best = cand
@@ -1077,10 +1056,28 @@ def _drift_last(passing: list[str], results: dict, level: float,
     if "drift" not in passing or not others:
         return list(passing)
     best = min(others, key=lambda n: results[n][1]["rms_cand"])
-    t = compare_losses(results[best][2].errs, results["drift"][2].errs)
-    if t["p_value"] < level and t["rel_reduction"] >= min_reduction:
-        return ["drift"]
-    return others
+    drift_errs = results["drift"][2].errs
+
+    def beats(a, b):
+        t = compare_losses(a, b)
+        return t["p_value"] < level and t["rel_reduction"] >= min_reduction
+
+    if not beats(results[best][2].errs, drift_errs):
+        return others
+    # the drift does better; the other form still goes first when, given each record's own
+    # drift as well, it explains what the drift alone does not (an input-tied slow effect)
+    if beats(drift_errs, _beyond_drift(results[best][2])):
+        return others
+    return ["drift"]
+
+
+def _beyond_drift(ev: _Evaluation) -> list[np.ndarray]:
+    """Held-out errors less each record's own least-squares drift."""
+    out = []
+    for e, seg in zip(ev.errs, ev.segments, strict=True):
+        t = seg.t0 + np.arange(len(e)) / seg.fs
+        out.append(e - _drift_fit(t, e))
+    return out
 
 
 def _extends(name: str, active: list[str]) -> bool:
@@ -1097,9 +1094,8 @@ def _candidate_info(name: str, rf: RefitResult, test: dict, ev: _Evaluation) -> 
 
 
 def _held_out_test(state: _Greedy, name: str, ev: _Evaluation) -> dict[str, float]:
-    """The held-out loss test of a form against the current model. Both errors are raw (or
-    both beyond each record's drift once the drift is accepted): a form refitted with the train
-    record's own drift as a nuisance must predict the held-out records by itself."""
+    """The held-out loss test of a form against the current model, on the held-out errors as
+    they are (both beyond each record's own drift once the drift is accepted)."""
     return compare_losses(state.ev.errs, ev.errs)
 
 

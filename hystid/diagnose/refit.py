@@ -404,7 +404,7 @@ def refit(
     base_phi: np.ndarray | None = None,
     step_scale: float = 1.0,
     w1_scale: float = 1.0,
-    max_nfev: int = 10,
+    max_nfev: int = 20,
     effect_nfev: int = 15,
     joint_starts: int = 1,
 ) -> RefitResult:
