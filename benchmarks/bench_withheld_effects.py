@@ -114,6 +114,13 @@ def effect_params(name: str, strength: int, rng: np.random.Generator, u: np.ndar
     if name == "slew_limit":
         limit = (0.8, 0.6, 0.4)[k] * _peak_w1(u)[0]
         return {"inv_rate": 1.0 / (limit * FS)}
+    if name == "slew_input":
+        limit = (0.8, 0.6, 0.4)[k] * float(np.max(np.abs(np.diff(u))))
+        return {"inv_rate": 1.0 / (limit * FS)}
+    if name == "output_curve":
+        y = reference_model(FS).simulate(u, check=False).y
+        return {"quadratic": sign * (0.03, 0.1, 0.3)[k], "cubic": 0.0,
+                "centre": 0.5 * float(np.max(y) + np.min(y)), "span": float(np.ptp(y))}
     if name == "saturation":
         return {"cubic": sign * (0.01, 0.03, 0.1)[k] / _peak_w1(u)[1] ** 2}
     if name == "offset":
