@@ -615,20 +615,20 @@ def diagnose(
                                               for n, r in results.items()}, level_r,
                                  min_reduction)
             rf, test, ev_best = results[best]
-            if tr_c is not tr:
-                # on the whole train part: the model that goes on must pass the same test
-                # again
-                rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
-                if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
-                        and test["rms_base"] - test["rms_cand"] >= needed):
-                    info["candidates"][best].update({
-                        "status": "not confirmed",
-                        "message": f"passed on its refit over the train head, not once "
-                                   f"refitted on the whole train part (held-out RMS "
-                                   f"{test['rms_cand']:.4g}, p = {test['p_value']:.2g})"})
-                    say(f"round {rnd}: {best} not confirmed on the whole train part")
-                    pool.remove(best)
-                    continue
+            # polished on the whole train part (longer than the screening refits, so that a
+            # later round does not pick up what an unfinished fit left): the model that goes
+            # on must pass the same test again
+            rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
+            if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
+                    and test["rms_base"] - test["rms_cand"] >= needed):
+                info["candidates"][best].update({
+                    "status": "not confirmed",
+                    "message": f"passed on its screening refit, not once polished on the whole "
+                               f"train part (held-out RMS {test['rms_cand']:.4g}, p = "
+                               f"{test['p_value']:.2g})"})
+                say(f"round {rnd}: {best} not confirmed on the whole train part")
+                pool.remove(best)
+                continue
             chosen = best
         if chosen is None:
             rounds.append(info)
@@ -895,14 +895,15 @@ class _Greedy:
     def refit_whole(self, name: str, rf: RefitResult, tr: FitData, ev: _Evaluator,
                     head: tuple[RefitResult, dict, _Evaluation], say: _Progress,
                     ) -> tuple[RefitResult, dict, _Evaluation]:
-        """Refit an accepted form on the whole train part from its solution over the head;
-        the test is then taken again against the current model (the head's figures are kept
-        when the whole-part refit fails)."""
-        say(f"refitting {name} on the whole train part")
+        """Polish an accepted form on the whole train part from its screening refit (three
+        times the evaluations); the test is then taken again against the current model (the
+        screening refit's figures are kept when the polish fails)."""
+        say(f"polishing {name} on the whole train part")
         start = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs)
         active = [n for n in self.active if n != name] + [name]
         whole = refit(start, tr, active, [rf.phi], base_phi=rf.phi,
-                      step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
+                      step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1],
+                      max_nfev=60)
         if not whole.ok:
             return head
         m = DuhemSandwich(whole.theta, self.model.structure, fs=self.model.fs)
