@@ -94,9 +94,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         "then measured against their repeatability when it is above the "
                         "sensor noise")
     parser.add_argument("--time-budget", type=_positive, default=None, metavar="S",
-                        help="seconds for refitting further forms once every family the "
-                        "screen cannot rule out has had its best form refitted (default: no "
-                        "limit)")
+                        help="seconds after which no further form is refitted (the best form "
+                        "of every family the screen cannot rule out always is; default: as "
+                        "long as the nominal identification took)")
 
 
 class _BadInput(Exception):

@@ -364,6 +364,7 @@ def diagnose(
     min_gap_share_later: float = 0.25,
     refit_samples: int | None = None,
     time_budget: float | None = None,
+    budget_factor: float | None = 1.0,
     require_excitation: bool = False,
     progress: bool | Callable[[str], None] = True,
 ) -> DiagnosisResult:
@@ -424,8 +425,13 @@ def diagnose(
         refitted on the whole train part and must pass again. Bounds the cost on long records
         whose head is well excited (all samples by default).
     time_budget : float, optional
-        Seconds the refits of further forms may take once every family that the screen
-        cannot rule out has had its most promising form refitted (unlimited by default).
+        Seconds from the start of the first round's refits after which no further form is
+        refitted; the most promising form of every family that the screen cannot rule out is
+        refitted in any case, most promising first.
+    budget_factor : float or None
+        Without ``time_budget``: that time as a multiple of the nominal identification's
+        (1.0 by default; None for no limit). Forms left out are reported as
+        ``not refitted``.
     require_excitation : bool
         Raise :class:`DiagnosisError` when a candidate cannot be shown by the records instead
         of reporting it as not excited.
@@ -460,6 +466,8 @@ def diagnose(
                              f"{refit_samples}")
     if time_budget is not None and not time_budget >= 0:
         raise DiagnosisError(f"time_budget: expected seconds >= 0, got {time_budget}")
+    if budget_factor is not None and not budget_factor >= 0:
+        raise DiagnosisError(f"budget_factor: expected a multiple >= 0, got {budget_factor}")
     fs = train.fs
     skip_tr = int(round(train_skip * fs))
     if train_skip < 0 or skip_tr > 0.5 * train.n * (1 if vals else 1 - holdout):
@@ -565,6 +573,8 @@ def diagnose(
         plan, ruled_out = _plan(scr, others, promising, refit_all)
         if rnd == 1:
             _record_screen(outcomes, scr, ruled_out, require_excitation)
+            if time_budget is None and budget_factor is not None:
+                time_budget = budget_factor * t_nominal
             if time_budget is not None:
                 budget_end = time.perf_counter() + time_budget
         info: dict[str, Any] = {"round": rnd, "rms_val_base": state.ev.rms_val,
@@ -681,6 +691,7 @@ def diagnose(
                 "holdout": None if vals else holdout, "transient_s": transient,
                 "train_skip_s": train_skip, "initial": initial, "candidates": list(names),
                 "fs": fs, "train_samples": len(tr.u), "time_budget_s": time_budget,
+                "budget_factor": budget_factor,
                 "val_samples": int(sum(len(v.u[v.weight]) for v in vds)),
                 "units": dict(train.units), "u_rest": u_rest,
                 "nominal_seconds": t_nominal, "elapsed_s": time.perf_counter() - say.t0}
