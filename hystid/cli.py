@@ -573,6 +573,14 @@ def build_parser() -> argparse.ArgumentParser:
                            "measure how far each closes the gap on held-out data.")
         diagnose_command.configure_parser(p)
         p.set_defaults(func=diagnose_command.run)
+
+    from . import fleet_command
+
+    p = sub.add_parser("fleet", help="identify or diagnose many records on Dask",
+                       description="Identify or diagnose many records as Dask tasks; one result "
+                       "row per record (CSV and Parquet), resumable.")
+    fleet_command.configure_parser(p)
+    p.set_defaults(func=fleet_command.run)
     return parser
 
 

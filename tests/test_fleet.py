@@ -1,0 +1,185 @@
+"""Fleets on Dask: a real scheduler and two worker processes on loopback."""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+distributed = pytest.importorskip("distributed", reason="hystid fleet needs dask.distributed")
+pd = pytest.importorskip("pandas", reason="hystid fleet writes its table with pandas")
+pytest.importorskip("pyarrow", reason="hystid fleet writes Parquet with pyarrow")
+
+from hystid.baselines import compare  # noqa: E402
+from hystid.cli import main  # noqa: E402
+from hystid.diagnose import diagnose  # noqa: E402
+from hystid.fleet import (  # noqa: E402
+    FailedSeed,
+    FleetError,
+    Job,
+    find_jobs,
+    map_seeds,
+    read_results,
+    result_paths,
+    run_fleet,
+    spawn_seeds,
+)
+from hystid.identify import identify  # noqa: E402
+from hystid.testing import as_measured_suite, stage_b_like  # noqa: E402
+
+CASES = ("offset", "units", "10kHz")
+
+
+@pytest.fixture(scope="module")
+def client():
+    with distributed.LocalCluster(host="127.0.0.1", n_workers=2, threads_per_worker=1,
+                                  processes=True, dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as cl:
+        yield cl
+
+
+@pytest.fixture(scope="module")
+def fleet_dir(tmp_path_factory) -> Path:
+    """Bouc-Wen stage records as measured (offset, other units, 10 kHz) with held-out
+    partners, a stage-B look-alike (200 Hz, large offset) without one, a broken file and a
+    table naming a file that does not exist."""
+    root = tmp_path_factory.mktemp("fleet")
+    recs = {r.name: r for r in as_measured_suite(3, seconds=0.1, hysteresis="bouc_wen")}
+    lines = ["name,train,val"]
+    (root / "held").mkdir()
+    for case in CASES:
+        recs[case].save(root / f"{case}.csv")
+        recs[f"{case}/heldout"].save(root / "held" / f"{case}.npz")
+        lines.append(f"{case},{case}.csv,held/{case}.npz")
+    stage_b_like(seconds=3.0, seed=5).save(root / "stage_b.csv")
+    lines.append("stage_b,stage_b.csv,")
+    (root / "broken.csv").write_text("t,u,y\n0,1,2\n0.001,x,3\n")
+    lines.append("broken,broken.csv,")
+    lines.append("missing,nowhere.csv,")
+    (root / "fleet.csv").write_text("\n".join(lines) + "\n")
+    return root
+
+
+def _table(out: Path) -> pd.DataFrame:
+    return read_results(out, "identify").set_index("name")
+
+
+def test_table_is_the_in_process_comparison_and_a_broken_record_is_isolated(
+        client, fleet_dir, tmp_path):
+    table = run_fleet(fleet_dir / "fleet.csv", tmp_path, client=client, progress=False)
+    assert sorted(table["name"]) == sorted([*CASES, "stage_b", "broken", "missing"])
+    t = table.set_index("name")
+    # the broken records are failed rows naming the file and what is wrong; the rest go on
+    assert t.loc["broken", "status"] == "failed"
+    assert "broken.csv, line 3" in t.loc["broken", "error"]
+    assert t.loc["missing", "status"] == "failed" and "nowhere.csv" in t.loc["missing", "error"]
+    ok = t[t["status"] == "ok"]
+    assert sorted(ok.index) == sorted([*CASES, "stage_b"])
+    assert ok["worker"].str.startswith("tcp://127.0.0.1:").all()
+    # a worker's row is what identify + compare give in this process
+    from hystid.records import load_record
+
+    for case in CASES:
+        train = load_record(fleet_dir / f"{case}.csv")
+        val = load_record(fleet_dir / "held" / f"{case}.npz")
+        row = compare(identify(train).model, train, [val]).rows[0]
+        for key in ("model", "static_line", "linear"):
+            assert ok.loc[case, f"rms_{key}"] == pytest.approx(row[key], rel=1e-6), (case, key)
+        assert bool(ok.loc[case, "beats_baselines"]) == row["beats"]
+        assert ok.loc[case, "samples"] == train.n and ok.loc[case, "fs"] == train.fs
+    # without a held-out record the end of the record is held out
+    assert ok.loc["stage_b", "held_out"] == "last 40 %"
+    assert ok.loc["stage_b", "samples"] == round(0.6 * 600)
+    assert np.isfinite(ok[["rms_model", "rms_static_line", "rms_linear", "param_alpha"]]
+                       .to_numpy(float)).all()
+    # CSV and Parquet hold the same table; no temporary file is left behind
+    csv_path, parquet_path = result_paths(tmp_path, "identify")
+    from_csv = pd.read_csv(csv_path, keep_default_na=False, na_values=[""]).set_index("name")
+    from_parquet = pd.read_parquet(parquet_path).set_index("name")
+    assert np.allclose(from_csv.loc[ok.index, "rms_model"], from_parquet.loc[ok.index,
+                                                                             "rms_model"])
+    assert not [p for p in os.listdir(tmp_path) if p.endswith(".tmp")]
+
+
+def test_resume_skips_done_records_reruns_changed_ones_and_force_reruns_all(
+        client, fleet_dir, tmp_path):
+    jobs = [j for j in find_jobs(fleet_dir / "fleet.csv") if j.name in ("units", "broken")]
+    first = run_fleet(jobs, tmp_path, client=client, progress=False).set_index("name")
+    again = run_fleet(jobs, tmp_path, client=client, progress=False).set_index("name")
+    # nothing recomputed: the timings are the stored ones
+    assert (again["seconds"] == first["seconds"]).all()
+    os.utime(fleet_dir / "units.csv")  # the record changed: its row is stale
+    third = run_fleet(jobs, tmp_path, client=client, progress=False).set_index("name")
+    assert third.loc["units", "seconds"] != first.loc["units", "seconds"]
+    assert third.loc["broken", "seconds"] == first.loc["broken", "seconds"]
+    retried = run_fleet(jobs, tmp_path, client=client, progress=False,
+                        retry_failed=True).set_index("name")
+    assert retried.loc["broken", "seconds"] != first.loc["broken", "seconds"]
+    assert retried.loc["units", "seconds"] == third.loc["units", "seconds"]
+    forced = run_fleet(jobs, tmp_path, client=client, progress=False,
+                       force=True).set_index("name")
+    assert (forced["seconds"] != retried["seconds"]).all()
+
+
+def test_diagnose_rows_are_the_diagnosis(client, fleet_dir, tmp_path):
+    from hystid.records import load_record
+
+    jobs = [Job("offset", str(fleet_dir / "offset.csv"), (str(fleet_dir / "held/offset.npz"),))]
+    settings = {"effects": ["offset", "drift"]}
+    row = run_fleet(jobs, tmp_path, "diagnose", settings=settings, client=client,
+                    progress=False).iloc[0]
+    assert row["status"] == "ok", row["error"]
+    res = diagnose(load_record(jobs[0].train), [load_record(jobs[0].val[0])],
+                   effects=settings["effects"], progress=False)
+    assert row["accepted"] == ";".join(res.accepted)
+    assert row["rms_final"] == pytest.approx(res.final["rms_val"], rel=1e-6)
+    assert result_paths(tmp_path, "diagnose")[1].exists()
+
+
+def test_map_seeds_keeps_the_order_and_isolates_a_failing_seed(client):
+    seeds = spawn_seeds(11, 6)
+    assert len(set(seeds)) == 6
+    draw = functools.partial(spawn_seeds, n=3)
+    assert map_seeds(draw, seeds, client=client) == [draw(s) for s in seeds]
+    kept = map_seeds(draw, [seeds[0], -1, seeds[1]], client=client, errors="keep")
+    assert kept[0] == draw(seeds[0]) and kept[2] == draw(seeds[1])
+    assert isinstance(kept[1], FailedSeed) and kept[1].seed == -1 and kept[1].error
+    with pytest.raises(ValueError):
+        map_seeds(draw, [-1], client=client)
+
+
+def test_command_line_on_an_existing_scheduler(client, fleet_dir, tmp_path, capsys):
+    out = tmp_path / "out"
+    pattern = str(fleet_dir / "held" / "*.npz")
+    status = main(["fleet", "identify", pattern, "--out", str(out), "--scheduler",
+                   client.scheduler.address, "--quiet"])
+    assert status == 0, capsys.readouterr()
+    assert sorted(_table(out).index) == sorted(f"{c}.npz" for c in CASES)
+    # bad input: a clear message and exit status 2, nothing written
+    assert main(["fleet", "identify", str(fleet_dir / "none*.csv"), "--out",
+                 str(tmp_path / "x"), "--scheduler", client.scheduler.address]) == 2
+    assert "no record files match" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["fleet", "identify", pattern, "--out", str(out), "--workers", "2",
+              "--scheduler", client.scheduler.address])
+
+
+def test_sources_and_refusals(fleet_dir, tmp_path):
+    # a folder: every record file in it (the table too: it is a .csv file like the others)
+    assert [j.name for j in find_jobs(fleet_dir)] == sorted(
+        [*(f"{c}.csv" for c in CASES), "stage_b.csv", "broken.csv", "fleet.csv"])
+    nested = find_jobs(str(fleet_dir / "**" / "*.npz"))
+    assert [j.name for j in nested] == sorted(f"{c}.npz" for c in CASES)
+    bad = tmp_path / "pairs.csv"
+    bad.write_text("train,val\na.csv,b.csv\n,c.csv\n")
+    with pytest.raises(FleetError, match="pairs.csv, line 3"):
+        find_jobs(bad)
+    foreign = tmp_path / "out"
+    foreign.mkdir()
+    (foreign / "identify.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(FleetError, match="not written by hystid fleet"):
+        run_fleet([Job("x", "x.csv")], foreign, progress=False)
+    assert (foreign / "identify.csv").read_text() == "a,b\n1,2\n"
