@@ -491,6 +491,8 @@ def diagnose(
     tr, vds, t0s, held = _split(train, vals, holdout, transient, skip_tr, initial, u_rest)
     say(f"{len(tr.u)} train samples, {sum(len(v.u[v.weight]) for v in vds)} held-out samples "
         f"({held}) at {fs:g} Hz; candidates: {', '.join(names)}")
+    if any(n in IN_NOMINAL for n in effects):
+        say("offset: the sensor offset is a parameter of the nominal model, not a candidate")
 
     # ----------------------------------------------------------------- nominal model
     t_nominal = time.perf_counter()
@@ -675,7 +677,16 @@ def diagnose(
     accepted = list(state.active)
     ranked = _rank(outcomes, accepted)
     final_effects = effect_dict(state.phi, accepted) if accepted else {}
-    aug = AugmentedSandwich(state.model, final_effects)
+    offset_slot = EFFECTS["offset"].slots[0]
+
+    def placed(m: DuhemSandwich, phi: np.ndarray) -> DuhemSandwich:
+        # the model in record units: its rest level, the fitted sensor offset, its envelope
+        return DuhemSandwich(m.theta, m.structure, fs=fs, name=nominal.name, u_rest=u_rest,
+                             offset=float(phi[offset_slot]),
+                             envelope=getattr(nominal, "envelope", None), units=train.units)
+
+    base_placed = placed(base_model, phi0)
+    aug = AugmentedSandwich(placed(state.model, state.phi), final_effects)
     nominal_info = {"rms_val": nom.rms_val, "rms_train": nom.rms_train, "gap": gap,
                     "params": base_model.params, "name": nominal.name,
                     "admissibility": admissibility, "margin_val": nom.margin_val}
@@ -701,20 +712,21 @@ def diagnose(
         f"{nom.rms_val:.4g} -> {state.ev.rms_val:.4g} ({floor['kind']} floor "
         f"{floor['rms']:.4g})")
     return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds,
-                           base_model, aug, state.where, settings, series, floor)
+                           base_placed, aug, state.where, settings, series, floor)
 
 
 # --------------------------------------------------------------------------- stages
 def _expand_families(effects: Sequence[str]) -> list[str]:
     """Family names stand for all their forms (``creep`` -> ``creep, creep_2tau, ...``); forms
-    that are part of the nominal model are refused."""
+    that are part of the nominal model are left out (an error when nothing else is asked)."""
     out: list[str] = []
     for n in effects:
-        if n in IN_NOMINAL:
-            raise ValueError(f"effects: {n!r} is a parameter of the nominal model (the sensor "
-                             "offset is estimated with it), not a candidate")
         forms = [f for f in FAMILIES.get(n, (n,)) if f not in IN_NOMINAL]
         out += [f for f in forms if f not in out]
+    if not out and any(n in IN_NOMINAL for n in effects):
+        raise ValueError(f"effects: {', '.join(n for n in effects if n in IN_NOMINAL)} is a "
+                         "parameter of the nominal model (the sensor offset is estimated with "
+                         "it), not a candidate; name others")
     return out
 
 

@@ -460,6 +460,16 @@ class AugmentedSandwich:
     ) -> SandwichResponse:
         """Simulate from the past ``x0`` (at rest by default); ``t = 0`` at the first sample.
 
+        The nominal model's ``u_rest`` is taken off the input and its ``offset`` added to the
+        output, as :meth:`DuhemSandwich.simulate` does.
+
+        Parameters
+        ----------
+        u : array_like
+            Input samples.
+        x0 : InitialCondition, optional
+            Past relative to the rest (at rest by default).
+
         Returns
         -------
         SandwichResponse
@@ -468,8 +478,10 @@ class AugmentedSandwich:
         u = np.asarray(u, dtype=float)
         if u.ndim != 1 or not np.all(np.isfinite(u)):
             raise ValueError("u: expected a 1-D array of finite samples")
-        ws = _Workspace(u, _history(self.model), x0)
-        w1, w2, y = ws.run(self.model.theta, self.model.structure.layout, self.phi, self.model.dt)
+        m = self.model
+        ws = _Workspace(u - m.u_rest, _history(m), x0)
+        w1, w2, y = ws.run(m.theta, m.structure.layout, self.phi, m.dt)
+        y = y + m.offset
         t = np.arange(len(u)) / self.fs
         return SandwichResponse(t, u, w1.copy(), w2.copy(), y.copy(), name=self.name)
 
