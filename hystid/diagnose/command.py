@@ -1,11 +1,12 @@
 """``hystid diagnose``: the sim-to-real gap diagnosis from the command line.
 
-``hystid diagnose TRAIN [--val VAL ...] [--fs HZ] [--model MODEL.json] [--json] [--out DIR]
-[--force] [--quiet]`` identifies the nominal sandwich on TRAIN (or takes the saved model given
-with ``--model``), localises its held-out error, screens and refits the candidate effects and
-prints a summary (or, with ``--json``, one JSON object). Bad input (unreadable or too-short
-records, mismatched sampling rates, records that cannot show a requested effect, an output folder
-that would overwrite files) gives a message on stderr and exit status 2 before any work.
+``hystid diagnose TRAIN [--val VAL ...] [--repeat REC ...] [--fs HZ] [--model MODEL.json]
+[--json] [--out DIR] [--force] [--quiet]`` identifies the nominal sandwich on TRAIN (or takes the
+saved model given with ``--model``), localises its held-out error, screens and refits the
+candidate effects and prints a summary (or, with ``--json``, one JSON object). Bad input
+(unreadable or too-short records, mismatched sampling rates, records that cannot show a
+requested effect, an output folder that would overwrite files) gives a message on stderr and
+exit status 2 before any work.
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The sub-command's parser.
     """
-    from .effects import EFFECT_NAMES
+    from .diagnosis import DEFAULT_EFFECTS
+    from .effects import FAMILIES
 
     parser.add_argument("train", metavar="TRAIN",
                         help="record to identify on (csv, npz, mat, h5 or file.h5:group)")
@@ -61,7 +63,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="replace files already in DIR")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument("--effects", default=None, metavar="NAMES",
-                        help=f"comma-separated candidates (default all: {','.join(EFFECT_NAMES)});"
+                        help=f"comma-separated families or forms (default all forms of "
+                        f"{','.join(FAMILIES)}: {','.join(DEFAULT_EFFECTS)});"
                         " a named candidate that the records cannot show is an error")
     parser.add_argument("--holdout", type=_fraction, default=0.4,
                         help="share of TRAIN held out when no --val is given (default 0.4)")
@@ -73,9 +76,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--train-skip", type=number(0.0), default=0.0, metavar="S",
                         help="seconds at the start of TRAIN simulated but left out of the fit's "
                         "cost (an initial transient the model cannot represent)")
-    parser.add_argument("--initial", choices=("rest", "level"), default="rest",
+    parser.add_argument("--initial", choices=("auto", "rest", "level"), default="auto",
                         help="records start at rest at zero output (rest) or at the output "
-                        "level measured before the input first moves (level)")
+                        "level measured before the input first moves (level); auto (default): "
+                        "level for a record that starts with 10 samples at rest")
     parser.add_argument("--alpha", type=_fraction, default=0.01,
                         help="family-wise level of the held-out test per round (default 0.01)")
     parser.add_argument("--min-reduction", type=_fraction, default=0.02,
@@ -85,6 +89,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="greedy rounds at most (default 3, at most 20)")
     parser.add_argument("--refit-all", action="store_true",
                         help="refit every excited candidate, not only the promising ones")
+    parser.add_argument("--repeat", nargs="+", metavar="REC", default=[],
+                        help="records of the same input as TRAIN or a --val record: the gap is "
+                        "then measured against their repeatability when it is above the "
+                        "sensor noise")
+    parser.add_argument("--time-budget", type=_positive, default=None, metavar="S",
+                        help="seconds after which no further form is refitted (the best form "
+                        "of every family the screen cannot rule out always is; default: as "
+                        "long as the nominal identification took)")
 
 
 class _BadInput(Exception):
@@ -200,15 +212,15 @@ def run(args: argparse.Namespace) -> int:
     args : argparse.Namespace
         Parsed arguments (see :func:`configure_parser`).
     """
-    from .diagnosis import DiagnosisError, diagnose
-    from .effects import EFFECT_NAMES
+    from .diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
 
     try:
         _check_out(args)
         train = _load(args.train, args, "TRAIN")
         vals = [_load(p, args, f"--val {p}") for p in args.val]
+        repeats = [_load(p, args, f"--repeat {p}") for p in args.repeat]
         if args.effects is None:
-            names, strict = EFFECT_NAMES, False
+            names, strict = DEFAULT_EFFECTS, False
         else:
             names = tuple(n.strip() for n in args.effects.split(",") if n.strip())
             strict = True
@@ -218,6 +230,7 @@ def run(args: argparse.Namespace) -> int:
             holdout=args.holdout, alpha=args.alpha,
             min_reduction=args.min_reduction, max_rounds=args.max_rounds,
             train_skip=args.train_skip, initial=args.initial, refit_all=args.refit_all,
+            repeats=repeats, time_budget=args.time_budget,
             require_excitation=strict, progress=not args.quiet,
         )
     except (_BadInput, DiagnosisError) as err:
@@ -225,6 +238,7 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     report = result.to_dict()
     report["records"] = {"train": train.name, "val": [v.name for v in vals],
+                         "repeat": [r.name for r in repeats],
                          "units": train.units, "u_scale": args.u_scale, "crop": args.crop}
     if args.out:
         out = Path(args.out)

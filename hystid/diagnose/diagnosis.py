@@ -15,18 +15,21 @@ import math
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..identify.offline import fit_output_error
+from ..baselines import repeat_floor
+from ..identify import identify
+from ..identify.offline import linear_start
+from ..identify.prepare import prepare
 from ..identify.result import IdentificationResult
 from ..model import DuhemSandwich, Structure
 from ..records import Record
-from .effects import EFFECT_NAMES, EFFECTS, AugmentedSandwich, effect_dict
-from .refit import FitData, RefitResult, initial_state, refit, simulate_fit_data
-from .screen import compare_losses, effect_names_check, screen, zero_vector
+from .effects import EFFECT_NAMES, EFFECTS, FAMILIES, AugmentedSandwich, effect_dict, family_of
+from .refit import FitData, RefitResult, duhem_margin, refit, simulate_fit_data
+from .screen import ScreenResult, compare_losses, effect_names_check, screen, zero_vector
 from .where import Segment, Where, localise
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -35,6 +38,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "ALIKE",
+    "DEFAULT_EFFECTS",
+    "IN_NOMINAL",
     "MIN_TRAIN_SAMPLES",
     "MIN_VAL_SAMPLES",
     "DiagnosisError",
@@ -46,6 +51,12 @@ __all__ = [
 #: Two candidates' held-out corrections ``da, db`` count as alike when
 #: ``1 - |da - db| / max(|da|, |db|)`` exceeds this.
 ALIKE = 0.75
+#: Forms that are parameters of the nominal model (the sensor offset is estimated by every fit).
+IN_NOMINAL = ("offset",)
+#: The candidates by default: every form that is not part of the nominal model.
+DEFAULT_EFFECTS = tuple(n for n in EFFECT_NAMES if n not in IN_NOMINAL)
+
+
 #: Fewest samples in the train part and in the held-out part.
 MIN_TRAIN_SAMPLES = 2000
 MIN_VAL_SAMPLES = 1000
@@ -60,15 +71,18 @@ class EffectOutcome:
     """What the diagnosis found for one candidate effect.
 
     Figures ``*_after`` are those of the candidate added alone to the nominal model (round 1);
-    an accepted candidate also carries the cumulative figures of the accepted set up to it.
+    those of an accepted candidate are of the round in which it was accepted (added to the
+    forms accepted before it), and ``cumulative`` holds that round's held-out RMS before and
+    after it.
 
     Attributes
     ----------
     name : str
-        Effect name.
+        Form name.
     status : str
         ``accepted``, ``rejected`` (refit, not significant or not worth having),
-        ``screened out``, ``not excited`` or ``failed`` (the refit failed).
+        ``screened out``, ``not excited``, ``not refitted`` (time budget) or ``failed`` (the
+        refit failed; ``message`` says why).
     screen_score : float
         Share of the train residual its signature matches.
     separation : float
@@ -90,6 +104,8 @@ class EffectOutcome:
     alike : dict
         Other candidates whose held-out correction is nearly this one's (similarity above
         :data:`ALIKE`): the records cannot tell them apart.
+    family : str
+        The effect family the form belongs to.
     """
 
     name: str
@@ -105,6 +121,7 @@ class EffectOutcome:
     round: int | None = None
     cumulative: dict[str, float] | None = None
     alike: dict[str, float] = field(default_factory=dict)
+    family: str = ""
 
     @property
     def accepted(self) -> bool:
@@ -115,6 +132,7 @@ class EffectOutcome:
         """JSON-ready figures."""
         return _clean({
             "name": self.name,
+            "family": self.family or self.name,
             "accepted": self.accepted,
             "status": self.status,
             "rms_val_after": self.rms_val_after,
@@ -162,6 +180,11 @@ class DiagnosisResult:
         Localisation after the accepted effects.
     settings : dict
         Settings of the run.
+    series : dict
+        Error arrays for the figures.
+    floor : dict
+        The floor of the gap: ``noise_floor_rms``, ``repeat_floor_rms`` (None without
+        repeats), ``rms`` (the larger) and ``kind``.
     """
 
     noise_floor_rms: float
@@ -176,6 +199,7 @@ class DiagnosisResult:
     where_final: Where
     settings: dict[str, Any] = field(default_factory=dict)
     series: dict[str, Any] = field(default_factory=dict, repr=False)
+    floor: dict[str, Any] = field(default_factory=dict)
 
     def __iter__(self) -> Iterator[Any]:
         yield self.where
@@ -184,8 +208,13 @@ class DiagnosisResult:
 
     @property
     def best(self) -> str:
-        """Name of the accepted effect that explains most, or ``"none"``."""
-        return self.accepted[0] if self.accepted else "none"
+        """Family of the first accepted form (the one that explains most), or ``"none"``."""
+        return family_of(self.accepted[0]) if self.accepted else "none"
+
+    @property
+    def families(self) -> list[str]:
+        """Families of the accepted forms, in order."""
+        return [family_of(n) for n in self.accepted]
 
     def to_dict(self) -> dict[str, Any]:
         """The issue's JSON object (``noise_floor_rms``, ``nominal``, ``where``, ``effects``...)."""
@@ -195,7 +224,9 @@ class DiagnosisResult:
             "where": self.where.to_dict(),
             "effects": [e.to_dict() for e in self.effects],
             "accepted": list(self.accepted),
+            "accepted_families": self.families,
             "best": self.best,
+            "floor": self.floor,
             "final": self.final,
             "rounds": self.rounds,
             "settings": self.settings,
@@ -261,10 +292,14 @@ def _as_records(val) -> list[Record]:
     return out
 
 
-def _rest_level(rec: Record, label: str) -> float:
+def _rest_level(rec: Record, label: str, required: bool = True) -> float | None:
+    """Mean output before the input first moves (None, when not required, for a record that
+    does not start with 10 samples at rest)."""
     moved = np.flatnonzero(rec.u != rec.u[0])
     k = int(moved[0]) if len(moved) else rec.n
     if k < 10:
+        if not required:
+            return None
         raise DiagnosisError(
             f"{label} {rec.name!r}: initial='level' needs at least 10 samples at rest before "
             f"the input first moves, found {k}")
@@ -315,15 +350,21 @@ def diagnose(
     model: DuhemSandwich | IdentificationResult | None = None,
     *,
     structure: Structure | None = None,
-    effects: Sequence[str] = EFFECT_NAMES,
+    effects: Sequence[str] = DEFAULT_EFFECTS,
+    repeats: Sequence[Record] | None = None,
     holdout: float = 0.4,
     alpha: float = 0.01,
     min_reduction: float = 0.02,
     max_rounds: int = 3,
     transient: float = 0.0017,
     train_skip: float = 0.0,
-    initial: str = "rest",
+    initial: str = "auto",
     refit_all: bool = False,
+    min_gap_share: float = 0.1,
+    min_gap_share_later: float = 0.25,
+    refit_samples: int | None = None,
+    time_budget: float | None = None,
+    budget_factor: float | None = 1.0,
     require_excitation: bool = False,
     progress: bool | Callable[[str], None] = True,
 ) -> DiagnosisResult:
@@ -337,13 +378,19 @@ def diagnose(
         Held-out records. Without them the last ``holdout`` share of ``train`` is held out (the
         model runs through the whole record; only the head is fitted).
     model : DuhemSandwich or IdentificationResult, optional
-        The model to diagnose; identified on ``train`` by output-error least squares when
-        omitted. A given model is also refitted alone, so that candidates are compared with a
-        model fitted the same way.
+        The model to diagnose; identified on ``train`` by :func:`hystid.identify.identify`
+        (batch: sensor offset and rest level estimated) when omitted. It is then refitted
+        alone, so that candidates are compared with a model fitted the same way. Its
+        ``u_rest`` is taken off the input and its ``offset`` is the sensor-offset parameter.
     structure : Structure, optional
         Structure for the identification; the paper's experimental one by default.
     effects : sequence of str
-        Candidate effects (all of :data:`~hystid.diagnose.effects.EFFECT_NAMES` by default).
+        Candidate families or forms (all of :data:`DEFAULT_EFFECTS` by default); a family name
+        stands for all its forms. The sensor offset is a parameter of the nominal model.
+    repeats : sequence of Record, optional
+        Records of the same input as ``train`` or a held-out record: the floor of the gap is
+        then the repeatability (:func:`hystid.baselines.repeat_floor`) when it is above the
+        sensor noise.
     holdout : float
         Share of ``train`` held out when no ``val`` is given.
     alpha : float
@@ -359,11 +406,32 @@ def diagnose(
         Seconds at the start of the train record simulated but left out of the refits' cost
         (an initial state the model cannot represent); the nominal model is then refitted alone
         with the same cost before the candidates are compared with it.
-    initial : {'rest', 'level'}
+    initial : {'auto', 'rest', 'level'}
         ``rest``: records start at rest at zero output. ``level``: at rest at the mean output
-        measured before the input first moves (the Duhem state holds the remanent value).
+        measured before the input first moves (the Duhem state holds the remanent value, as
+        the identification's fitted state at rest). ``auto`` (default): ``level`` for a record
+        that starts with 10 samples at rest, ``rest`` otherwise.
     refit_all : bool
-        Refit every excited candidate, not only the promising ones.
+        Refit every excited form, not only the promising ones.
+    min_gap_share : float
+        Smallest share of the nominal model's gap (to the floor) a form must close to be
+        accepted in the first round.
+    min_gap_share_later : float
+        The same in later rounds: a further effect must explain a good part of the gap, not
+        what the first form's imperfect fit leaves.
+    refit_samples : int, optional
+        Compare the forms on refits over the first ``refit_samples`` train samples only (the
+        model they are compared with refitted on the same span); an accepted form is then
+        refitted on the whole train part and must pass again. Bounds the cost on long records
+        whose head is well excited (all samples by default).
+    time_budget : float, optional
+        Seconds from the start of the first round's refits after which no further form is
+        refitted; the most promising form of every family that the screen cannot rule out is
+        refitted in any case, most promising first.
+    budget_factor : float or None
+        Without ``time_budget``: that time as a multiple of the nominal identification's
+        (1.0 by default; None for no limit). Forms left out are reported as
+        ``not refitted``.
     require_excitation : bool
         Raise :class:`DiagnosisError` when a candidate cannot be shown by the records instead
         of reporting it as not excited.
@@ -384,42 +452,27 @@ def diagnose(
     vals = _as_records(val)
     _check_inputs(train, vals, holdout, transient)
     try:
-        names = effect_names_check(effects)
+        names = effect_names_check(_expand_families(effects))
     except ValueError as err:
         raise DiagnosisError(str(err)) from err
-    if initial not in ("rest", "level"):
-        raise DiagnosisError(f"initial: expected 'rest' or 'level', got {initial!r}")
+    if initial not in ("auto", "rest", "level"):
+        raise DiagnosisError(f"initial: expected 'auto', 'rest' or 'level', got {initial!r}")
     if not 0 < alpha < 1:
         raise DiagnosisError(f"alpha: expected a level in (0, 1), got {alpha}")
     if not 0 <= min_reduction < 1:
         raise DiagnosisError(f"min_reduction: expected a fraction in [0, 1), got {min_reduction}")
+    if refit_samples is not None and refit_samples < MIN_TRAIN_SAMPLES:
+        raise DiagnosisError(f"refit_samples: expected at least {MIN_TRAIN_SAMPLES}, got "
+                             f"{refit_samples}")
+    if time_budget is not None and not time_budget >= 0:
+        raise DiagnosisError(f"time_budget: expected seconds >= 0, got {time_budget}")
+    if budget_factor is not None and not budget_factor >= 0:
+        raise DiagnosisError(f"budget_factor: expected a multiple >= 0, got {budget_factor}")
     fs = train.fs
     skip_tr = int(round(train_skip * fs))
     if train_skip < 0 or skip_tr > 0.5 * train.n * (1 if vals else 1 - holdout):
         raise DiagnosisError(f"train_skip: expected 0 <= train_skip <= half the train part, got "
                              f"{train_skip} s")
-    level = (lambda r, lab: _rest_level(r, lab)) if initial == "level" else (lambda r, lab: None)
-
-    # ----------------------------------------------------------------- data
-    if vals:
-        tr = FitData(train.u, train.y, fs, level(train, "train"), slice(skip_tr, None))
-        skip = int(round(transient * fs))
-        vds = [FitData(v.u, v.y, fs, level(v, f"val[{i}]"), slice(skip, None))
-               for i, v in enumerate(vals)]
-        t0s = [skip / fs] * len(vds)
-        held = "held-out records"
-    else:
-        k = int(round((1 - holdout) * train.n))
-        lev = level(train, "train")
-        tr = FitData(train.u[:k], train.y[:k], fs, lev, slice(skip_tr, None))
-        vds = [FitData(train.u, train.y, fs, lev, slice(k, None))]
-        t0s = [k / fs]
-        held = f"last {100 * holdout:.0f} % of the train record"
-    say(f"{len(tr.u)} train samples, {sum(len(v.u[v.weight]) for v in vds)} held-out samples "
-        f"({held}) at {fs:g} Hz; candidates: {', '.join(names)}")
-
-    # ----------------------------------------------------------------- nominal model
-    given = model is not None
     if isinstance(model, IdentificationResult):
         model = model.model
     if model is not None and not isinstance(model, DuhemSandwich):
@@ -427,194 +480,696 @@ def diagnose(
     if model is not None and not np.isclose(model.fs, fs, rtol=1e-9):
         raise DiagnosisError(f"model: sampling rate {model.fs:g} Hz differs from the records' "
                              f"{fs:g} Hz")
+    repeat = _repeat_floor(train, vals, repeats)
+    for label, v in (("min_gap_share", min_gap_share),
+                     ("min_gap_share_later", min_gap_share_later)):
+        if not 0 <= v < 1:
+            raise DiagnosisError(f"{label}: expected a fraction in [0, 1), got {v}")
+
+    # ----------------------------------------------------------------- data
+    u_rest = model.u_rest if model is not None else 0.0
+    tr, vds, t0s, held = _split(train, vals, holdout, transient, skip_tr, initial, u_rest)
+    say(f"{len(tr.u)} train samples, {sum(len(v.u[v.weight]) for v in vds)} held-out samples "
+        f"({held}) at {fs:g} Hz; candidates: {', '.join(names)}")
+    if any(n in IN_NOMINAL for n in effects):
+        say("offset: the sensor offset is a parameter of the nominal model, not a candidate")
+
+    # ----------------------------------------------------------------- nominal model
+    t_nominal = time.perf_counter()
     if model is None:
-        say("identifying the nominal sandwich (output-error least squares)")
+        say("identifying the nominal sandwich (hystid.identify, batch: offset and rest level "
+            "estimated)")
         nominal = _identify(tr, structure)
+        if nominal.u_rest != 0.0:
+            u_rest = nominal.u_rest
+            tr, vds, t0s, held = _split(train, vals, holdout, transient, skip_tr, initial,
+                                        u_rest)
     else:
         nominal = model
+    left_out = _cost_mask(tr, u_rest)
+    if left_out is not None:
+        say(f"{int(np.count_nonzero(~left_out))} train samples simulated but left out of every "
+            "cost, as the identification leaves them out (burn-in, jumps, outliers, a "
+            "saturated sensor)")
     phi0 = zero_vector()
-
-    def evaluate(m: DuhemSandwich, phi: np.ndarray):
-        w1, _, yh = simulate_fit_data(m, phi, tr)
-        e_tr = tr.y[tr.weight] - yh[tr.weight]
-        errs, segs = [], []
-        for vd, t0 in zip(vds, t0s, strict=True):
-            w1v, _, yv = simulate_fit_data(m, phi, vd)
-            sl = vd.weight
-            errs.append((vd.y[sl] - yv[sl]).copy())
-            segs.append(Segment(vd.u[sl], vd.y[sl], yv[sl].copy(), w1v[sl].copy(), fs, t0))
-        scales = (float(np.max(np.abs(np.diff(w1)))), float(np.max(np.abs(w1))))
-        return float(np.sqrt(np.mean(e_tr**2))), errs, segs, scales
-
-    rms_tr_first, errs_first, _, _ = evaluate(nominal, phi0)
-    if not all(np.all(np.isfinite(e)) for e in errs_first) or not np.isfinite(rms_tr_first):
+    phi0[EFFECTS["offset"].slots[0]] = getattr(nominal, "offset", 0.0)
+    ev = _Evaluator(tr, vds, t0s)
+    tr_c = tr if refit_samples is None else _head(tr, refit_samples)
+    ev_c = ev if tr_c is tr else _Evaluator(tr_c, vds, t0s)
+    first = ev(nominal, phi0, drift=False)
+    if not first.finite:
         raise DiagnosisError("the nominal model's simulation diverges on these records (the "
                              "Duhem stability condition (8) fails): scale the input down")
-    rms_val_first = _rms(errs_first)
-    say(f"nominal model: train RMS {rms_tr_first:.4g}, held-out RMS {rms_val_first:.4g}")
-
-    base_model, base_phi, base_active = nominal, phi0, []
-    first_fit = None
-    if given or initial == "level" or skip_tr > 0:
-        # the candidates are refitted with this cost and initial state: so is the base
-        say("refitting the nominal model alone (the base the candidates are compared with)")
-        rb = refit(nominal, tr, [], [phi0])
-        if rb.ok and rb.cost <= rms_tr_first**2:
-            base_model = DuhemSandwich(rb.theta, nominal.structure, fs=fs, name=nominal.name)
-            first_fit = {"rms_val": rms_val_first, "rms_train": rms_tr_first,
-                         "params": nominal.params,
-                         "note": "the given or first-identified model; the nominal figures are "
-                                 "those of its refit with the candidates' cost and initial state"}
-    rms_tr_nom, errs_nom, segs_nom, (step_scale, w1_scale) = evaluate(base_model, base_phi)
-    rms_val_nom = _rms(errs_nom)
+    say(f"nominal model: train RMS {first.rms_train:.4g}, held-out RMS {first.rms_val:.4g}")
+    base_model, first_fit = nominal, None
+    # the candidates are refitted with this cost and initial state: so is the base
+    say("refitting the nominal model alone (the base the candidates are compared with)")
+    rb = refit(nominal, tr, [], [phi0])
+    if rb.ok and rb.cost <= first.rms_train**2:
+        base_model = DuhemSandwich(rb.theta, nominal.structure, fs=fs, name=nominal.name)
+        phi0 = rb.phi
+        first_fit = {"rms_val": first.rms_val, "rms_train": first.rms_train,
+                     "params": nominal.params,
+                     "note": "the given or identified model; the nominal figures are those of "
+                             "its refit with the candidates' cost and initial state"}
+    t_nominal = time.perf_counter() - t_nominal
+    nom = ev(base_model, phi0, drift=False) if first_fit is not None else first
     if first_fit is not None:
-        say(f"nominal model refitted: train RMS {rms_tr_nom:.4g}, held-out RMS "
-            f"{rms_val_nom:.4g}")
-    where0 = localise(segs_nom)
+        say(f"nominal model refitted: train RMS {nom.rms_train:.4g}, held-out RMS "
+            f"{nom.rms_val:.4g}")
+    admissibility = _admissibility(base_model, nom, vds)
+    for m in admissibility:
+        say(f"the nominal model is not admissible on the held-out input: {m}")
+    where0 = localise(nom.segments)
+    floor_rms = max(where0.noise["rms"], repeat or 0.0)
     say(f"noise floor {where0.noise['rms']:.4g}; " + "; ".join(where0.findings[1:3]))
-    errs_base, rms_tr_base = errs_nom, rms_tr_nom
 
     # ----------------------------------------------------------------- greedy rounds
-    base_model_nominal = base_model
-    outcomes: dict[str, EffectOutcome] = {n: EffectOutcome(n, "screened out") for n in names}
-    accepted: list[str] = []
+    state = _Greedy(base_model, phi0, nom, where0)
+    outcomes: dict[str, EffectOutcome] = {
+        n: EffectOutcome(n, "screened out", family=family_of(n)) for n in names}
     rounds: list[dict[str, Any]] = []
     nf_estimates = [where0.noise["rms"]]
-    where_cur = where0
-    errs_cur, rms_tr_cur = errs_base, rms_tr_base
     promising = 0.25 * (1.0 - (1.0 - min_reduction) ** 2)
     cand_errs: dict[str, list[np.ndarray]] = {}
+    budget_end = None
     for rnd in range(1, max_rounds + 1):
-        remaining = [n for n in names if n not in accepted]
+        remaining = [n for n in names if n not in state.active
+                     and (family_of(n) not in state.families or _extends(n, state.active))]
         if not remaining:
             break
-        say(f"round {rnd}: screening {', '.join(remaining)}")
-        scr = screen(base_model, base_phi, base_active, tr, remaining, step_scale=step_scale,
-                     w1_scale=w1_scale,
-                     peaks_hz=where_cur.frequency["peaks_hz"] + [where_cur.frequency["peak_hz"]])
-        order = sorted(remaining, key=lambda n: -scr[n].score)
-        to_fit = [n for n in order if scr[n].excited
-                  and (refit_all or scr[n].score >= promising or n in order[:2])]
+        window = state if tr_c is tr else state.on_window(tr_c, ev_c, say)
+        drift_result, base = None, window
+        if "drift" in remaining:
+            # the drift is a nuisance of every record: refitted with the train record's own
+            # drift, judged with each held-out record's own drift re-estimated
+            drift_result = window.with_drift(tr_c, ev_c, say)
+        others = [n for n in remaining if n != "drift"]
+        say(f"round {rnd}: screening {', '.join(others)}")
+        scr = screen(base.model, base.phi, base.active, tr_c, others,
+                     step_scale=base.ev.scales[0], w1_scale=base.ev.scales[1],
+                     peaks_hz=state.where.frequency["peaks_hz"]
+                     + [state.where.frequency["peak_hz"]])
+        if drift_result is not None:
+            scr["drift"] = drift_result[3]
+        plan, ruled_out = _plan(scr, others, promising, refit_all)
         if rnd == 1:
-            for n in remaining:
-                o = outcomes[n]
-                o.screen_score, o.separation = scr[n].score, scr[n].separation
-                o.message = scr[n].message
-                if not scr[n].excited:
-                    o.status = "not excited"
-                    if require_excitation:
-                        raise DiagnosisError(scr[n].message)
-        if not to_fit:
-            rounds.append({"round": rnd, "rms_val_base": _rms(errs_cur), "accepted": None,
-                           "refitted": [], "findings": where_cur.findings})
+            _record_screen(outcomes, scr, ruled_out, require_excitation)
+            if time_budget is None and budget_factor is not None:
+                time_budget = budget_factor * t_nominal
+            if time_budget is not None:
+                budget_end = time.perf_counter() + time_budget
+        info: dict[str, Any] = {"round": rnd, "rms_val_base": state.ev.rms_val,
+                                "findings": state.where.findings, "accepted": None,
+                                "ruled_out": ruled_out, "candidates": {}}
+        if not plan and drift_result is None:
+            rounds.append(info)
             break
-        results: dict[str, tuple[RefitResult, dict, list]] = {}
-        for n in to_fit:
-            say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
-            rf = refit(base_model, tr, base_active + [n], scr[n].starts, base_phi=base_phi,
-                       step_scale=step_scale, w1_scale=w1_scale)
-            if not rf.ok:
-                if rnd == 1:
-                    outcomes[n].status = "failed"
-                    outcomes[n].message = f"refit failed: {rf.message}"
-                say(f"round {rnd}: {n}: refit failed ({rf.message})")
-                continue
-            m = DuhemSandwich(rf.theta, base_model.structure, fs=fs, name=base_model.name)
-            rms_tr, errs, _, _ = evaluate(m, rf.phi)
-            if not all(np.all(np.isfinite(e)) for e in errs):
-                if rnd == 1:
-                    outcomes[n].status = "failed"
-                    outcomes[n].message = "refit diverges on the held-out records"
-                continue
-            test = compare_losses(errs_cur, errs)
-            results[n] = (rf, test, errs)
-            say(f"round {rnd}: {n}: held-out RMS {test['rms_cand']:.4g} "
-                f"({100 * test['rel_reduction']:+.1f} %), p = {test['p_value']:.2g}")
-            if rnd == 1:
+        results = _refit_round(base, plan, scr, tr_c, ev_c, info, say, rnd, budget_end)
+        if drift_result is not None:
+            results["drift"] = drift_result[:3]
+            info["candidates"]["drift"] = _candidate_info("drift", *drift_result[:3])
+        if rnd == 1:
+            for n, (rf, test, ev_n) in results.items():
                 o = outcomes[n]
                 o.status = "rejected"
                 o.params = effect_dict(rf.phi, [n])[n]
-                o.rms_train_after = rms_tr
-                o.rms_val_after = test["rms_cand"]
-                o.test = test
-                cand_errs[n] = errs
-        if rnd == 1:
-            _mark_alike(outcomes, errs_cur, cand_errs)
-        level_r = alpha / max(len(to_fit), 1)
+                o.rms_train_after, o.rms_val_after, o.test = ev_n.rms_train, ev_n.rms_val, test
+                cand_errs[n] = ev_n.errs
+            for n, c in info["candidates"].items():
+                if c["status"] in ("failed", "not refitted"):
+                    outcomes[n].status = c["status"]
+                    outcomes[n].message = _join(outcomes[n].message, c["message"])
+            _mark_alike(outcomes, state.ev.errs, cand_errs)
+        level_r = alpha / max(len(results) + sum(
+            c["status"] == "failed" for c in info["candidates"].values()), 1)
+        info["test_level"] = level_r
+        share = min_gap_share if rnd == 1 else max(min_gap_share, min_gap_share_later)
+        needed = share * max(nom.rms_val - floor_rms, 0.0)
         passing = [n for n, (_, t, _) in results.items()
-                   if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction]
-        info = {"round": rnd, "rms_val_base": _rms(errs_cur), "refitted": list(results),
-                "test_level": level_r, "findings": where_cur.findings, "accepted": None}
+                   if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction
+                   and t["rms_base"] - t["rms_cand"] >= needed]
+        info["rms_reduction_needed"] = needed
         if not passing:
             rounds.append(info)
             say(f"round {rnd}: no candidate passes (level {level_r:.2g}, "
                 f"minimum reduction {100 * min_reduction:.0f} %)")
             break
-        best = min(passing, key=lambda n: results[n][1]["rms_cand"])
-        best = _parsimonious(best, passing, results, level_r, min_reduction)
-        rf, test, errs = results[best]
-        base_model = DuhemSandwich(rf.theta, base_model.structure, fs=fs, name=base_model.name)
-        base_phi = rf.phi
-        base_active = base_active + [best]
-        accepted.append(best)
-        rms_tr_cur, errs_cur, segs_cur, (step_scale, w1_scale) = evaluate(base_model, base_phi)
-        where_cur = localise(segs_cur)
-        nf_estimates.append(where_cur.noise["rms"])
+        # a further form of a family already accepted goes first (the first form did not
+        # catch the whole effect), a new family next; a record's own drift (re-estimated on
+        # the held-out records themselves) only when it beats the best other form
+        pool = ([n for n in passing if family_of(n) in state.families]
+                or _drift_last(passing, results, level_r, min_reduction))
+        chosen = None
+        while pool and chosen is None:
+            best = min(pool, key=lambda n: results[n][1]["rms_cand"])
+            best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
+                                              for n, r in results.items()}, level_r,
+                                 min_reduction)
+            rf, test, ev_best = results[best]
+            # polished on the whole train part (longer than the screening refits, so that a
+            # later round does not pick up what an unfinished fit left): the model that goes
+            # on must pass the same test again
+            rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
+            if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
+                    and test["rms_base"] - test["rms_cand"] >= needed):
+                info["candidates"][best].update({
+                    "status": "not confirmed",
+                    "message": f"passed on its screening refit, not once polished on the whole "
+                               f"train part (held-out RMS {test['rms_cand']:.4g}, p = "
+                               f"{test['p_value']:.2g})"})
+                say(f"round {rnd}: {best} not confirmed on the whole train part")
+                pool.remove(best)
+                continue
+            chosen = best
+        if chosen is None:
+            rounds.append(info)
+            break
+        best = chosen
+        rms_before = state.ev.rms_val
+        state.accept(best, rf, ev_best, localise(ev_best.segments))
+        nf_estimates.append(state.where.noise["rms"])
         o = outcomes[best]
         o.status, o.round = "accepted", rnd
-        o.cumulative = {"rms_val": _rms(errs_cur), "p_value": test["p_value"],
-                        "rel_reduction": test["rel_reduction"]}
-        info.update({"accepted": best, "rms_val_after": _rms(errs_cur)})
+        o.params = effect_dict(rf.phi, [best])[best]
+        o.rms_train_after, o.rms_val_after, o.test = ev_best.rms_train, ev_best.rms_val, test
+        o.cumulative = {"rms_val_before": rms_before, "rms_val": ev_best.rms_val,
+                        "p_value": test["p_value"], "rel_reduction": test["rel_reduction"]}
+        info.update({"accepted": best, "rms_val_after": ev_best.rms_val})
         rounds.append(info)
-        say(f"round {rnd}: accepted {best}: held-out RMS {_rms(errs_cur):.4g}")
+        say(f"round {rnd}: accepted {best}: held-out RMS {ev_best.rms_val:.4g}")
 
     # ----------------------------------------------------------------- figures of merit
     nf = float(min(nf_estimates))
-    gap = rms_val_nom - nf
+    floor = {"noise_floor_rms": nf, "repeat_floor_rms": repeat,
+             "rms": max(nf, repeat) if repeat is not None else nf,
+             "kind": "repeatability" if repeat is not None and repeat > nf else "sensor noise"}
+    gap = nom.rms_val - floor["rms"]
 
     def closed(rms):
-        return float((rms_val_nom - rms) / gap) if gap > 0 else 0.0
+        return float((nom.rms_val - rms) / gap) if gap > 0 else 0.0
 
     for o in outcomes.values():
         if o.rms_val_after is not None:
             o.gap_closed = closed(o.rms_val_after)
         if o.cumulative is not None:
             o.cumulative["gap_closed"] = closed(o.cumulative["rms_val"])
-    ranked = [outcomes[n] for n in accepted]
-    rest = [o for n, o in outcomes.items() if n not in accepted]
-    status_rank = {"rejected": 0, "screened out": 1, "failed": 2, "not excited": 3}
-    rest.sort(key=lambda o: (status_rank.get(o.status, 4),
-                             o.rms_val_after if o.rms_val_after is not None else np.inf,
-                             -o.screen_score))
-    ranked += rest
-    rms_final = _rms(errs_cur)
-    final_effects = effect_dict(base_phi, accepted) if accepted else {}
-    aug = AugmentedSandwich(base_model, final_effects)
-    nominal_info = {
-        "rms_val": rms_val_nom,
-        "rms_train": rms_tr_nom,
-        "gap": gap,
-        "params": base_model_nominal.params,
-        "name": nominal.name,
-    }
+    accepted = list(state.active)
+    ranked = _rank(outcomes, accepted)
+    final_effects = effect_dict(state.phi, accepted) if accepted else {}
+    offset_slot = EFFECTS["offset"].slots[0]
+
+    def placed(m: DuhemSandwich, phi: np.ndarray) -> DuhemSandwich:
+        # the model in record units: its rest level, the fitted sensor offset, its envelope
+        return DuhemSandwich(m.theta, m.structure, fs=fs, name=nominal.name, u_rest=u_rest,
+                             offset=float(phi[offset_slot]),
+                             envelope=getattr(nominal, "envelope", None), units=train.units)
+
+    base_placed = placed(base_model, phi0)
+    aug = AugmentedSandwich(placed(state.model, state.phi), final_effects)
+    nominal_info = {"rms_val": nom.rms_val, "rms_train": nom.rms_train, "gap": gap,
+                    "params": base_model.params, "name": nominal.name,
+                    "admissibility": admissibility, "margin_val": nom.margin_val}
     if first_fit is not None:
         nominal_info["first_fit"] = first_fit
-    final = {"rms_val": rms_final, "rms_train": rms_tr_cur, "gap_closed": closed(rms_final),
-             "effects": final_effects, "params": base_model.params}
-    settings = {"alpha": alpha, "min_reduction": min_reduction, "max_rounds": max_rounds,
+    final = {"rms_val": state.ev.rms_val, "rms_train": state.ev.rms_train,
+             "gap_closed": closed(state.ev.rms_val), "effects": final_effects,
+             "params": state.model.params,
+             "unexplained": describe_unexplained(state.where, floor["rms"])}
+    settings = {"alpha": alpha, "min_reduction": min_reduction, "min_gap_share": min_gap_share,
+                "min_gap_share_later": min_gap_share_later,
+                "refit_samples": refit_samples, "max_rounds": max_rounds,
                 "holdout": None if vals else holdout, "transient_s": transient,
-                "train_skip_s": train_skip,
-                "initial": initial, "candidates": list(names), "fs": fs,
-                "train_samples": len(tr.u),
+                "train_skip_s": train_skip, "initial": initial, "candidates": list(names),
+                "fs": fs, "train_samples": len(tr.u), "time_budget_s": time_budget,
+                "budget_factor": budget_factor,
                 "val_samples": int(sum(len(v.u[v.weight]) for v in vds)),
-                "elapsed_s": time.perf_counter() - say.t0}
-    series = {"errs_nominal": errs_nom, "errs_final": errs_cur, "candidate_errs": cand_errs,
-              "t0s": t0s}
+                "units": dict(train.units), "u_rest": u_rest,
+                "nominal_seconds": t_nominal, "elapsed_s": time.perf_counter() - say.t0}
+    series = {"errs_nominal": nom.errs, "errs_final": state.ev.errs,
+              "candidate_errs": cand_errs, "t0s": t0s}
     say(f"done: {', '.join(accepted) if accepted else 'none'} accepted; held-out RMS "
-        f"{rms_val_nom:.4g} -> {rms_final:.4g} (noise floor {nf:.4g})")
+        f"{nom.rms_val:.4g} -> {state.ev.rms_val:.4g} ({floor['kind']} floor "
+        f"{floor['rms']:.4g})")
     return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds,
-                           base_model_nominal,
-                           aug, where_cur, settings, series)
+                           base_placed, aug, state.where, settings, series, floor)
+
+
+# --------------------------------------------------------------------------- stages
+def _expand_families(effects: Sequence[str]) -> list[str]:
+    """Family names stand for all their forms (``creep`` -> ``creep, creep_2tau, ...``); forms
+    that are part of the nominal model are left out (an error when nothing else is asked)."""
+    out: list[str] = []
+    for n in effects:
+        forms = [f for f in FAMILIES.get(n, (n,)) if f not in IN_NOMINAL]
+        out += [f for f in forms if f not in out]
+    if not out and any(n in IN_NOMINAL for n in effects):
+        raise ValueError(f"effects: {', '.join(n for n in effects if n in IN_NOMINAL)} is a "
+                         "parameter of the nominal model (the sensor offset is estimated with "
+                         "it), not a candidate; name others")
+    return out
+
+
+def _join(a: str, b: str) -> str:
+    return f"{a}; {b}" if a and b else (a or b)
+
+
+def _repeat_floor(train: Record, vals: list[Record],
+                  repeats: Sequence[Record] | None) -> float | None:
+    """Repeatability of the records of one input, or None without repeats."""
+    if not repeats:
+        return None
+    reps = _as_records(repeats)
+    for ref in [train, *vals]:
+        if ref.n == reps[0].n and np.allclose(ref.u, reps[0].u,
+                                              atol=1e-3 * (np.ptp(ref.u) or 1.0)):
+            try:
+                return repeat_floor([ref, *reps])
+            except ValueError as err:
+                raise DiagnosisError(f"repeats: {err}") from err
+    raise DiagnosisError(f"repeats {reps[0].name!r}: its input is not that of the train record "
+                         "or of a held-out record (expected repeats of one of their inputs, "
+                         "equally long)")
+
+
+def _split(train: Record, vals: list[Record], holdout: float, transient: float, skip_tr: int,
+           initial: str, u_rest: float) -> tuple[FitData, list[FitData], list[float], str]:
+    """The train part and the held-out parts as :class:`FitData` (input less ``u_rest``)."""
+    fs = train.fs
+
+    def level(rec: Record, label: str) -> float | None:
+        if initial == "rest":
+            return None
+        return _rest_level(rec, label, required=initial == "level")
+
+    if vals:
+        tr = FitData(train.u - u_rest, train.y, fs, level(train, "train"),
+                     slice(skip_tr, None))
+        skip = int(round(transient * fs))
+        vds = [FitData(v.u - u_rest, v.y, fs, level(v, f"val[{i}]"), slice(skip, None))
+               for i, v in enumerate(vals)]
+        return tr, vds, [skip / fs] * len(vds), "held-out records"
+    k = int(round((1 - holdout) * train.n))
+    lev = level(train, "train")
+    tr = FitData(train.u[:k] - u_rest, train.y[:k], fs, lev, slice(skip_tr, None))
+    vds = [FitData(train.u - u_rest, train.y, fs, lev, slice(k, None))]
+    return tr, vds, [k / fs], f"last {100 * holdout:.0f} % of the train record"
+
+
+@dataclass
+class _Evaluation:
+    """Train and held-out errors of one model (drift re-estimated per record when on)."""
+
+    rms_train: float
+    errs: list[np.ndarray]
+    segments: list[Segment]
+    scales: tuple[float, float]
+    margin_val: float
+    finite: bool
+
+    @property
+    def rms_val(self) -> float:
+        return _rms(self.errs)
+
+
+class _Evaluator:
+    """Simulates a model over the train and held-out parts.
+
+    The drift is a nuisance of each record: its parameters (fitted on the train record) are
+    zero on the held-out records; with ``drift`` on, a drift ``d1 t + d2 t^2 + d3 t^3`` is
+    re-estimated on each of them by least squares, so the held-out error is what the model
+    explains beyond it.
+    """
+
+    def __init__(self, tr: FitData, vds: list[FitData], t0s: list[float]) -> None:
+        self.tr, self.vds, self.t0s = tr, vds, t0s
+        self.drift_slots = list(EFFECTS["drift"].slots)
+
+    def __call__(self, m: DuhemSandwich, phi: np.ndarray, drift: bool) -> _Evaluation:
+        tr = self.tr
+        w1, _, yh = simulate_fit_data(m, phi, tr)
+        e_tr = tr.y[tr.weight] - yh[tr.weight]
+        scales = (float(np.max(np.abs(np.diff(w1)))), float(np.max(np.abs(w1))))
+        phi_val = np.array(phi, float)
+        phi_val[self.drift_slots] = 0.0
+        errs, segs, margin = [], [], 0.0
+        for vd, t0 in zip(self.vds, self.t0s, strict=True):
+            w1v, _, yv = simulate_fit_data(m, phi_val, vd)
+            sl = vd.weight
+            yv = yv.copy()
+            if drift:
+                t = np.arange(len(vd.u))[sl] / vd.fs
+                yv[sl] += _drift_fit(t, vd.y[sl] - yv[sl])
+            errs.append(vd.y[sl] - yv[sl])
+            segs.append(Segment(vd.u[sl], vd.y[sl], yv[sl], w1v[sl].copy(), vd.fs, t0))
+            margin = max(margin, duhem_margin(m.theta, m.structure, phi_val, w1v[sl]))
+        finite = bool(np.isfinite(e_tr).all() and all(np.isfinite(e).all() for e in errs))
+        rms_tr = float(np.sqrt(np.mean(e_tr**2)))
+        return _Evaluation(rms_tr, errs, segs, scales, margin, finite)
+
+
+def _head(data: FitData, n: int) -> FitData:
+    """The first ``n`` samples of a train part (the part itself when shorter)."""
+    if len(data.u) <= n:
+        return data
+    weight = data.weight[:n] if isinstance(data.weight, np.ndarray) else data.weight
+    return FitData(data.u[:n], data.y[:n], data.fs, data.level, weight)
+
+
+def _drift_fit(t: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Least-squares drift ``d1 t + d2 t^2 + d3 t^3`` of a record's error (the record's own
+    drift, zero at its start)."""
+    A = np.column_stack([t, t * t, t**3])
+    coef = np.linalg.lstsq(A, e, rcond=None)[0]
+    return A @ coef
+
+
+def _admissibility(model: DuhemSandwich, ev: _Evaluation, vds: list[FitData]) -> list[str]:
+    """Why the nominal model cannot be trusted on the held-out input (empty when it can)."""
+    out = []
+    env = getattr(model, "envelope", None)
+    if env is not None:
+        for i, vd in enumerate(vds):
+            out += [f"held-out record {i}: {m}" for m in env.violations(vd.u + model.u_rest)]
+    if not ev.finite:
+        out.append("the simulation diverges on the held-out input")
+    elif not ev.margin_val < 2.0:
+        out.append(f"condition (8) fails on the held-out input: alpha |dw1| reaches "
+                   f"{ev.margin_val:.3g} (expected < 2), so the Duhem recursion amplifies there "
+                   "and the held-out error is partly the model's own instability")
+    return out
+
+
+class _Greedy:
+    """The model the greedy search has reached: nominal parameters, effect vector, accepted
+    forms, their families, the evaluation and the localisation."""
+
+    def __init__(self, model: DuhemSandwich, phi: np.ndarray, ev: _Evaluation,
+                 where: Where) -> None:
+        self.model, self.phi, self.ev, self.where = model, phi, ev, where
+        self.active: list[str] = []
+        self.families: list[str] = []
+
+    @property
+    def drift(self) -> bool:
+        """Whether the drift is accepted (re-estimated on every held-out record)."""
+        return "drift" in self.active
+
+    def _copy(self, model: DuhemSandwich, phi: np.ndarray, ev: _Evaluation) -> _Greedy:
+        out = _Greedy(model, phi, ev, self.where)
+        out.active, out.families = list(self.active), list(self.families)
+        return out
+
+    def with_drift(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> tuple | None:
+        """The drift candidate: the current model refitted with the train record's own drift,
+        judged with each held-out record's own drift re-estimated. Returns ``(refit, test,
+        evaluation, screen entry)``, or None when the refit fails."""
+        say("refitting with the train record's own drift (a nuisance of every record)")
+        w1, _, yh = simulate_fit_data(self.model, self.phi, tr_c)
+        sl = tr_c.weight
+        t = np.arange(len(tr_c.u))[sl] / tr_c.fs
+        A = np.column_stack([t, t * t, t**3])
+        coef = np.linalg.lstsq(A, tr_c.y[sl] - yh[sl], rcond=None)[0]
+        start = np.array(self.phi, float)
+        start[list(EFFECTS["drift"].slots)] = coef
+        rf = refit(self.model, tr_c, self.active + ["drift"], [start], base_phi=start,
+                   step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
+        if not rf.ok:
+            return None
+        m = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs, name=self.model.name)
+        ev = ev_c(m, rf.phi, drift=True)
+        if not ev.finite:
+            return None
+        score = float(max(0.0, 1.0 - rf.cost / max(self.ev.rms_train**2, 1e-300)))
+        entry = ScreenResult("drift", score, 1.0, True, [start])
+        return rf, compare_losses(self.ev.errs, ev.errs), ev, entry
+
+    def on_window(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> _Greedy:
+        """The current model refitted over the head of the train part (itself when the head
+        is the whole part): the base the forms refitted over the head are compared with."""
+        say(f"refitting the current model over the first {len(tr_c.u)} train samples")
+        rf = refit(self.model, tr_c, self.active, [self.phi], base_phi=self.phi,
+                   step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1])
+        if not rf.ok:
+            return self
+        m = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs, name=self.model.name)
+        return self._copy(m, rf.phi, ev_c(m, rf.phi, self.drift))
+
+    def refit_whole(self, name: str, rf: RefitResult, tr: FitData, ev: _Evaluator,
+                    head: tuple[RefitResult, dict, _Evaluation], say: _Progress,
+                    ) -> tuple[RefitResult, dict, _Evaluation]:
+        """Polish an accepted form on the whole train part from its screening refit (three
+        times the evaluations); the test is then taken again against the current model (the
+        screening refit's figures are kept when the polish fails)."""
+        say(f"polishing {name} on the whole train part")
+        start = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs)
+        active = [n for n in self.active if n != name] + [name]
+        whole = refit(start, tr, active, [rf.phi], base_phi=rf.phi,
+                      step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1],
+                      max_nfev=60)
+        if not whole.ok:
+            return head
+        m = DuhemSandwich(whole.theta, self.model.structure, fs=self.model.fs)
+        ev_w = ev(m, whole.phi, self.drift or name == "drift")
+        if not ev_w.finite:
+            return head
+        return whole, _held_out_test(self, name, ev_w), ev_w
+
+    def accept(self, name: str, rf: RefitResult, ev: _Evaluation, where: Where) -> None:
+        """Add an accepted form with its refit, evaluation and localisation."""
+        self.model = DuhemSandwich(rf.theta, self.model.structure, fs=self.model.fs,
+                                   name=self.model.name)
+        self.phi = rf.phi
+        self.active.append(name)
+        self.families.append(family_of(name))
+        self.ev, self.where = ev, where
+
+
+def _plan(scr: dict[str, ScreenResult], remaining: list[str], promising: float,
+          refit_all: bool) -> tuple[list[tuple[str, bool]], dict[str, str]]:
+    """Which forms to refit, most promising first, and the families the screen rules out.
+
+    A family is ruled out only when none of its forms is excited or every excited form's
+    signature matches less than a quarter of what a useful reduction needs. Every other family
+    has its best form refitted (``must`` True); its further forms follow when promising.
+    """
+    by_family: dict[str, list[str]] = {}
+    for n in remaining:
+        by_family.setdefault(family_of(n), []).append(n)
+    must, extra, ruled_out = [], [], {}
+    for fam, forms in by_family.items():
+        excited = sorted((n for n in forms if scr[n].excited), key=lambda n: -scr[n].score)
+        if not excited:
+            ruled_out[fam] = "not excited"
+            continue
+        top = excited[0]
+        if not refit_all and scr[top].score < 0.25 * promising:
+            ruled_out[fam] = (f"its signature matches {100 * scr[top].score:.2g} % of the train "
+                              f"residual (a useful reduction needs {100 * promising:.2g} %)")
+            continue
+        must.append(top)
+        extra += [n for n in excited[1:] if refit_all or scr[n].score >= promising]
+    must.sort(key=lambda n: -scr[n].score)
+    extra.sort(key=lambda n: -scr[n].score)
+    return [(n, True) for n in must] + [(n, False) for n in extra], ruled_out
+
+
+def _record_screen(outcomes: dict[str, EffectOutcome], scr: dict[str, ScreenResult],
+                   ruled_out: dict[str, str], require_excitation: bool) -> None:
+    for n, o in outcomes.items():
+        if n not in scr:
+            continue
+        o.screen_score, o.separation = scr[n].score, scr[n].separation
+        o.message = scr[n].message
+        if not scr[n].excited:
+            o.status = "not excited"
+            if require_excitation:
+                raise DiagnosisError(scr[n].message)
+        elif o.family in ruled_out:
+            o.message = _join(o.message, f"screened out: {ruled_out[o.family]}")
+
+
+def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, ScreenResult],
+                 tr: FitData, ev: _Evaluator, info: dict, say: _Progress, rnd: int,
+                 budget_end: float | None) -> dict[str, tuple[RefitResult, dict, _Evaluation]]:
+    """Refit the planned forms on top of the current model and test each on the held-out
+    part; failures and forms left out by the time budget are recorded in ``info``."""
+    results = {}
+    for n, must in plan:
+        if not must and budget_end is not None and time.perf_counter() > budget_end:
+            info["candidates"][n] = {"status": "not refitted",
+                                     "message": "not refitted: the time budget was spent on "
+                                                "more promising forms"}
+            continue
+        say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
+        rf = refit(state.model, tr, state.active + [n], scr[n].starts, base_phi=state.phi,
+                   step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
+                   joint_starts=len(scr[n].starts) if n == "delay" else 1)
+        if n == "delay" and all(a == "drift" for a in state.active):
+            rf = _delay_as_structure(state, tr, rf, say)
+        ev_n = None
+        if rf.ok:
+            ev_n = ev(DuhemSandwich(rf.theta, state.model.structure, fs=state.model.fs),
+                      rf.phi, drift=state.drift or n == "drift")
+            if not ev_n.finite:
+                rf.ok, rf.message = False, "the refitted model diverges on the held-out records"
+        if not rf.ok:
+            info["candidates"][n] = {"status": "failed", "message": f"refit failed: {rf.message}"}
+            say(f"round {rnd}: {n}: refit failed ({rf.message})")
+            continue
+        test = _held_out_test(state, n, ev_n)
+        results[n] = (rf, test, ev_n)
+        info["candidates"][n] = _candidate_info(n, rf, test, ev_n)
+        say(f"round {rnd}: {n}: held-out RMS {test['rms_cand']:.4g} "
+            f"({100 * test['rel_reduction']:+.1f} %), p = {test['p_value']:.2g}")
+    return results
+
+
+#: Dead times (samples added to q1) scanned by the structure refit of the delay.
+STRUCTURE_DELAYS = 24
+
+
+def _delay_as_structure(state: _Greedy, tr: FitData, rf: RefitResult,
+                        say: _Progress) -> RefitResult:
+    """The dead time as a structure change: the nominal model identified afresh with
+    ``q1 + d`` (eq. 1) for the one or two ``d`` whose linear start simulates best, then refitted
+    with a fractional delay; kept when it fits the train part better than ``rf``.
+
+    A large dead time moves the nominal fit into another basin (L1 and L2 bent to mimic it),
+    from which a refit of the delay alone does not come back.
+    """
+    s = state.model.structure
+    rec = Record(tr.u, tr.y, tr.fs, name="train")
+    scores = []
+    for d in range(STRUCTURE_DELAYS + 1):
+        sd = replace(s, q1=s.q1 + d)
+        lin = linear_start(rec, sd)
+        if lin is None:
+            continue
+        with np.errstate(all="ignore"):
+            y = DuhemSandwich(lin, sd, fs=tr.fs).simulate(tr.u, check=False).y
+            cost = float(np.mean((y - tr.y) ** 2)) if np.all(np.isfinite(y)) else np.inf
+        if np.isfinite(cost):
+            scores.append((cost, d))
+    scores.sort()
+    ref = dict((d, c) for c, d in scores).get(0, np.inf)
+    best = rf
+    for cost, d in scores[:1]:
+        # a dead time worth a fresh identification: its linear start is clearly better
+        if d == 0 or not cost < 0.9 * ref:
+            continue
+        say(f"identifying the nominal structure with q1 + {d}")
+        fresh = _identify(tr, replace(s, q1=s.q1 + d))
+        start = np.array(state.phi, float)
+        start[EFFECTS["delay"].slots[0]] = d
+        start[EFFECTS["offset"].slots[0]] = fresh.offset
+        m = DuhemSandwich(fresh.theta, s, fs=tr.fs, name=state.model.name)
+        cand = refit(m, tr, state.active + ["delay"], [start], base_phi=start,
+                     step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1])
+        if cand.ok and (not best.ok or cand.cost < best.cost):
+            best = cand
+    return best
+
+
+def _drift_last(passing: list[str], results: dict, level: float,
+                min_reduction: float) -> list[str]:
+    """The passing forms without the drift, unless the drift lowers the held-out error below
+    the best other form's by the same test (its drift is fitted on the held-out records
+    themselves: it must do more than match an input-tied form)."""
+    others = [n for n in passing if n != "drift"]
+    if "drift" not in passing or not others:
+        return list(passing)
+    best = min(others, key=lambda n: results[n][1]["rms_cand"])
+    drift_errs = results["drift"][2].errs
+
+    def beats(a, b):
+        t = compare_losses(a, b)
+        return t["p_value"] < level and t["rel_reduction"] >= min_reduction
+
+    if not beats(results[best][2].errs, drift_errs):
+        return others
+    # the drift does better; the other form still goes first when, given each record's own
+    # drift as well, it explains what the drift alone does not (an input-tied slow effect)
+    if beats(drift_errs, _beyond_drift(results[best][2])):
+        return others
+    return ["drift"]
+
+
+def _beyond_drift(ev: _Evaluation) -> list[np.ndarray]:
+    """Held-out errors less each record's own least-squares drift."""
+    out = []
+    for e, seg in zip(ev.errs, ev.segments, strict=True):
+        t = seg.t0 + np.arange(len(e)) / seg.fs
+        out.append(e - _drift_fit(t, e))
+    return out
+
+
+def _extends(name: str, active: list[str]) -> bool:
+    """Whether a form of an accepted family can join the accepted forms (no shared
+    parameters): a further form of the same effect."""
+    taken = {s for a in active for s in EFFECTS[a].slots}
+    return not taken & set(EFFECTS[name].slots)
+
+
+def _candidate_info(name: str, rf: RefitResult, test: dict, ev: _Evaluation) -> dict[str, Any]:
+    """A refitted form's figures in a round's record."""
+    return {"status": "refitted", "rms_val_after": ev.rms_val, "p_value": test["p_value"],
+            "rel_reduction": test["rel_reduction"], "params": effect_dict(rf.phi, [name])[name]}
+
+
+def _held_out_test(state: _Greedy, name: str, ev: _Evaluation) -> dict[str, float]:
+    """The held-out loss test of a form against the current model, on the held-out errors as
+    they are (both beyond each record's own drift once the drift is accepted)."""
+    return compare_losses(state.ev.errs, ev.errs)
+
+
+def _rank(outcomes: dict[str, EffectOutcome], accepted: list[str]) -> list[EffectOutcome]:
+    """Accepted forms in order, then the others: refitted by held-out RMS, then the rest."""
+    ranked = [outcomes[n] for n in accepted]
+    rest = [o for n, o in outcomes.items() if n not in accepted]
+    status_rank = {"rejected": 0, "screened out": 1, "not refitted": 2, "failed": 3,
+                   "not excited": 4}
+    rest.sort(key=lambda o: (status_rank.get(o.status, 5),
+                             o.rms_val_after if o.rms_val_after is not None else np.inf,
+                             -o.screen_score))
+    return ranked + rest
+
+
+def describe_unexplained(where: Where, floor: float) -> dict[str, Any]:
+    """What the error left above the floor looks like: band, periodicity, zone, branch.
+
+    Parameters
+    ----------
+    where : Where
+        Localisation of the error left.
+    floor : float
+        The floor the gap is measured against.
+
+    Returns
+    -------
+    dict
+        ``rms``, ``excess_rms``, ``band_hz``, ``peak_hz``, ``periodic`` (harmonics of a
+        repeating input, or None), ``offset_fraction``, ``trend_fraction``, ``worst_zone`` and
+        ``branch`` (loop-width and common shares) and ``text`` (one line each).
+    """
+    f, t, b, z = where.frequency, where.time, where.branch, where.zone["worst"]
+    excess = float(np.sqrt(max(where.rms**2 - floor**2, 0.0)))
+    h = f.get("harmonics")
+    text = [f"{excess:.3g} RMS above the floor of {floor:.3g}",
+            f"band {f['band_hz'][0]:.4g}-{f['band_hz'][1]:.4g} Hz (peak {f['peak_hz']:.4g} Hz)"]
+    if h:
+        text.append(f"{100 * h['harmonic_fraction']:.0f} % periodic with the input "
+                    f"({1 / h['f0_hz']:.4g} s)")
+    text.append(f"worst zone: {z['by']} in [{z['bin'][0]:.3g}, {z['bin'][1]:.3g}] "
+                f"({z['rms_ratio']:.1f}x the overall RMS)")
+    text.append(f"branches: loop-width part {100 * b['width_fraction']:.0f} %, common part "
+                f"{100 * b['common_fraction']:.0f} % of the excess")
+    return {"rms": where.rms, "excess_rms": excess, "band_hz": f["band_hz"],
+            "peak_hz": f["peak_hz"], "periodic": h or None,
+            "offset_fraction": t["mean_fraction"], "trend_fraction": t["trend_fraction"],
+            "worst_zone": z, "branch": {"width_fraction": b["width_fraction"],
+                                        "common_fraction": b["common_fraction"]},
+            "text": text}
 
 
 def _parsimonious(best: str, passing: list[str], results: dict, level: float,
@@ -655,7 +1210,8 @@ def _mark_alike(outcomes: dict[str, EffectOutcome], base: list[np.ndarray],
     for n in names:
         o = outcomes[n]
         if o.alike:
-            others = ", ".join(f"{k} ({100 * v:.0f} %)" for k, v in o.alike.items())
+            top = sorted(o.alike.items(), key=lambda kv: -kv[1])[:3]
+            others = ", ".join(f"{k} ({100 * v:.0f} %)" for k, v in top)
             note = f"{n} corrects the held-out error like {others}: these records cannot " \
                    f"tell them apart"
             o.message = (o.message + "; " if o.message else "") + note
@@ -665,18 +1221,34 @@ def _rms(errs: list[np.ndarray]) -> float:
     return float(np.sqrt(np.mean(np.concatenate(errs) ** 2)))
 
 
-def _identify(tr: FitData, structure: Structure | None) -> DuhemSandwich:
-    """The nominal identification: output-error least squares on the train part.
+def _cost_mask(tr: FitData, u_rest: float) -> np.ndarray | None:
+    """Make the train part's cost leave out what the identification leaves out
+    (:func:`hystid.identify.prepare.prepare`: burn-in, samples after an input jump, outliers,
+    a saturated sensor); returns the samples kept, or None when all are kept (or the record
+    cannot be prepared)."""
+    try:
+        prep = prepare(Record(tr.u + u_rest, tr.y, tr.fs, name="train"))
+    except ValueError:
+        return None
+    keep = np.asarray(prep.weight, bool).copy()
+    own = np.zeros(len(tr.u), bool)
+    own[tr.weight] = True
+    keep &= own
+    if keep.all() or keep.sum() < MIN_TRAIN_SAMPLES // 2:
+        return None
+    tr.weight = keep
+    return keep
 
-    With an initial output level, a first fit from rest gives the L2 gain that sets the
-    initial Duhem state, and a second fit starts from it.
+
+def _identify(tr: FitData, structure: Structure | None) -> DuhemSandwich:
+    """The nominal identification: :func:`hystid.identify.identify` (batch) on the train part,
+    which places the model at the record's rest level and sensor offset.
+
+    Its fitted Duhem state at rest is not part of the model: the diagnosis' simulations start
+    at the measured rest level instead (``initial='auto'`` or ``'level'``), which sets it.
     """
     rec = Record(tr.u, tr.y, tr.fs, name="train")
-    res = fit_output_error(rec, structure)
-    if tr.level is not None:
-        P = res.model.structure.history
-        x0 = initial_state(res.model, tr.level, float(tr.u[0]), P)
-        res = fit_output_error(rec, structure, res.model.theta, x0=x0, linear_init=False)
+    res = identify(rec, "batch", structure)
     model = res.model
     model.name = "nominal sandwich"
     return model

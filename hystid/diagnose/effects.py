@@ -1,25 +1,42 @@
 """Candidate unmodelled effects: augmentations of the Duhem sandwich (eqs. 1, 2, 7).
 
-Each effect adds a few parameters to the nominal sandwich and reduces to it *exactly* (bit for
-bit) when they are zero. With ``ud`` the delayed input, ``v = w2 + c`` the actuator displacement
-with creep, ``yL`` the output of L2 and ``t`` the time since the start of the record::
+Each candidate *form* adds a few parameters to the nominal sandwich and reduces to it *exactly*
+(bit for bit) when they are zero. Forms are grouped in *families* (the physical effect a
+diagnosis names); a family has one or several forms so that an effect whose functional form
+differs from any single parametrisation is still found. With ``ud`` the delayed input,
+``v = w2 + c`` the actuator displacement with creep, ``yL`` the output of L2 and ``t`` the time
+since the start of the record::
 
-    delay       ud(k) = (1 - phi) u(k - n) + phi u(k - n - 1),   n + phi = d (samples)
-    slew_limit  w1(k) = w1(k-1) + clip(w1_L1(k) - w1(k-1), -1/s, 1/s),   s = inv_rate * fs
-    saturation  f(w1) = f0 sgn(w1) + f1 w1 (1 + c w1^2) in eq. (7): the anhysteretic curve bends
-    offset      y(k) = ... + y0: a constant offset of the sensor's zero
-    asymmetry   alpha_k = alpha (1 + e_a sgn dw1(k)),  g_k = g0 (1 + e_g sgn dw1(k))  in eq. (7)
-    creep       c(k) = c(k-1) + lam (kappa w2(k) - c(k-1)),   lam = 1 - exp(-dt / tau)
-    extra_mode  m(k) = 2 r cos(W) m(k-1) - r^2 m(k-2) + g K2 (1 - 2 r cos W + r^2) v(k)
-    drift       y(k) = yL(k) + m(k) + d1 t + d2 t^2  (+ y0 with the offset)
+    delay        ud(k) = (1 - phi) u(k - n) + phi u(k - n - 1),   n + phi = d (samples): the
+                 dead time q1 of eq. (1) (several samples), fractional
+    slew_limit   w1(k) = w1(k-1) + clip(w1_L1(k) - w1(k-1), -1/s, 1/s),   s = inv_rate * fs
+    slew_input   the same limit on the input before L1 (the amplifier's own slew rate)
+    saturation   f(w1) = f0 sgn(w1) + f1 w1 (1 + c w1^2) in eq. (7): the anhysteretic curve bends
+    output_curve y = v + c2 x^2 / S + c3 x^3 / S^2, x = v - centre: a curved sensor or
+                 actuator characteristic at the output (``centre`` and span ``S`` are fixed
+                 by the records, not fitted)
+    offset       y(k) = ... + y0: a constant offset of the sensor's zero
+    asymmetry    alpha_k = alpha (1 + e_a s_k), g_k = g0 (1 + e_g s_k), f1_k = f1 (1 + e_f s_k),
+                 s_k = sgn dw1(k): ascending and descending branches differ
+    loop_level   alpha_k = alpha (1 + l_a w1(k-1)), g_k = g0 (1 + l_g w1(k-1)): the loop's
+                 shape changes with the level
+    creep        c(k) = c(k-1) + lam (kappa w2(k) - c(k-1)),   lam = 1 - exp(-dt / tau)
+    creep_2tau   creep plus a second lag (kappa2, tau2): several time constants
+    creep_log    a bank of five lags, time constants tau * 10^(0.75 j), j = 0..4, gains
+                 kappa / 5: a logarithmic creep over three decades
+    extra_mode   m(k) = 2 r cos(W) m(k-1) - r^2 m(k-2) + g K2 (1 - 2 r cos W + r^2) v(k), added
+                 to yL: a further mode in parallel with L2 (n2 + 2)
+    mode_series  ys(k) = 2 r cos(W) ys(k-1) - r^2 ys(k-2) + (1 - 2 r cos W + r^2) yL(k),
+                 y = yL + g (ys - yL): a mode in series with L2 (unit static gain)
+    drift        y(k) = yL(k) + m(k) + d1 t + d2 t^2 + d3 t^3  (+ y0 with the offset)
 
-where ``w1_L1`` is eq. (1) driven by ``ud``, ``K2`` the static gain of L2, and the mode has the
-natural frequency ``freq`` and damping ``zeta`` (``r = exp(-zeta w dt)``,
-``W = w dt sqrt(1 - zeta^2)``). All effects share one compiled kernel, so any set of them can be
-active at once (the greedy search adds them one by one).
+where ``w1_L1`` is eq. (1) driven by ``ud``, ``K2`` the static gain of L2, and the modes have
+the natural frequency ``freq`` and damping ``zeta`` (``r = exp(-zeta w dt)``,
+``W = w dt sqrt(1 - zeta^2)``). All forms share one compiled kernel, so any set of them can be
+active at once (the greedy search adds them one by one, one form per family).
 
-The harness makes records "from the reference stage with one effect" with
-:func:`simulate_with_effect`.
+The diagnosis treats ``drift`` as a record-specific nuisance (re-estimated on every record); its
+kernel form serves :func:`simulate_with_effect`.
 """
 
 from __future__ import annotations
@@ -36,27 +53,32 @@ from ..model import DuhemSandwich, InitialCondition, SandwichResponse
 __all__ = [
     "EFFECTS",
     "EFFECT_NAMES",
+    "FAMILIES",
     "AugmentedSandwich",
     "Effect",
     "augmented_into",
     "augmented_output",
     "effect_dict",
     "effect_vector",
+    "family_of",
     "simulate_with_effect",
 ]
 
 #: Longest input dead time the kernel accepts, in samples.
 MAX_DELAY = 64
+#: Lags of the logarithmic creep bank and the decades between their time constants.
+N_LOG = 5
+LOG_STEP = 0.75
 
 
 @dataclass(frozen=True)
 class Effect:
-    """One candidate effect: its parameters, units, bounds and meaning.
+    """One candidate form of an effect: its parameters, units, bounds and meaning.
 
     Attributes
     ----------
     name : str
-        Effect name (``creep``, ``drift``, ...).
+        Form name (``creep``, ``creep_log``, ...).
     params : tuple of str
         Names of its new parameters; all zero gives the nominal sandwich.
     units : tuple of str
@@ -65,6 +87,9 @@ class Effect:
         Positions of the parameters in the kernel's effect vector.
     description : str
         One line for reports.
+    family : str
+        The effect the form stands for (``creep`` for ``creep_log``); the form's name by
+        default.
     """
 
     name: str
@@ -72,37 +97,93 @@ class Effect:
     units: tuple[str, ...]
     slots: tuple[int, ...]
     description: str
+    family: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.family:
+            object.__setattr__(self, "family", self.name)
 
 
 # kernel effect vector:
-# [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate, cubic, y0]
+# [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate, cubic, y0,
+#  e_f, l_alpha, kappa2, tau2, kappa_log, tau_log, g_series, l_g, d3, inv_rate_u,
+#  c2, c3, centre, span]
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
         Effect("creep", ("gain", "tau"), ("1", "s"), (0, 1),
                "slow creep of the actuator: first-order lag of gain*w2 added to w2"),
-        Effect("drift", ("rate", "accel"), ("y/s", "y/s^2"), (2, 3),
-               "slow output drift not tied to the input: rate*t + accel*t^2"),
+        Effect("creep_2tau", ("gain", "tau", "gain2", "tau2"), ("1", "s", "1", "s"),
+               (0, 1, 15, 16), "creep with two time constants", "creep"),
+        Effect("creep_log", ("gain", "tau"), ("1", "s"), (17, 18),
+               "logarithmic creep: five lags over three decades from tau", "creep"),
+        Effect("drift", ("rate", "accel", "jerk"), ("y/s", "y/s^2", "y/s^3"), (2, 3, 21),
+               "slow output drift not tied to the input, different on every record"),
         Effect("extra_mode", ("gain", "freq", "zeta"), ("1", "Hz", "1"), (4, 5, 6),
-               "a further structural resonance in parallel with L2"),
+               "a further structural resonance in parallel with L2 (order n2 + 2)"),
+        Effect("mode_series", ("gain", "freq", "zeta"), ("1", "Hz", "1"), (19, 5, 6),
+               "a further structural resonance in series with L2 (order n2 + 2)", "extra_mode"),
         Effect("delay", ("samples",), ("samples",), (7,),
-               "input dead time (fractional, linear interpolation)"),
-        Effect("asymmetry", ("alpha", "g0"), ("1", "1"), (8, 9),
-               "ascending and descending branches differ: alpha, g0 scaled by 1 +/- e"),
+               "input dead time (q1 of eq. 1, several samples, fractional)"),
+        Effect("asymmetry", ("alpha", "g0", "f1"), ("1", "1", "1"), (8, 9, 13),
+               "ascending and descending branches differ: alpha, g0, f1 scaled by 1 +/- e"),
+        Effect("loop_level", ("alpha", "g0"), ("1/u", "1/u"), (14, 20),
+               "the loop changes with the level: alpha, g0 scaled by 1 + l w1", "asymmetry"),
         Effect("slew_limit", ("inv_rate",), ("s/u",), (10,),
                "amplifier rate limit |dw1/dt| <= 1/inv_rate"),
+        Effect("slew_input", ("inv_rate",), ("s/u",), (22,),
+               "amplifier rate limit on the input |du/dt| <= 1/inv_rate", "slew_limit"),
         Effect("saturation", ("cubic",), ("1/u^2",), (11,),
                "the anhysteretic curve of eq. (7) bends: f1 w1 (1 + cubic w1^2)"),
+        Effect("output_curve", ("quadratic", "cubic", "centre", "span"), ("1", "1", "y", "y"),
+               (23, 24, 25, 26), "a curved characteristic at the output (sensor or actuator "
+               "range)", "saturation"),
         Effect("offset", ("y0",), ("y",), (12,),
-               "a constant offset of the output (the sensor's zero)"),
+               "a constant offset of the output (the sensor's zero, or a loop shifted as a "
+               "whole)", "asymmetry"),
     )
 }
 EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
-N_SLOTS = 13
+#: Families in order, each with its forms.
+FAMILIES: dict[str, tuple[str, ...]] = {}
+for _e in EFFECTS.values():
+    FAMILIES[_e.family] = (*FAMILIES.get(_e.family, ()), _e.name)
+N_SLOTS = 27
+#: Slots set from the records and never fitted (the output curve's centre and span).
+FIXED_SLOTS = (25, 26)
+
+
+def family_of(name: str) -> str:
+    """The family of a form (a family name maps to itself).
+
+    Parameters
+    ----------
+    name : str
+        A form or family name.
+
+    Returns
+    -------
+    str
+        The family's name.
+    """
+    if name in FAMILIES:
+        return name
+    return EFFECTS[name].family
 
 
 def effect_vector(effects: Mapping[str, Mapping[str, float]] | None) -> np.ndarray:
-    """Pack ``{"creep": {"gain": .., "tau": ..}, ...}`` into the kernel's effect vector."""
+    """Pack ``{"creep": {"gain": .., "tau": ..}, ...}`` into the kernel's effect vector.
+
+    Parameters
+    ----------
+    effects : mapping or None
+        Forms and their parameter values; missing parameters are zero.
+
+    Returns
+    -------
+    ndarray
+        The effect vector (:data:`N_SLOTS` entries).
+    """
     phi = np.zeros(N_SLOTS)
     for name, values in (effects or {}).items():
         if name not in EFFECTS:
@@ -123,25 +204,42 @@ def effect_vector(effects: Mapping[str, Mapping[str, float]] | None) -> np.ndarr
 
 
 def _check_vector(phi: np.ndarray) -> None:
-    if phi[1] < 0:
-        raise ValueError(f"creep tau must be >= 0 s, got {phi[1]}")
-    if phi[0] < 0:
-        raise ValueError(f"creep gain must be >= 0 (creep goes on in the direction of the "
-                         f"drive), got {phi[0]}")
+    for g, tau, label in ((0, 1, "creep"), (15, 16, "creep_2tau"), (17, 18, "creep_log")):
+        if phi[tau] < 0:
+            raise ValueError(f"{label} tau must be >= 0 s, got {phi[tau]}")
+        if phi[g] < 0:
+            raise ValueError(f"{label} gain must be >= 0 (creep goes on in the direction of "
+                             f"the drive), got {phi[g]}")
     if phi[6] < 0 or phi[6] >= 1:
         raise ValueError(f"extra_mode zeta must be in [0, 1), got {phi[6]}")
     if phi[5] < 0:
         raise ValueError(f"extra_mode freq must be >= 0 Hz, got {phi[5]}")
     if not 0 <= phi[7] <= MAX_DELAY - 1:
         raise ValueError(f"delay samples must be in [0, {MAX_DELAY - 1}], got {phi[7]}")
-    if abs(phi[8]) >= 1 or abs(phi[9]) >= 1:
-        raise ValueError(f"asymmetry alpha, g0 must be in (-1, 1), got {phi[8]}, {phi[9]}")
-    if phi[10] < 0:
-        raise ValueError(f"slew_limit inv_rate must be >= 0, got {phi[10]}")
+    if max(abs(phi[8]), abs(phi[9]), abs(phi[13])) >= 1:
+        raise ValueError(f"asymmetry alpha, g0, f1 must be in (-1, 1), got {phi[8]}, "
+                         f"{phi[9]}, {phi[13]}")
+    if phi[10] < 0 or phi[22] < 0:
+        raise ValueError(f"slew_limit inv_rate must be >= 0, got {phi[10]}, {phi[22]}")
+    if (phi[23] != 0 or phi[24] != 0) and not phi[26] > 0:
+        raise ValueError(f"output_curve span must be > 0, got {phi[26]}")
 
 
 def effect_dict(phi: np.ndarray, names: Sequence[str] | None = None) -> dict[str, dict]:
-    """Unpack an effect vector into ``{name: {param: value}}`` for the given effect names."""
+    """Unpack an effect vector into ``{name: {param: value}}`` for the given forms.
+
+    Parameters
+    ----------
+    phi : ndarray
+        Effect vector.
+    names : sequence of str, optional
+        Forms to unpack (all by default).
+
+    Returns
+    -------
+    dict
+        Parameter values by form.
+    """
     names = EFFECT_NAMES if names is None else names
     return {
         n: {p: float(phi[s]) for p, s in zip(EFFECTS[n].params, EFFECTS[n].slots, strict=True)}
@@ -151,12 +249,18 @@ def effect_dict(phi: np.ndarray, names: Sequence[str] | None = None) -> dict[str
 
 # --------------------------------------------------------------------------- compiled kernel
 @njit(cache=True)
+def _lag_coefficient(tau, dt):
+    return 1.0 - np.exp(-dt / tau) if tau > 0.0 else 1.0
+
+
+@njit(cache=True)
 def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt):
     """Simulate the augmented sandwich from index ``start`` on (extended arrays, past first).
 
-    ``U`` is the input, ``UD`` the delayed input, ``V = W2 + C`` the drive of L2, ``YL`` the
-    output of L2, ``M`` the extra mode and ``Y`` the measured-like output. Entries before
-    ``start`` are the past and are read, never written (except ``UD``, rebuilt from ``U``).
+    ``U`` is the input, ``UD`` the delayed input, ``V = W2 + C`` the drive of L2, ``C`` the
+    creep, ``YL`` the output of L2, ``M`` the extra modes and ``Y`` the measured-like output.
+    Entries before ``start`` are the past and are read, never written (except ``UD``, rebuilt
+    from ``U``). The creep lags start at zero, the series mode at rest at ``YL[start - 1]``.
     """
     n1a, n1b, n2a, n2b, q1, q2 = layout[0], layout[1], layout[2], layout[3], layout[4], layout[5]
     i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
@@ -164,28 +268,39 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     f0 = theta[i_f0] if i_f0 >= 0 else 0.0
     f1 = theta[i_f1]
     g0 = theta[i_g0]
-    kappa, tau, d1, d2 = phi[0], phi[1], phi[2], phi[3]
+    kappa, d1, d2 = phi[0], phi[2], phi[3]
     gm, fm, zeta = phi[4], phi[5], phi[6]
     e_a, e_g, inv_rate, cubic, y_off = phi[8], phi[9], phi[10], phi[11], phi[12]
-    # creep: first-order lag, lam = 1 - exp(-dt / tau)
-    lam = 1.0 - np.exp(-dt / tau) if tau > 0.0 else 1.0
-    # extra mode: poles r exp(+-jW); static gain gm * K2
-    c1 = 0.0
+    e_f, l_a, kappa2, k_log, g_ser, l_g = phi[13], phi[14], phi[15], phi[17], phi[19], phi[20]
+    d3 = phi[21]
+    inv_rate_u, c2o, c3o, y_c, y_s = phi[22], phi[23], phi[24], phi[25], phi[26]
+    # creep: first-order lags, lam = 1 - exp(-dt / tau)
+    lam = _lag_coefficient(phi[1], dt)
+    lam2 = _lag_coefficient(phi[16], dt)
+    lam_log = np.empty(N_LOG)
+    for j in range(N_LOG):
+        lam_log[j] = _lag_coefficient(phi[18] * 10.0 ** (LOG_STEP * j), dt)
+    c_log = np.zeros(N_LOG)
     c2 = 0.0
+    # modes: poles r exp(+-jW); the parallel one has the static gain gm * K2
+    p1 = 0.0
+    p2 = 0.0
     bm = 0.0
-    if gm != 0.0:
+    if gm != 0.0 or g_ser != 0.0:
         w = 2.0 * np.pi * fm
         r = np.exp(-zeta * w * dt)
         wd = w * dt * np.sqrt(1.0 - zeta * zeta)
-        c1 = 2.0 * r * np.cos(wd)
-        c2 = -r * r
+        p1 = 2.0 * r * np.cos(wd)
+        p2 = -r * r
         num2 = 1.0
         for j in range(n2b):
             num2 += theta[i_b2 + j]
         den2 = 1.0
         for i in range(n2a):
             den2 += theta[i_a2 + i]
-        bm = gm * (num2 / den2) * (1.0 - c1 - c2)
+        bm = gm * (num2 / den2) * (1.0 - p1 - p2)
+    ys1 = YL[start - 1]
+    ys2 = YL[start - 2] if start >= 2 else ys1
     # delay: ud(k) = (1 - frac) u(k - nd) + frac u(k - nd - 1)
     nd = int(np.floor(phi[7]))
     frac = phi[7] - nd
@@ -195,6 +310,13 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         a0 = U[i0] if i0 >= 0 else U[0]
         a1 = U[i1] if i1 >= 0 else U[0]
         UD[k] = (1.0 - frac) * a0 + frac * a1
+        if inv_rate_u > 0.0 and k > 0:
+            lim_u = dt / inv_rate_u
+            step_u = UD[k] - UD[k - 1]
+            if step_u > lim_u:
+                UD[k] = UD[k - 1] + lim_u
+            elif step_u < -lim_u:
+                UD[k] = UD[k - 1] - lim_u
     lim = 1.0 / (inv_rate / dt) if inv_rate > 0.0 else 0.0
     for k in range(start, U.shape[0]):
         # eq. (1) on the delayed input, b10 = 1
@@ -210,18 +332,26 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
             elif step < -lim:
                 w1 = W1[k - 1] - lim
         W1[k] = w1
-        # eq. (7) with direction-dependent alpha and g0
+        # eq. (7) with direction- and level-dependent coefficients
         w1p = W1[k - 1]
         w2p = W2[k - 1]
         dw1 = w1 - w1p
         s = sgn(dw1)
-        alpha_k = alpha * (1.0 + e_a * s)
-        g_k = g0 * (1.0 + e_g * s)
-        f = f0 * sgn(w1p) + f1 * w1p * (1.0 + cubic * w1p * w1p)
+        alpha_k = alpha * (1.0 + e_a * s) * (1.0 + l_a * w1p)
+        g_k = g0 * (1.0 + e_g * s) * (1.0 + l_g * w1p)
+        f = f0 * sgn(w1p) + f1 * (1.0 + e_f * s) * w1p * (1.0 + cubic * w1p * w1p)
         W2[k] = w2p + alpha_k * (f - w2p) * abs(dw1) + g_k * dw1
-        # creep of the actuator
+        # creep of the actuator: one lag, a second lag, a logarithmic bank
         C[k] = C[k - 1] + lam * (kappa * W2[k] - C[k - 1])
-        V[k] = W2[k] + C[k]
+        v = W2[k] + C[k]
+        if kappa2 != 0.0:
+            c2 += lam2 * (kappa2 * W2[k] - c2)
+            v += c2
+        if k_log != 0.0:
+            for j in range(N_LOG):
+                c_log[j] += lam_log[j] * (k_log / N_LOG * W2[k] - c_log[j])
+                v += c_log[j]
+        V[k] = v
         # eq. (2), b20 = 1
         y = V[k - q2]
         for j in range(1, n2b + 1):
@@ -229,11 +359,20 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         for i in range(1, n2a + 1):
             y -= theta[i_a2 + i - 1] * YL[k - i]
         YL[k] = y
-        # extra mode in parallel with L2
-        M[k] = c1 * M[k - 1] + c2 * M[k - 2] + bm * V[k]
+        # extra modes, in parallel with L2 and in series after it
+        M[k] = p1 * M[k - 1] + p2 * M[k - 2] + bm * V[k]
+        out = YL[k] + M[k]
+        if g_ser != 0.0:
+            ys = p1 * ys1 + p2 * ys2 + (1.0 - p1 - p2) * YL[k]
+            ys2 = ys1
+            ys1 = ys
+            out += g_ser * (ys - YL[k])
+        if c2o != 0.0 or c3o != 0.0:
+            x = (out - y_c) / y_s
+            out += y_s * x * x * (c2o + c3o * x)
         # drift, t from the start of the record, and the sensor offset
         t = (k - start) * dt
-        Y[k] = YL[k] + M[k] + (d1 * t + d2 * t * t) + y_off
+        Y[k] = out + t * (d1 + t * (d2 + t * d3)) + y_off
 
 
 class _Workspace:
@@ -321,6 +460,16 @@ class AugmentedSandwich:
     ) -> SandwichResponse:
         """Simulate from the past ``x0`` (at rest by default); ``t = 0`` at the first sample.
 
+        The nominal model's ``u_rest`` is taken off the input and its ``offset`` added to the
+        output, as :meth:`DuhemSandwich.simulate` does.
+
+        Parameters
+        ----------
+        u : array_like
+            Input samples.
+        x0 : InitialCondition, optional
+            Past relative to the rest (at rest by default).
+
         Returns
         -------
         SandwichResponse
@@ -329,8 +478,10 @@ class AugmentedSandwich:
         u = np.asarray(u, dtype=float)
         if u.ndim != 1 or not np.all(np.isfinite(u)):
             raise ValueError("u: expected a 1-D array of finite samples")
-        ws = _Workspace(u, _history(self.model), x0)
-        w1, w2, y = ws.run(self.model.theta, self.model.structure.layout, self.phi, self.model.dt)
+        m = self.model
+        ws = _Workspace(u - m.u_rest, _history(m), x0)
+        w1, w2, y = ws.run(m.theta, m.structure.layout, self.phi, m.dt)
+        y = y + m.offset
         t = np.arange(len(u)) / self.fs
         return SandwichResponse(t, u, w1.copy(), w2.copy(), y.copy(), name=self.name)
 

@@ -1,41 +1,45 @@
 """Output-error refit of the sandwich with unmodelled effects switched on.
 
-The nominal parameters are searched in reflection coefficients (stable, minimum-phase L1 and L2,
-Assumption 1) and ``alpha > 0``, as in :func:`hystid.identify.offline.fit_output_error`; each
-effect parameter in a transformed coordinate with bounds (a log scale for time constants and
-frequencies). The Jacobian is taken by finite differences over the compiled augmented kernel
-(:func:`hystid.diagnose.effects.augmented_into`), which costs one simulation per parameter.
-The solver is a bounded Levenberg-Marquardt iteration on the scaled normal equations (the
-problems are tall and thin: tens of thousands of samples, about ten parameters).
+The nominal parameters are searched in the coordinates of the off-line Duhem fit
+(:class:`hystid.identify.offline._Reparam`: reflection coefficients of L1 and L2, so every
+iterate is stable and minimum phase, Assumption 1, and ``alpha > 0``); each effect parameter in
+a transformed coordinate with bounds (a log scale for time constants and frequencies). The
+solver is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds) with a
+forward-difference Jacobian over the compiled augmented kernel
+(:func:`hystid.diagnose.effects.augmented_into`), one simulation per parameter. A refit runs in
+two stages: the effect's own parameters with the nominal ones held (a few simulations per step),
+then all of them together from there. Condition (8) is kept by a barrier residual: past
+``alpha |dw1| = 1.9`` the cost rises steeply.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import least_squares
 
-from ..identify.constraints import (
-    ALPHA_MIN,
-    K_MAX,
-    poly_to_reflection,
-    polynomial_groups,
-    reflection_to_poly,
-)
+from ..identify.offline import _Reparam
 from ..model import DuhemSandwich, InitialCondition
-from .effects import EFFECTS, MAX_DELAY, N_SLOTS, _Workspace
+from .effects import EFFECTS, FIXED_SLOTS, LOG_STEP, MAX_DELAY, N_LOG, N_SLOTS, _Workspace
 
 __all__ = [
+    "MARGIN_LIMIT",
+    "NOMINAL_SLOTS",
     "FitData",
-    "LMSolution",
     "Parametrisation",
     "RefitResult",
+    "duhem_margin",
     "initial_state",
-    "levenberg_marquardt",
     "refit",
     "simulate_fit_data",
 ]
+
+#: Condition (8) asks ``alpha |dw1| < 2``; the refits are held below this value.
+MARGIN_LIMIT = 1.9
+#: Effect-vector slots that belong to the nominal model: the sensor offset.
+NOMINAL_SLOTS = (EFFECTS["offset"].slots[0],)
 
 
 @dataclass
@@ -51,7 +55,7 @@ class FitData:
     level : float or None
         When set, the record starts at rest with this output level (the Duhem state ``w2`` is
         set so that L2's static output equals it); at rest from zero otherwise.
-    weight : slice
+    weight : slice or ndarray of bool
         Samples that enter the least-squares cost (all by default).
     """
 
@@ -59,7 +63,7 @@ class FitData:
     y: np.ndarray
     fs: float
     level: float | None = None
-    weight: slice = field(default_factory=lambda: slice(None))
+    weight: slice | np.ndarray = field(default_factory=lambda: slice(None))
 
     def __post_init__(self) -> None:
         self._ws: dict[int, _Workspace] = {}
@@ -105,6 +109,33 @@ def simulate_fit_data(
     return ws.run(model.theta, model.structure.layout, phi, model.dt)
 
 
+def duhem_margin(theta: np.ndarray, structure, phi: np.ndarray, w1: np.ndarray) -> float:
+    """Largest ``alpha_k |dw1(k)|`` of eq. (7) over a simulation (condition 8 asks < 2).
+
+    Parameters
+    ----------
+    theta : ndarray
+        Nominal parameters.
+    structure : Structure
+        Their structure.
+    phi : ndarray
+        Effect vector (direction- and level-dependent alpha scale ``alpha``).
+    w1 : ndarray
+        Simulated ``w1``.
+
+    Returns
+    -------
+    float
+        The margin; ``inf`` when ``w1`` is not finite.
+    """
+    if len(w1) < 2 or not np.all(np.isfinite(w1)):
+        return float("inf")
+    alpha = theta[structure.names.index("alpha")]
+    dw = np.abs(np.diff(w1))
+    level = 1.0 + phi[14] * w1[:-1]
+    return float(alpha * (1.0 + abs(phi[8])) * np.max(np.abs(level) * dw))
+
+
 class Parametrisation:
     """``z`` <-> (theta, phi) for the nominal parameters and a set of active effects.
 
@@ -113,57 +144,78 @@ class Parametrisation:
     model : DuhemSandwich
         Gives the structure and the sampling rate.
     active : sequence of str
-        Names of the effects whose parameters are free.
+        Names of the forms whose parameters are free.
     duration : float
         Length of the fitting record in seconds (bounds of the time constants).
     step_scale : float
         Largest input-driven change of ``w1`` per sample (scale of the slew limit).
     w1_scale : float
-        Largest ``|w1|`` (scale of the saturation's cubic coefficient).
+        Largest ``|w1|`` (scale of the saturation's and the level-dependent loop's
+        coefficients).
+    free_theta : bool
+        Whether the nominal parameters are free (False: the effects' parameters alone). With
+        them, the sensor offset (:data:`NOMINAL_SLOTS`) is free too: it is a parameter of the
+        nominal model, as in :func:`hystid.identify.offline.fit_output_error`.
     """
 
     def __init__(self, model: DuhemSandwich, active: Sequence[str], duration: float,
-                 step_scale: float = 1.0, w1_scale: float = 1.0) -> None:
+                 step_scale: float = 1.0, w1_scale: float = 1.0, free_theta: bool = True) -> None:
         self.structure = model.structure
         self.fs = model.fs
         self.active = tuple(active)
-        self.groups = polynomial_groups(self.structure)
-        self.ialpha = self.structure.names.index("alpha")
-        self.ntheta = len(self.structure.names)
+        self.reparam = _Reparam(self.structure)
+        self.ialpha = self.reparam.ialpha
+        self.ntheta = self.reparam.n if free_theta else 0
+        self.theta_fixed = np.array(model.theta, float)
         self.duration = float(duration)
         self.step_scale = float(max(step_scale, 1e-12))
         self.w1_scale = float(max(w1_scale, 1e-12))
-        self.slots = [s for name in self.active for s in EFFECTS[name].slots]
+        self.slots = [s for name in self.active for s in EFFECTS[name].slots
+                      if s not in FIXED_SLOTS]
+        if free_theta:
+            self.slots = [s for s in NOMINAL_SLOTS if s not in self.slots] + self.slots
+        if len(set(self.slots)) != len(self.slots):
+            raise ValueError(f"forms {self.active} share parameters: at most one form per family")
         self.n = self.ntheta + len(self.slots)
 
     # transformed coordinates of the effect slots
+    def _tau_floor(self) -> float:
+        return max(0.5 / self.fs, 5e-3)
+
     def _fwd(self, slot: int, v: float) -> float:
-        if slot == 1:
-            return float(np.log(max(v, 0.5 / self.fs, 5e-3)))
+        if slot in (1, 16):
+            return float(np.log(max(v, self._tau_floor())))
+        if slot == 18:
+            return float(np.log(max(v, 0.5 / self.fs)))
         if slot in (5, 6):
             return float(np.log(max(v, 1e-6)))
-        if slot == 10:
+        if slot in (10, 22):
             return float(np.log(max(v * self.fs * self.step_scale, 1e-6)))
         if slot == 11:
             return float(v * self.w1_scale**2)
+        if slot in (14, 20):
+            return float(v * self.w1_scale)
         return float(v)
 
     def _inv(self, slot: int, z: float) -> float:
-        if slot in (1, 5, 6):
+        if slot in (1, 5, 6, 16, 18):
             return float(np.exp(z))
-        if slot == 10:
+        if slot in (10, 22):
             return float(np.exp(z) / (self.fs * self.step_scale))
         if slot == 11:
             return float(z / self.w1_scale**2)
+        if slot in (14, 20):
+            return float(z / self.w1_scale)
         return float(z)
 
     def _bounds(self, slot: int) -> tuple[float, float]:
+        T = self.duration
         table = {
             # creep goes on in the direction of the drive (gain >= 0) and is slow (tau >= 5 ms)
             0: (0.0, 1.0),
-            1: (np.log(max(0.5 / self.fs, 5e-3)), np.log(100.0 * self.duration)),
+            1: (np.log(self._tau_floor()), np.log(100.0 * T)),
             4: (-2.0, 2.0),
-            5: (np.log(max(5.0 / self.duration, 20.0)), np.log(0.49 * self.fs)),
+            5: (np.log(max(5.0 / T, 20.0)), np.log(0.49 * self.fs)),
             6: (np.log(1e-3), np.log(0.3)),
             7: (0.0, MAX_DELAY - 1.0),
             8: (-0.95, 0.95),
@@ -171,15 +223,38 @@ class Parametrisation:
             10: (np.log(0.3), np.log(1e3)),
             # f stays monotone (Assumption 2) while 1 + 3 c w1^2 > 0
             11: (-0.3, 3.0),
+            13: (-0.95, 0.95),
+            14: (-0.9, 0.9),
+            15: (0.0, 1.0),
+            16: (np.log(self._tau_floor()), np.log(100.0 * T)),
+            17: (0.0, 1.0),
+            # the bank spans tau .. tau 10^(LOG_STEP (N_LOG - 1))
+            18: (np.log(0.5 / self.fs),
+                 np.log(max(10.0 * T / 10 ** (LOG_STEP * (N_LOG - 1)), 1.0 / self.fs))),
+            19: (-1.0, 2.0),
+            20: (-0.9, 0.9),
+            # input rate limit relative to the largest input step (about w1's over L1's gain)
+            22: (np.log(0.05), np.log(1e3)),
+            # the curve stays monotone over the span
+            23: (-0.6, 0.6),
+            24: (-0.3, 0.3),
         }
         return table.get(slot, (-np.inf, np.inf))
 
     def to_z(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
-        """Search coordinates of a parameter pair."""
-        z = np.array(theta, float)
-        for g in self.groups:
-            z[g] = np.clip(poly_to_reflection(theta[g]), -K_MAX, K_MAX)
-        z[self.ialpha] = max(z[self.ialpha], ALPHA_MIN)
+        """Search coordinates of a parameter pair.
+
+        Parameters
+        ----------
+        theta, phi : ndarray
+            Nominal parameters and effect vector.
+
+        Returns
+        -------
+        ndarray
+            ``z``, clipped into the bounds.
+        """
+        z = self.reparam.to_z(np.asarray(theta, float))[: self.ntheta]
         ze = [self._fwd(s, phi[s]) for s in self.slots]
         z = np.concatenate([z, ze])
         lo, hi = self.bounds()
@@ -188,22 +263,39 @@ class Parametrisation:
     def to_values(
         self, z: np.ndarray, base_phi: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``(theta, phi)`` from search coordinates; inactive slots keep ``base_phi``."""
-        theta = np.array(z[: self.ntheta], float)
-        for g in self.groups:
-            theta[g] = reflection_to_poly(z[g])[0]
+        """``(theta, phi)`` from search coordinates; inactive slots keep ``base_phi``.
+
+        Parameters
+        ----------
+        z : ndarray
+            Search coordinates.
+        base_phi : ndarray, optional
+            Effect vector of the slots that are not free (zero by default).
+
+        Returns
+        -------
+        tuple of ndarray
+            Nominal parameters and effect vector.
+        """
+        if self.ntheta:
+            theta = self.reparam.to_theta(np.asarray(z[: self.ntheta], float))[0]
+        else:
+            theta = self.theta_fixed.copy()
         phi = np.zeros(N_SLOTS) if base_phi is None else np.array(base_phi, float)
         for s, v in zip(self.slots, z[self.ntheta:], strict=True):
             phi[s] = self._inv(s, v)
         return theta, phi
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of ``z``."""
-        lo = np.full(self.ntheta, -np.inf)
-        hi = np.full(self.ntheta, np.inf)
-        for g in self.groups:
-            lo[g], hi[g] = -K_MAX, K_MAX
-        lo[self.ialpha] = ALPHA_MIN
+        """Lower and upper bounds of ``z``.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``(lo, hi)``.
+        """
+        lo, hi = self.reparam.bounds()
+        lo, hi = lo[: self.ntheta], hi[: self.ntheta]
         eb = [self._bounds(s) for s in self.slots]
         lo = np.concatenate([lo, [b[0] for b in eb]])
         hi = np.concatenate([hi, [b[1] for b in eb]])
@@ -225,7 +317,9 @@ class RefitResult:
     message : str
         Solver message or the reason of the failure.
     nfev : int
-        Residual evaluations (Jacobian columns not counted).
+        Residual evaluations (Jacobian columns counted).
+    margin : float
+        ``alpha |dw1|`` of condition (8) at the solution.
     """
 
     theta: np.ndarray
@@ -234,6 +328,71 @@ class RefitResult:
     ok: bool
     message: str
     nfev: int = 0
+    margin: float = float("nan")
+
+
+class _Problem:
+    """Residual of one refit: the simulated train output less the measured one, with the
+    condition-(8) barrier appended; counts its simulations."""
+
+    def __init__(self, model: DuhemSandwich, data: FitData, par: Parametrisation,
+                 base_phi: np.ndarray | None) -> None:
+        self.data, self.par, self.base_phi = data, par, base_phi
+        self.y = data.y[data.weight]
+        self.work = DuhemSandwich(model.theta.copy(), model.structure, fs=model.fs)
+        scale = float(np.std(self.y)) or 1.0
+        self.barrier = scale * np.sqrt(len(self.y))
+        self.calls = 0
+
+    def values(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.par.to_values(z, self.base_phi)
+
+    def simulate(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        theta, phi = self.values(z)
+        self.work.theta = theta
+        self.calls += 1
+        with np.errstate(over="ignore", invalid="ignore"):
+            w1, _, yhat = simulate_fit_data(self.work, phi, self.data)
+        return theta, phi, w1, yhat
+
+    def __call__(self, z: np.ndarray) -> np.ndarray:
+        theta, phi, w1, yhat = self.simulate(z)
+        r = yhat[self.data.weight] - self.y
+        if not np.all(np.isfinite(r)):
+            return np.full(len(self.y) + 1, 1e6)
+        margin = duhem_margin(theta, self.par.structure, phi, w1)
+        over = max(0.0, margin - MARGIN_LIMIT) if np.isfinite(margin) else 1e3
+        return np.append(r, self.barrier * over)
+
+
+def _solve(problem: _Problem, z0: np.ndarray, max_nfev: int):
+    lo, hi = problem.par.bounds()
+    pad = 1e-9 * np.minimum(hi - lo, 1.0)
+    z0 = np.clip(z0, lo + pad, hi - pad)
+    # a dense trust-region step takes an SVD of the tall Jacobian per iteration: far more than
+    # the simulations cost here; LSMR on the few columns does not (it needs two or more)
+    solver = "lsmr" if len(z0) > 1 else "exact"
+    return least_squares(problem, z0, bounds=(lo, hi), method="trf", jac="2-point",
+                         tr_solver=solver, x_scale="jac", ftol=1e-8, xtol=1e-8, gtol=1e-10,
+                         max_nfev=max_nfev)
+
+
+def _judge(problem: _Problem, z: np.ndarray, message: str) -> RefitResult:
+    """The refit's verdict at ``z``: finite, admissible, monotone anhysteretic curve."""
+    theta, phi, w1, yhat = problem.simulate(z)
+    w1 = w1.copy()
+    r = yhat[problem.data.weight] - problem.y
+    cost = float(np.mean(r**2)) if np.all(np.isfinite(r)) else np.inf
+    margin = duhem_margin(theta, problem.par.structure, phi, w1)
+    ok, msg = True, message
+    if not (np.isfinite(cost) and np.all(np.isfinite(theta)) and np.all(np.isfinite(phi))):
+        ok, msg = False, "the simulation diverges at the solution"
+    elif 1 + 3 * phi[11] * np.max(w1**2) <= 0:
+        ok, msg = False, "the solution's anhysteretic curve is not monotone (Assumption 2)"
+    elif not margin < 2.0:
+        ok, msg = False, (f"the solution leaves the Duhem stability condition (8) "
+                          f"(alpha |dw1| reaches {margin:.3g}, expected < 2)")
+    return RefitResult(theta, phi, cost, ok, msg, problem.calls, margin)
 
 
 def refit(
@@ -245,9 +404,15 @@ def refit(
     base_phi: np.ndarray | None = None,
     step_scale: float = 1.0,
     w1_scale: float = 1.0,
-    max_nfev: int = 60,
+    max_nfev: int = 20,
+    effect_nfev: int = 15,
+    joint_starts: int = 1,
 ) -> RefitResult:
     """Least-squares refit of the nominal parameters and the active effects' parameters.
+
+    Each start is first refitted in the new effect's parameters alone (the nominal ones and
+    the accepted effects held), the best ``joint_starts`` of them then in all parameters
+    together; the best admissible solution wins.
 
     Parameters
     ----------
@@ -256,152 +421,72 @@ def refit(
     data : FitData
         The fitting record.
     active : sequence of str
-        Effects whose parameters are free.
+        Forms whose parameters are free (the last one is the new candidate; none for the
+        nominal model alone).
     starts : sequence of ndarray
-        Effect vectors to start from (each a full effect vector); the best final cost wins.
+        Effect vectors to start from (each a full effect vector).
     base_phi : ndarray, optional
         Values of the effect slots that are not free (zero by default).
     step_scale : float
         Scale of the slew-limit coordinate (largest ``|dw1|`` of the nominal simulation).
     w1_scale : float
-        Scale of the saturation coordinate (largest ``|w1|`` of the nominal simulation).
+        Scale of the saturation and level coordinates (largest ``|w1|`` of the simulation).
     max_nfev : int
-        Iterations allowed per start.
+        Residual evaluations of the joint stage (Jacobian columns not counted).
+    effect_nfev : int
+        Residual evaluations of each start's effect-only stage.
+    joint_starts : int
+        How many of the best effect-only solutions the joint stage starts from (a dead time's
+        cost has a minimum near every whole sample).
 
     Returns
     -------
     RefitResult
-        The best of the starts; ``ok`` False when every start failed.
+        ``ok`` False, with the reason, when the solver failed or its solution is not
+        admissible.
     """
-    n = len(data.u)
-    par = Parametrisation(model, active, n / data.fs, step_scale, w1_scale)
-    lo, hi = par.bounds()
-    y = data.y[data.weight]
-    work = DuhemSandwich(model.theta.copy(), model.structure, fs=model.fs, name=model.name)
-
-    def residual(z):
-        theta, phi = par.to_values(z, base_phi)
-        work.theta = theta
-        yhat = simulate_fit_data(work, phi, data)[2][data.weight]
-        r = yhat - y
-        if not np.all(np.isfinite(r)):
-            return np.full(len(y), 1e6)
-        return r
-
+    if not starts:
+        return RefitResult(model.theta.copy(), np.zeros(N_SLOTS), np.inf, False, "no start given")
+    duration = len(data.u) / data.fs
+    new = list(active[-1:])
+    calls = 0
+    messages: list[str] = []
+    if new:
+        par_e = Parametrisation(model, new, duration, step_scale, w1_scale, free_theta=False)
+        found = []
+        for phi0 in starts:
+            problem = _Problem(model, data, par_e, phi0)
+            try:
+                sol = _solve(problem, par_e.to_z(model.theta, phi0), effect_nfev)
+            except (ValueError, np.linalg.LinAlgError, FloatingPointError) as err:
+                messages.append(f"{type(err).__name__}: {err}")
+                continue
+            finally:
+                calls += problem.calls
+            found.append((float(np.mean(sol.fun[:-1] ** 2)), par_e.to_values(sol.x, phi0)[1]))
+        if not found:
+            return RefitResult(model.theta.copy(), np.array(starts[0], float), np.inf, False,
+                               "; ".join(messages) or "every start failed", calls)
+        found.sort(key=lambda c: c[0])
+        joint_from = [phi for _, phi in found[:max(joint_starts, 1)]]
+    else:
+        joint_from = [np.array(starts[0], float)]
+    par = Parametrisation(model, active, duration, step_scale, w1_scale)
     best: RefitResult | None = None
-    messages = []
-    for phi0 in starts:
-        z0 = par.to_z(model.theta, phi0)
-        pad = 1e-9 * np.minimum(hi - lo, 1.0)
-        z0 = np.clip(z0, lo + pad, hi - pad)
+    for phi0 in joint_from:
+        joint = _Problem(model, data, par, phi0)
         try:
-            sol = levenberg_marquardt(residual, z0, lo, hi, max_iter=max_nfev)
+            sol = _solve(joint, par.to_z(model.theta, phi0), max_nfev)
         except (ValueError, np.linalg.LinAlgError, FloatingPointError) as err:
             messages.append(f"{type(err).__name__}: {err}")
+            calls += joint.calls
             continue
-        theta, phi = par.to_values(sol.x, base_phi)
-        cost = float(np.mean(sol.fun**2))
-        ok = bool(np.all(np.isfinite(theta)) and np.all(np.isfinite(phi)) and cost < 1e11)
-        msg = str(sol.message) if ok else "the simulation diverged at the solution"
-        if ok:
-            work.theta = theta
-            w1 = simulate_fit_data(work, phi, data)[0]
-            margin = theta[par.ialpha] * (1 + abs(phi[8])) * np.max(np.abs(np.diff(w1)))
-            if 1 + 3 * phi[11] * np.max(w1**2) <= 0:
-                ok, msg = False, "the solution's anhysteretic curve is not monotone"
-            if ok and not margin < 2.0:
-                ok, msg = False, f"the solution leaves the Duhem stability condition (8) " \
-                                 f"(alpha |dw1| reaches {margin:.3g})"
-        res = RefitResult(theta, phi, cost, ok, msg, int(sol.nfev))
+        res = _judge(joint, sol.x, str(sol.message))
+        calls += joint.calls
         if best is None or (res.ok and (not best.ok or res.cost < best.cost)):
             best = res
     if best is None:
-        return RefitResult(model.theta.copy(), np.zeros(N_SLOTS), np.inf, False,
-                           "; ".join(messages) or "no start given")
+        return RefitResult(model.theta.copy(), joint_from[0], np.inf, False,
+                           "; ".join(messages), calls)
+    best.nfev = calls
     return best
-
-
-@dataclass
-class LMSolution:
-    """Result of :func:`levenberg_marquardt`: solution ``x``, residual ``fun``, evaluations,
-    iterations and a message."""
-
-    x: np.ndarray
-    fun: np.ndarray
-    nfev: int
-    nit: int
-    message: str
-
-
-def levenberg_marquardt(
-    fun: Callable[[np.ndarray], np.ndarray],
-    x0: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    *,
-    max_iter: int = 60,
-    ftol: float = 1e-10,
-    xtol: float = 1e-10,
-) -> LMSolution:
-    """Bounded Levenberg-Marquardt with a forward-difference Jacobian.
-
-    Minimises ``||fun(x)||^2`` over the box ``lo <= x <= hi``: each iteration builds the
-    Jacobian column by column (one evaluation per parameter, stepping inwards at an upper
-    bound), solves ``(J^T J + lam D) dx = -J^T r`` with ``D`` the diagonal of ``J^T J`` and
-    projects the step onto the box; ``lam`` shrinks after a successful step and grows otherwise.
-
-    Parameters
-    ----------
-    fun : callable
-        ``fun(x) -> residual vector``.
-    x0, lo, hi : ndarray
-        Start and bounds.
-    max_iter : int
-        Iterations at most.
-    ftol, xtol : float
-        Stop when the cost or the step changes relatively less than this.
-    """
-    x = np.clip(np.asarray(x0, float), lo, hi)
-    r = fun(x)
-    cost = float(r @ r)
-    nfev, lam, message = 1, 1e-3, "maximum number of iterations reached"
-    nit = 0
-    for nit in range(1, max_iter + 1):
-        h = 1e-6 * np.maximum(1.0, np.abs(x))
-        J = np.empty((len(r), len(x)))
-        for i in range(len(x)):
-            xi = x.copy()
-            xi[i] = x[i] + h[i] if x[i] + h[i] <= hi[i] else x[i] - h[i]
-            J[:, i] = (fun(xi) - r) / (xi[i] - x[i])
-        nfev += len(x)
-        g = J.T @ r
-        H = J.T @ J
-        d = np.sqrt(np.diag(H))
-        d[d == 0] = 1.0
-        Hs = H / np.outer(d, d)
-        gs = g / d
-        improved = False
-        for _ in range(12):
-            try:
-                step = -np.linalg.solve(Hs + lam * np.eye(len(x)), gs) / d
-            except np.linalg.LinAlgError:
-                lam *= 10
-                continue
-            x_new = np.clip(x + step, lo, hi)
-            r_new = fun(x_new)
-            nfev += 1
-            c_new = float(r_new @ r_new)
-            if np.isfinite(c_new) and c_new < cost:
-                rel = (cost - c_new) / max(cost, 1e-300)
-                small = np.max(np.abs(x_new - x) / np.maximum(np.abs(x), 1.0)) < xtol
-                x, r, cost = x_new, r_new, c_new
-                lam = max(lam / 3.0, 1e-12)
-                improved = True
-                if rel < ftol or small:
-                    return LMSolution(x, r, nfev, nit, "converged")
-                break
-            lam *= 4.0
-        if not improved:
-            message = "converged (no further decrease)"
-            break
-    return LMSolution(x, r, nfev, nit, message)

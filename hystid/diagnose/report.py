@@ -36,16 +36,41 @@ def _num(x) -> str:
     return "-" if x is None else f"{x:.4g}"
 
 
+def _unit(result: DiagnosisResult) -> str:
+    return str(result.settings.get("units", {}).get("y", "") or "")
+
+
 def summary_text(result: DiagnosisResult) -> str:
-    """The diagnosis as readable text: where, which, how far."""
+    """The diagnosis as readable text: admissibility first, then where, which, how far.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        A finished diagnosis.
+
+    Returns
+    -------
+    str
+        The summary ``hystid diagnose`` prints.
+    """
     s = result.settings
-    unit = ""
-    lines = [
+    u = _unit(result)
+    unit = f" {u}" if u else ""
+    lines = []
+    for m in result.nominal.get("admissibility", []):
+        lines.append(f"WARNING: the nominal model is not admissible on the held-out input: {m}")
+    if lines:
+        lines.append("")
+    floor = result.floor or {"rms": result.noise_floor_rms, "kind": "sensor noise",
+                             "repeat_floor_rms": None}
+    lines += [
         f"Sim-to-real gap diagnosis: {s['train_samples']} train samples, {s['val_samples']} "
         f"held-out samples at {s['fs']:g} Hz",
         f"nominal model: held-out RMS {result.nominal['rms_val']:.4g}{unit} (train "
-        f"{result.nominal['rms_train']:.4g}); noise floor {result.noise_floor_rms:.4g}; gap "
-        f"{result.nominal['gap']:.4g}",
+        f"{result.nominal['rms_train']:.4g}); noise floor {result.noise_floor_rms:.4g}"
+        + (f"; repeatability {floor['repeat_floor_rms']:.4g}"
+           if floor.get("repeat_floor_rms") is not None else "")
+        + f"; gap {result.nominal['gap']:.4g} to the {floor['kind']} floor",
     ]
     if "first_fit" in result.nominal:
         r = result.nominal["first_fit"]
@@ -55,49 +80,69 @@ def summary_text(result: DiagnosisResult) -> str:
     lines.append("Where the error lies:")
     lines += [f"  - {f}" for f in result.where.findings[1:]] or ["  - (nothing stands out)"]
     lines.append("")
-    lines.append("Which effect (candidates, best first):")
-    header = ["effect", "status", "held-out RMS", "gap closed", "p-value", "screen", "params"]
+    lines.append("Which effect (candidate forms, best first; figures of the round in which a "
+                 "form was accepted, of round 1 otherwise):")
+    header = ["form", "family", "status", "held-out RMS", "gap closed", "p-value", "screen",
+              "params"]
     rows = []
     for e in result.effects:
-        rows.append([e.name, e.status, _num(e.rms_val_after), _pct(e.gap_closed),
+        rows.append([e.name, e.family or e.name, e.status, _num(e.rms_val_after),
+                     _pct(e.gap_closed),
                      "-" if "p_value" not in e.test else f"{e.test['p_value']:.2g}",
                      f"{e.screen_score:.3f}", _fmt_params(e.params)])
     widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
     lines.append("  " + "  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)))
     for r in rows:
         lines.append("  " + "  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)))
-    notes = [e for e in result.effects if e.message]
-    for e in notes:
-        lines.append(f"  note: {e.message}")
+    for e in result.effects:
+        if e.message:
+            lines.append(f"  {e.name}: {e.message}")
+    for rnd in result.rounds[1:]:
+        for n, c in rnd.get("candidates", {}).items():
+            if c["status"] in ("failed", "not confirmed"):
+                lines.append(f"  {n} (round {rnd['round']}): {c['message']}")
     lines.append("")
     if result.accepted:
-        lines.append("How far it shrinks (accepted, cumulative):")
+        lines.append("How far it shrinks (accepted, in order; each with its round's test):")
         for e in result.effects:
             if e.accepted and e.cumulative:
-                lines.append(f"  round {e.round}: + {e.name}: held-out RMS "
-                             f"{e.cumulative['rms_val']:.4g}, gap closed "
-                             f"{_pct(e.cumulative.get('gap_closed'))} (p = "
-                             f"{e.cumulative['p_value']:.2g})")
+                c = e.cumulative
+                lines.append(f"  round {e.round}: + {e.name} ({e.family}): held-out RMS "
+                             f"{c['rms_val_before']:.4g} -> {c['rms_val']:.4g}{unit} "
+                             f"({100 * c['rel_reduction']:+.1f} %, p = {c['p_value']:.2g}); "
+                             f"gap closed so far {_pct(c.get('gap_closed'))}")
         lines.append(f"final: held-out RMS {result.nominal['rms_val']:.4g} -> "
-                     f"{result.final['rms_val']:.4g} ({_pct(result.final['gap_closed'])} of the "
-                     f"gap to the noise floor closed)")
-        lines += [f"  - {f}" for f in result.where_final.findings[1:3]]
+                     f"{result.final['rms_val']:.4g}{unit} "
+                     f"({_pct(result.final['gap_closed'])} of the gap to the {floor['kind']} "
+                     "floor closed)")
     else:
-        lines.append("accepted: none (no candidate lowers the held-out error significantly and "
-                     f"by at least {100 * s['min_reduction']:.0f} %)")
+        first = result.rounds[0] if result.rounds else {}
+        tried = first.get("candidates", {})
+        failed = [n for n, c in tried.items() if c["status"] == "failed"]
+        if tried and len(failed) == len(tried):
+            lines.append(f"accepted: none -- every refit failed ({len(failed)} of "
+                         f"{len(tried)}; reasons above): the candidates could not be tested")
+        else:
+            lines.append("accepted: none (no candidate lowers the held-out error significantly, "
+                         f"by at least {100 * s['min_reduction']:.0f} % and by "
+                         f"{100 * s.get('min_gap_share', 0):.0f} % of the gap"
+                         + (f"; {len(failed)} refits failed" if failed else "") + ")")
+    unexplained = result.final.get("unexplained")
+    if unexplained and result.final["gap_closed"] < 0.9:
+        lines.append("What is left unexplained: " + "; ".join(unexplained["text"]))
     return "\n".join(lines)
 
 
 def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> list[Path]:
     """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
+    u = _unit(result)
+    yu = f" [{u}]" if u else ""
+    psd_u = f" [{u}^2/Hz]" if u else " [unit^2/Hz]"
     w0, wf = result.where, result.where_final
     nf = result.noise_floor_rms
     ts = w0.series["time"]
@@ -114,7 +159,7 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     for sgn in (1, -1):
         ax[0].axhline(sgn * nf, ls="--", color="k", lw=0.8)
     ax[0].set_xlabel("time in its record [s]")
-    ax[0].set_ylabel("y - yhat")
+    ax[0].set_ylabel("y - yhat" + yu)
     ax[0].set_title("held-out simulation error (dashed: noise floor)")
     ax[0].legend(loc="best", fontsize=7)
     lag = ts["step_lags"]
@@ -124,7 +169,7 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
         ax[1].plot(lag, wf.series["time"]["step_avg"], "o-", ms=3, label="final")
     ax[1].axvline(0, color="k", ls=":", lw=0.8)
     ax[1].set_xlabel("samples after an input step")
-    ax[1].set_ylabel("mean error x sign(step)")
+    ax[1].set_ylabel("mean error x sign(step)" + yu)
     ax[1].set_title(f"error after input steps ({w0.time['steps']} steps)")
     ax[1].legend(fontsize=7)
     fig.tight_layout()
@@ -139,12 +184,12 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
         ax[0].loglog(f[1:], wf.series["frequency"]["psd"][1:], lw=1,
                      label="residual (with " + " + ".join(result.accepted) + ")")
     ax[0].axhline(2 * nf**2 / w0.series["fs"], color="k", ls="--", lw=1,
-                  label=f"noise floor ({nf:.3g} RMS)")
+                  label=f"noise floor ({nf:.3g} {u} RMS)")
     band = w0.frequency["band_hz"]
     if band[1] > band[0]:
         ax[0].axvspan(max(band[0], f[1]), band[1], color="C3", alpha=0.08,
                       label="10-90 % of the excess power")
-    ax[0].set_ylabel("PSD [unit^2/Hz]")
+    ax[0].set_ylabel("PSD" + psd_u)
     ax[0].legend(fontsize=7)
     ax[0].set_title("residual spectrum against the noise floor")
     ax[1].semilogx(f[1:], fser["coherence"][1:], lw=1)
@@ -168,14 +213,15 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     centres = 0.5 * (bs["edges"][1:] + bs["edges"][:-1])
     ax[0].plot(centres, bs["ascending"], "o-", color="C0")
     ax[0].plot(centres, bs["descending"], "s-", color="C1")
-    ax[0].set_xlabel("simulated output")
-    ax[0].set_ylabel("error")
+    ax[0].set_xlabel("simulated output" + yu)
+    ax[0].set_ylabel("error" + yu)
     ax[0].set_title("error by branch")
     ax[0].legend(fontsize=7, markerscale=8)
     ax[1].plot(centres, 0.5 * (bs["ascending"] + bs["descending"]), "o-", label="common")
     ax[1].plot(centres, 0.5 * (bs["ascending"] - bs["descending"]), "s-", label="loop width")
     ax[1].axhline(0, color="k", lw=0.5)
-    ax[1].set_xlabel("simulated output")
+    ax[1].set_xlabel("simulated output" + yu)
+    ax[1].set_ylabel("error" + yu)
     ax[1].set_title("common vs loop-width error")
     ax[1].legend(fontsize=7)
     fig.tight_layout()
@@ -193,10 +239,12 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     for k, e in zip(yk, result.effects, strict=True):
         text = e.status if e.gap_closed is None else f"{e.status}, {_pct(e.gap_closed)} closed"
         ax.text(before * 1.01, k, text, va="center", fontsize=7)
-    ax.axvline(nf, color="k", ls="--", lw=1, label="noise floor")
+    floor = (result.floor or {}).get("rms", nf)
+    ax.axvline(floor, color="k", ls="--", lw=1,
+               label=f"{(result.floor or {}).get('kind', 'sensor noise')} floor")
     ax.set_yticks(yk)
     ax.set_yticklabels(names)
-    ax.set_xlabel("held-out RMS error")
+    ax.set_xlabel("held-out RMS error" + yu)
     ax.set_xlim(0, before * 1.45)
     ax.set_title("gap before/after per candidate (green: accepted)")
     ax.legend(fontsize=7, loc="lower right")

@@ -29,6 +29,7 @@ from scipy import stats
 from ..model import DuhemSandwich
 from .effects import EFFECTS, MAX_DELAY, N_SLOTS
 from .refit import FitData, Parametrisation, simulate_fit_data
+from .where import correlation
 
 __all__ = [
     "MIN_SEPARATION",
@@ -44,8 +45,17 @@ __all__ = [
 #: for the records to show the effect.
 MIN_SEPARATION = 0.01
 
+#: Dead times scanned by the screen, in samples (the refit goes on from the best).
+DELAY_GRID = (0.1, 0.3, 0.6, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0)
+
 _HINTS = {
     "creep": "the input needs level changes held longer than the creep time",
+    "creep_2tau": "the input needs level changes held longer than the creep times",
+    "creep_log": "the input needs level changes held over several decades of time",
+    "mode_series": "the input needs broadband content near the mode",
+    "loop_level": "the input needs loops at several levels",
+    "slew_input": "the input needs fast steps",
+    "output_curve": "the output needs a wide range",
     "drift": "the record needs to be longer",
     "extra_mode": "the input needs broadband content near the mode",
     "delay": "the input needs fast changes",
@@ -190,48 +200,81 @@ def screen(
     def grid(name: str):
         """Yield (directions N x k, function beta -> effect vector start)."""
         h = 1e-4
-        if name == "creep":
-            for tau in np.geomspace(max(3 * dt, 5e-3), 2 * T, 10):
+        if name in ("creep", "creep_2tau", "creep_log"):
+            lo_tau = 0.5 / fs if name == "creep_log" else max(3 * dt, 5e-3)
+            hi_tau = 0.2 * T if name == "creep_log" else 2 * T
+            for tau in np.geomspace(lo_tau, max(hi_tau, 2 * lo_tau), 10):
+                if name == "creep_log":
+                    D = (sim(with_(s17=h, s18=tau)) - y0) / h
+                    yield D[:, None], (lambda b, tau=tau: with_(
+                        s17=float(np.clip(b[0], 0.0, .5)), s18=tau))
+                    continue
                 D = (sim(with_(s0=h, s1=tau)) - y0) / h
-                yield D[:, None], (lambda b, tau=tau: with_(s0=float(np.clip(b[0], 0.0, .5)),
-                                                            s1=tau))
+                if name == "creep":
+                    yield D[:, None], (lambda b, tau=tau: with_(
+                        s0=float(np.clip(b[0], 0.0, .5)), s1=tau))
+                    continue
+                D2 = (sim(with_(s15=h, s16=10 * tau)) - y0) / h
+                yield np.column_stack([D, D2]), (lambda b, tau=tau: with_(
+                    s0=float(np.clip(b[0], 1e-4, .5)), s1=tau,
+                    s15=float(np.clip(b[1], 1e-4, .5)), s16=10 * tau))
         elif name == "drift":
-            D1 = (sim(with_(s2=h)) - y0) / h
-            D2 = (sim(with_(s3=h)) - y0) / h
-            yield np.column_stack([D1, D2]), (lambda b: with_(s2=b[0], s3=b[1]))
-        elif name == "extra_mode":
-            freqs = list(np.geomspace(max(20.0 / T, 50.0), 0.45 * fs, 48)) + list(peaks_hz)
+            cols = [(sim(with_(**{k: h})) - y0) / h for k in ("s2", "s3", "s21")]
+            yield np.column_stack(cols), (lambda b: with_(s2=b[0], s3=b[1], s21=b[2]))
+        elif name in ("extra_mode", "mode_series"):
+            slot = "s4" if name == "extra_mode" else "s19"
+            freqs = list(np.geomspace(max(20.0 / T, 50.0), 0.45 * fs, 32)) + list(peaks_hz)
             for f in freqs:
                 if not 0 < f < 0.49 * fs:
                     continue
                 for zeta in (0.01, 0.05):
-                    D = (sim(with_(s4=h, s5=f, s6=zeta)) - y0) / h
-                    yield D[:, None], (lambda b, f=f, z=zeta: with_(
-                        s4=float(np.clip(b[0], -1, 1)), s5=f, s6=z))
+                    D = (sim(with_(**{slot: h}, s5=f, s6=zeta)) - y0) / h
+                    yield D[:, None], (lambda b, f=f, z=zeta, slot=slot: with_(
+                        **{slot: float(np.clip(b[0], -1, 1))}, s5=f, s6=z))
         elif name == "delay":
-            for d in (0.1, 0.3, 0.6, 1.0, 2.0, 4.0, 8.0):
+            for d in DELAY_GRID:
                 if d > MAX_DELAY - 1:
                     continue
                 D = sim(with_(s7=d)) - y0
-                yield D[:, None], (lambda b, d=d: with_(s7=float(np.clip(b[0], 0.2, 1.5) * d)))
+                # a dead time is not linear in its size: the grid point itself is the start
+                yield D[:, None], (lambda b, d=d: with_(s7=d))
         elif name == "asymmetry":
-            D1 = (sim(with_(s8=h)) - y0) / h
-            D2 = (sim(with_(s9=h)) - y0) / h
-            yield np.column_stack([D1, D2]), (lambda b: with_(s8=float(np.clip(b[0], -.5, .5)),
-                                                              s9=float(np.clip(b[1], -.5, .5))))
+            cols = [(sim(with_(**{k: h})) - y0) / h for k in ("s8", "s9", "s13")]
+            yield np.column_stack(cols), (lambda b: with_(
+                s8=float(np.clip(b[0], -.5, .5)), s9=float(np.clip(b[1], -.5, .5)),
+                s13=float(np.clip(b[2], -.5, .5))))
+        elif name == "loop_level":
+            hl = h / w1_scale
+            cols = [(sim(with_(**{k: hl})) - y0) / hl for k in ("s14", "s20")]
+            lim = 0.5 / w1_scale
+            yield np.column_stack(cols), (lambda b: with_(
+                s14=float(np.clip(b[0], -lim, lim)), s20=float(np.clip(b[1], -lim, lim))))
         elif name == "slew_limit":
             for rel in (1.05, 1.2, 1.5, 2.0, 3.0, 5.0):
                 inv = rel / (fs * step_scale)
                 D = sim(with_(s10=inv)) - y0
                 yield D[:, None], (lambda b, inv=inv: with_(s10=inv))
+        elif name == "slew_input":
+            du = float(np.max(np.abs(np.diff(data.u)))) or 1.0
+            for rel in (1.05, 1.2, 1.5, 2.0, 3.0, 5.0):
+                inv = rel / (fs * du)
+                D = sim(with_(s22=inv)) - y0
+                yield D[:, None], (lambda b, inv=inv: with_(s22=inv))
+        elif name == "output_curve":
+            centre = 0.5 * (float(np.max(y0)) + float(np.min(y0)))
+            span = float(np.ptp(y0)) or 1.0
+            cols = [(sim(with_(**{k: h}, s25=centre, s26=span)) - y0) / h for k in ("s23", "s24")]
+            yield np.column_stack(cols), (lambda b, c=centre, sp=span: with_(
+                s23=float(np.clip(b[0], -.3, .3)), s24=float(np.clip(b[1], -.2, .2)),
+                s25=c, s26=sp))
         elif name == "saturation":
             hc = h / w1_scale**2
             D = (sim(with_(s11=hc)) - y0) / hc
             yield D[:, None], (lambda b: with_(s11=float(np.clip(b[0] * w1_scale**2, -0.25,
                                                                  2.0)) / w1_scale**2))
         elif name == "offset":
-            D = (sim(with_(s12=h)) - y0) / h
-            yield D[:, None], (lambda b: with_(s12=float(b[0])))
+            D = (sim(with_(s12=phi[12] + h)) - y0) / h
+            yield D[:, None], (lambda b: with_(s12=float(phi[12] + b[0])))
         else:  # pragma: no cover - names are checked by the caller
             raise ValueError(name)
 
@@ -262,7 +305,7 @@ def screen(
         msg = "" if excited else (
             f"{name}: the records cannot show it: the model absorbs "
             f"{100 * (1 - sep):.2f} % of its signature; {_HINTS[name]}")
-        starts = [s[1] for s in scored[:n_starts]]
+        starts = [s[1] for s in scored[:n_starts + (1 if name == "delay" else 0)]]
         out[name] = ScreenResult(name, scored[0][0], sep, excited, starts, msg)
         best_dirs[name] = scored[0][2]
     # creep and drift are told apart only by input level changes
@@ -296,9 +339,7 @@ def hac_variance(d: np.ndarray, demean: bool = True) -> tuple[float, int]:
     rho = float(np.clip((x[1:] @ x[:-1]) / (x @ x), -0.99, 0.99))
     a = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
     L = int(min(np.ceil(1.1447 * (a * n) ** (1 / 3)), n // 4))
-    m = int(2 ** np.ceil(np.log2(2 * n)))
-    spec = np.fft.rfft(x, m)
-    gam = np.fft.irfft(spec * np.conj(spec), m)[: L + 1] / n
+    gam = correlation(x, None, L) / n
     w = 1.0 - np.arange(1, L + 1) / (L + 1)
     return float(max(gam[0] + 2 * np.sum(w * gam[1:]), gam[0] * 1e-6)), L
 

@@ -21,6 +21,7 @@ from scipy import signal, stats
 __all__ = [
     "Segment",
     "Where",
+    "correlation",
     "cross_correlation_test",
     "harmonics",
     "input_period",
@@ -156,9 +157,7 @@ def input_period(u: np.ndarray) -> int | None:
     n = len(u)
     if n < 64 or np.ptp(u) == 0:
         return None
-    x = u - u.mean()
-    spec = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(spec * np.conj(spec))[: n // 2]
+    ac = correlation(u - u.mean(), None, n // 2 - 1)
     if ac[0] <= 0:
         return None
     ac = ac / (n - np.arange(len(ac)))
@@ -215,11 +214,33 @@ def harmonics(e: np.ndarray, period: int, fs: float, top: int = 5) -> dict:
 
 
 # --------------------------------------------------------------------------- correlations
+def correlation(x: np.ndarray, e: np.ndarray | None, max_lag: int) -> np.ndarray:
+    """Raw correlation sums ``c(k) = sum_i x(i) e(i + k)`` for ``k = 0..max_lag``.
+
+    One FFT correlation (:func:`scipy.signal.correlate`) for every autocorrelation and
+    cross-correlation of the diagnosis; ``e=None`` gives the autocorrelation of ``x``.
+
+    Parameters
+    ----------
+    x, e : ndarray
+        Equally long series (not demeaned here); ``e`` defaults to ``x``.
+    max_lag : int
+        Largest lag, in samples (at most ``len(x) - 1``).
+
+    Returns
+    -------
+    ndarray
+        ``max_lag + 1`` sums, lag 0 first.
+    """
+    x = np.asarray(x, float)
+    e = x if e is None else np.asarray(e, float)
+    full = signal.correlate(e, x, mode="full", method="fft")
+    mid = len(x) - 1
+    return full[mid: mid + max_lag + 1]
+
+
 def _acf(x: np.ndarray, nlags: int) -> np.ndarray:
-    x = x - x.mean()
-    n = len(x)
-    spec = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(spec * np.conj(spec))[: nlags + 1]
+    ac = correlation(x - x.mean(), None, nlags)
     return ac / ac[0] if ac[0] > 0 else np.zeros(nlags + 1)
 
 
@@ -248,10 +269,9 @@ def cross_correlation_test(
     if sx == 0 or se == 0:
         return {"lags": lags, "rho": np.zeros(len(lags)), "band": 0.0, "max_ratio": 0.0,
                 "lag_at_max": 0, "fraction_outside": 0.0, "significant": False}
-    m = int(2 ** np.ceil(np.log2(2 * n)))
-    cc = np.fft.irfft(np.conj(np.fft.rfft(x, m)) * np.fft.rfft(e, m), m)
-    # cc[k] = sum_i x(i) e(i + k)
-    rho = np.concatenate([cc[m - max_lag:], cc[: max_lag + 1]]) / (sx * se)
+    ahead, behind = correlation(x, e, max_lag), correlation(e, x, max_lag)
+    # ahead[k] = sum_i x(i) e(i + k), behind[k] = sum_i x(i + k) e(i)
+    rho = np.concatenate([behind[:0:-1], ahead]) / (sx * se)
     K = int(min(n // 4, max(10 * max_lag, 200)))
     rx, re = _acf(x, K), _acf(e, K)
     taper = 1.0 - np.arange(K + 1) / (K + 1)

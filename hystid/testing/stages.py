@@ -133,7 +133,7 @@ def _duhem(x, x_rest, w_rest, alpha_rise, alpha_fall, f0, f1, g0, width_slope, w
 def _bouc_wen(x, x_rest, z_rest, k_lin, a_rise, a_fall, beta, gamma, power, rate, rate_ref, fs,
               width_slope, width_centre, width_scale):  # pragma: no cover - compiled
     # dz = A dx - beta |dx| |z|^(n-1) z - gamma dx |z|^n, integrated with explicit Euler sub-steps
-    # small enough that (beta + gamma) |dz-step| stays below 0.05; w = k_lin x + z.
+    # small enough that (|A| + beta + gamma) |dx-step| stays below 0.05; w = k_lin x + z.
     n = x.size
     w = np.empty(n)
     x_prev = x_rest
@@ -145,9 +145,10 @@ def _bouc_wen(x, x_rest, z_rest, k_lin, a_rise, a_fall, beta, gamma, power, rate
         width = 1.0 + width_slope * (x_prev - width_centre) / width_scale
         if width < 0.1:
             width = 0.1
-        shrink = 1.0 / (width * (1.0 + rate * speed))
-        b_eff = beta * shrink
-        g_eff = gamma * shrink
+        fast = 1.0 + rate * speed
+        a_coef = a_coef * fast
+        b_eff = beta * fast / width
+        g_eff = gamma * fast / width
         zmag = abs(z) if abs(z) > 1.0 else 1.0
         steps = 1 + int(abs(dx) * (abs(b_eff) + abs(g_eff) + abs(a_coef)) * zmag ** (power - 1)
                         / 0.05)
@@ -420,8 +421,9 @@ class BoucWen:
     offset : float, optional
         Constant added to the output, by default 0.
     rate : float, optional
-        Rate dependence c: beta and gamma are divided by ``1 + c |dx/dt| / rate_ref``, so loops
-        widen at speed, by default 0.
+        Rate dependence c: A, beta and gamma are multiplied by ``1 + c |dx/dt| / rate_ref``, so
+        ``z`` reaches its bound ``A / (beta + gamma)`` over a shorter stroke and loops open up
+        (become squarer) at speed, by default 0.
     rate_ref : float, optional
         Reference speed of ``x`` per second, by default 1000.
     asymmetry : float, optional
