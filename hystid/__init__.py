@@ -6,6 +6,8 @@ diagnosis.
 """
 
 from .model import DuhemSandwich, InitialCondition, SandwichResponse, Structure
+from .modelfile import load_model, save_model
 
-__all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure"]
+__all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure", "load_model",
+           "save_model"]
 __version__ = "0.1.0"

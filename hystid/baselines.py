@@ -200,12 +200,13 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
 
 
 def repeat_floor(records: Sequence[Record]) -> float:
-    """RMS of the part of the output that does not repeat between records of the same input.
+    """Repeat-to-repeat RMS: how far records of the same input differ from each other.
 
-    With ``y_i = f(u) + n_i`` and independent ``n_i`` of equal power, the RMS of ``n`` is the
-    smallest RMS error any deterministic model ``f`` can reach. It is estimated from the
-    pairwise differences of the records, each with its mean removed (a sensor's zero may move
-    between repeats): ``mean_ij RMS(y_i - y_j) / sqrt(2)``.
+    ``mean_ij RMS(y_i - y_j)`` over pairs, each record with its mean removed (a sensor's zero
+    may move between repeats). A model identified on one repeat and validated on another
+    carries the first one's variation as well: this is its floor. (With ``y_i = f(u) + n_i``
+    and independent ``n_i`` of equal power, a model of ``f`` itself could reach ``1/sqrt(2)``
+    of it, if it were known without the training record's own variation.)
 
     Parameters
     ----------
@@ -215,7 +216,7 @@ def repeat_floor(records: Sequence[Record]) -> float:
     Returns
     -------
     float
-        The repeat floor, in the output's units.
+        The repeat-to-repeat RMS, in the output's units.
 
     Raises
     ------
@@ -234,7 +235,7 @@ def repeat_floor(records: Sequence[Record]) -> float:
             raise ValueError(f"repeat_floor: record {r.name!r} has another input than "
                              f"{records[0].name!r} (expected repeats of one input)")
     ys = [r.y - np.mean(r.y) for r in records]
-    pairs = [np.sqrt(np.mean((ys[i] - ys[j]) ** 2)) / np.sqrt(2.0)
+    pairs = [np.sqrt(np.mean((ys[i] - ys[j]) ** 2))
              for i in range(len(ys)) for j in range(i + 1, len(ys))]
     return float(np.mean(pairs))
 
@@ -299,8 +300,11 @@ def compare(model: Any, train: Record, records: Sequence[Record],
         The identified model.
     train : Record
         The record the model was identified on.
-    records : sequence of Record
-        Held-out records.
+    records : sequence of Record or (Record, int)
+        Held-out records; a pair ``(record, k)`` scores only samples ``k:`` of a record that is
+        simulated whole (a held-out tail of the identification record, say). A record that does
+        not start at rest is scored after the burn-in of
+        :func:`hystid.identify.prepare.burn_in`, for every model alike.
     orders : tuple of int, optional
         ``(na, nb, q)`` of the linear baseline; by default the sandwich's linear part
         (``n1a + n2a``, ``n1b + n2b``, ``q1 + q2``).
@@ -317,18 +321,25 @@ def compare(model: Any, train: Record, records: Sequence[Record],
     line = StaticLine.fit(train)
     linear = LinearModel.fit(train, *orders)
     rows, notes = [], []
-    for rec in records:
+    from .identify.prepare import burn_in, rest_level
+
+    for item in records:
+        rec, k = item if isinstance(item, tuple) else (item, None)
+        if k is None:
+            k = burn_in(rec.u, rest_level(rec.u)[1])
         with np.errstate(over="ignore", invalid="ignore"):
             yhat = simulate_from_rest(model, rec.u, check=False)
-        rms = float(np.sqrt(np.mean((yhat - rec.y) ** 2)))
+        y = rec.y[k:]
+        rms = float(np.sqrt(np.mean((yhat[k:] - y) ** 2)))
         rms = rms if np.isfinite(rms) else float("inf")
-        r_line = float(np.sqrt(np.mean((line.predict(rec.u) - rec.y) ** 2)))
-        r_lin = float(np.sqrt(np.mean((linear.predict(rec.u) - rec.y) ** 2)))
+        r_line = float(np.sqrt(np.mean((line.predict(rec.u)[k:] - y) ** 2)))
+        r_lin = float(np.sqrt(np.mean((linear.predict(rec.u)[k:] - y) ** 2)))
         beats = rms < min(r_line, r_lin)
-        rows.append({"record": rec.name, "model": rms, "static_line": r_line, "linear": r_lin,
+        label = rec.name if not k else f"{rec.name} [{k}:]"
+        rows.append({"record": label, "model": rms, "static_line": r_line, "linear": r_lin,
                      "beats": bool(beats)})
         if not beats:
-            notes.append(f"on {rec.name!r} the hysteresis model ({rms:.4g}) does not beat "
+            notes.append(f"on {label!r} the hysteresis model ({rms:.4g}) does not beat "
                          f"the {'static line' if r_line <= r_lin else 'linear model'} "
                          f"({min(r_line, r_lin):.4g})")
     floor = repeat_floor(repeats) if repeats else None

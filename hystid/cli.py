@@ -12,8 +12,12 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .options import MAX_SECONDS, integer, number
 
 EXIT_BAD_INPUT = 2
+#: Files ``identify --out`` and ``demo --out`` write into their folder.
+REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png")
+_RECORD_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
 
 
 class CommandError(Exception):
@@ -52,6 +56,34 @@ def _load(path: str, fs: float | None, columns: dict | None = None):
         raise CommandError(str(err)) from err
 
 
+def _check_file(path: str | None, option: str, args: argparse.Namespace,
+                inputs: tuple = ()) -> Path | None:
+    """Check an output file before any work (see :func:`hystid.safeio.check_output`)."""
+    from .safeio import OutputError, check_output
+
+    if path is None:
+        return None
+    try:
+        return check_output(path, option=option, inputs=inputs,
+                            force=getattr(args, "force", False))
+    except OutputError as err:
+        raise CommandError(str(err)) from err
+
+
+def _check_dir(path: str | None, args: argparse.Namespace, inputs: tuple = (),
+               names: tuple[str, ...] = REPORT_FILES) -> Path | None:
+    """Check an output folder and the files to be written into it, before any work."""
+    from .safeio import OutputError, check_output_dir
+
+    if path is None:
+        return None
+    try:
+        return check_output_dir(path, names, option="--out", inputs=inputs,
+                                force=getattr(args, "force", False))
+    except OutputError as err:
+        raise CommandError(str(err)) from err
+
+
 def _columns_arg(text: str) -> dict:
     from .records import parse_columns
 
@@ -62,26 +94,11 @@ def _columns_arg(text: str) -> dict:
 
 
 def _positive(kind):
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError as err:
-            raise argparse.ArgumentTypeError(f"expected a {kind.__name__}, got {text!r}") from err
-        if not value > 0:
-            raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-        return value
-
-    return parse
+    """argparse ``type=`` for a positive finite ``kind`` (float or int)."""
+    return number(0.0, strict_minimum=True) if kind is float else integer(1)
 
 
-def _non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from err
-    if not (np.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"expected a non-negative number, got {text!r}")
-    return value
+_non_negative_float = number(0.0)
 
 
 def _table(rows: list[list[str]], header: list[str]) -> str:
@@ -92,8 +109,38 @@ def _table(rows: list[list[str]], header: list[str]) -> str:
     return "\n".join(out)
 
 
+def _crop_arg(args):
+    text = getattr(args, "crop", None)
+    if text is None:
+        return None
+    from .options import OptionError, parse_crop
+
+    try:
+        return parse_crop(text)
+    except OptionError as err:
+        raise CommandError(str(err)) from err
+
+
+def _cropped(rec, span):
+    if span is None:
+        return rec
+    from .options import OptionError, crop
+
+    try:
+        return crop(rec, span)
+    except OptionError as err:
+        raise CommandError(str(err)) from err
+
+
+def _holdout_fraction(text: str) -> float:
+    value = _non_negative_float(text)
+    if not value < 1:
+        raise argparse.ArgumentTypeError(f"expected a share in [0, 1), got {text!r}")
+    return value
+
+
 def _identify_record(rec, args, progress: Progress):
-    """Run the chosen model/method on a record; returns (result, simulate function)."""
+    """Run the chosen model/method on a record; returns the IdentificationResult."""
     from .identify import identify
 
     model_kind = getattr(args, "model", "duhem")
@@ -103,26 +150,87 @@ def _identify_record(rec, args, progress: Progress):
         method = "recursive" if args.method in (None, "online", "eria") else args.method
         return identify_pi(rec, method=method)
     method = args.method or "batch"
-    settings = {"progress": progress} if method != "batch" else {}
-    return identify(rec, method=method, **settings)
+    settings: dict = {"progress": progress} if method != "batch" else {}
+    if method == "batch":
+        settings["offset"] = getattr(args, "offset", "estimate") == "estimate"
+        if getattr(args, "skip", None) is not None:
+            settings["skip"] = int(round(args.skip * rec.fs))
+    return identify(rec, method=method, structure=_structure_arg(args), **settings)
 
 
-def _report(result, rec, val, args) -> dict:
+def _structure_arg(args):
+    text = getattr(args, "structure", None)
+    if text is None or text == "auto":
+        return text
+    from .options import OptionError, parse_structure
+
+    try:
+        return parse_structure(text)
+    except OptionError as err:
+        raise CommandError(str(err)) from err
+
+
+def _split_for_validation(rec, val, args):
+    """The identification record, the validation target and the first sample to score.
+
+    Without ``--val`` the end of the record is held out (``--holdout``) and the whole record is
+    simulated, so the held-out part starts from the model's own state.
+    """
+    if val is not None:
+        return rec, val, None
+    share = getattr(args, "holdout", 0.0) or 0.0
+    if share == 0.0:
+        return rec, rec, 0
+    k = int(round((1.0 - share) * rec.n))
+    if k < 2 or rec.n - k < 2:
+        raise CommandError(f"--holdout {share:g}: record {rec.name!r} is too short to hold out "
+                           "a part of it")
+    return rec[:k], rec, k
+
+
+def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dict, np.ndarray,
+                                                                              object]:
+    from .baselines import compare, simulate_from_rest
     from .metrics import validate
 
     target = val if val is not None else rec
-    yhat = result.model.simulate(target.u).y
-    validation = validate(target.y, yhat, target.fs)
+    k = scored_from
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yhat = simulate_from_rest(result.model, target.u, check=False)
+    problems = result.model.admissibility(target.u) if hasattr(result.model, "admissibility") \
+        else (result.model.envelope.violations(target.u) if result.model.envelope else [])
+    baselines = compare(result.model, rec, [(target, k) if k is not None else target],
+                        repeats=repeats)
+    k = k or 0
+    finite = bool(np.all(np.isfinite(yhat[k:])))
+    validation = validate(target.y[k:], yhat[k:] if finite else np.zeros(target.n - k),
+                          target.fs)
+    warnings_ = list(result.info.get("warnings", []))
+    warnings_ += [f"on the validation input: {p}" for p in problems]
+    warnings_ += baselines.notes
+    if not finite:
+        warnings_.append("the model diverges on the validation input; its figures are not "
+                         "reported")
     return {
         "model": getattr(args, "model", "duhem"),
         "method": result.method,
         "params": result.params,
-        "validation": validation.to_dict(),
-        "validated_on": "validation record" if val is not None else "identification record",
+        "u_rest": getattr(result.model, "u_rest", 0.0),
+        "offset": getattr(result.model, "offset", 0.0),
+        "units": dict(rec.units),
+        "structure": getattr(result.model.structure, "__dict__", {}),
+        "validation": validation.to_dict() if finite else None,
+        "validated_on": ("validation record" if getattr(args, "val", None) else
+                         f"held-out end of the record (samples {k}..{target.n - 1})" if k
+                         else "identification record"),
+        "baselines": baselines.to_dict(),
+        "beats_baselines": baselines.beats_baselines,
+        "warnings": warnings_,
         "converged_at": result.converged_at,
-        "settings": {k: v for k, v in result.settings.items() if _jsonable(v)},
+        "settings": {k_: v for k_, v in result.settings.items() if _jsonable(v)},
         "record": {"name": rec.name, "samples": rec.n, "fs": rec.fs},
-        "info": {k: v for k, v in result.info.items() if _jsonable(v)},
+        "info": {k_: v for k_, v in result.info.items() if _jsonable(v)},
     }, yhat, target
 
 
@@ -135,77 +243,176 @@ def _jsonable(value) -> bool:
 
 
 def _write_history(path: str, result) -> None:
+    from .safeio import atomic_open
+
     if result.history is None:
         raise CommandError(f"--history: method {result.method!r} keeps no parameter history")
     names = list(result.names)
-    k = np.arange(1, len(result.history) + 1)
+    index = getattr(result, "history_index", None)  # a decimated history names its samples
+    k = np.arange(1, len(result.history) + 1) if index is None else np.asarray(index) + 1
     data = np.column_stack([k, result.history])
-    np.savetxt(path, data, delimiter=",", header=",".join(["k", *names]), comments="",
-               fmt=["%d"] + ["%.10g"] * len(names))
+    with atomic_open(path, "w", newline="\n") as out:
+        np.savetxt(out, data, delimiter=",", header=",".join(["k", *names]), comments="",
+                   fmt=["%d"] + ["%.10g"] * len(names))
 
 
 # --------------------------------------------------------------------------- commands
 def cmd_simulate(args: argparse.Namespace) -> int:
-    """``hystid simulate``: a record from the built-in reference stage."""
-    from .reference import reference_record
-
+    """``hystid simulate``: a record from the built-in reference stage or from a saved model."""
     progress = Progress(args.quiet)
-    rec = reference_record(args.seconds, seed=args.seed, noise=args.noise,
-                           name=f"reference stage seed {args.seed}")
-    out = Path(args.out)
-    if out.suffix.lower() not in (".csv", ".npz", ".mat", ".h5", ".hdf5"):
+    inputs = tuple(p for p in (args.model, args.input) if p)
+    out = _check_file(args.out, "--out", args, inputs)
+    if out.suffix.lower() not in _RECORD_SUFFIXES:
         raise CommandError(f"--out {out}: expected a .csv, .npz, .mat, .h5 or .hdf5 file name")
+    if args.model is None:
+        rec = _reference_stage_record(args)
+    else:
+        rec = _model_record(args, progress)
     rec.save(out)
     progress.say(f"wrote {out}: {rec.n} samples at {rec.fs:g} Hz, y in "
-                 f"[{rec.y.min():.3f}, {rec.y.max():.3f}] um")
+                 f"[{rec.y.min():.4g}, {rec.y.max():.4g}] {rec.units.get('y', '')}")
     return 0
+
+
+def _reference_stage_record(args: argparse.Namespace):
+    """The built-in stage excited like the paper (``--seconds``, ``--seed``, ``--noise``)."""
+    from .reference import reference_record
+
+    for option, value in (("--input", args.input), ("--columns", args.columns),
+                          ("--fs", args.fs)):
+        if value is not None:
+            raise CommandError(f"{option} applies to --model only (simulate a saved model on a "
+                               "record's input)")
+    missing = [o for o, v in (("--seconds", args.seconds), ("--seed", args.seed)) if v is None]
+    if missing:
+        raise CommandError(f"{' and '.join(missing)} required to simulate the built-in stage "
+                           "(or give --model M --input REC)")
+    noise = 1e-3 if args.noise is None else args.noise
+    return reference_record(args.seconds, seed=args.seed, noise=noise,
+                            name=f"reference stage seed {args.seed}")
+
+
+def _model_record(args: argparse.Namespace, progress: Progress):
+    """A saved model (``--model``) simulated on a record's input (``--input``)."""
+    from .modelfile import ModelFileError, load_model
+    from .records import Record, RecordError
+
+    if args.input is None:
+        raise CommandError("--model needs --input REC: the record whose input u is simulated")
+    if args.seconds is not None:
+        raise CommandError("--seconds applies to the built-in stage only; with --model the "
+                           "input record sets the length")
+    if args.noise and args.seed is None:
+        raise CommandError("--noise needs --seed with --model (every random figure takes a "
+                           "seed)")
+    try:
+        model = load_model(args.model)
+    except ModelFileError as err:
+        raise CommandError(f"--model {err}") from err
+    rec = _load(args.input, args.fs, args.columns)
+    if not np.isclose(rec.fs, model.fs, rtol=1e-9):
+        raise CommandError(f"--input {args.input}: sampled at {rec.fs:g} Hz but the model at "
+                           f"{model.fs:g} Hz (expected the model's rate)")
+    from .operating import AdmissibilityWarning
+
+    with warnings.catch_warnings():  # the reasons are in resp.warnings, printed below
+        warnings.simplefilter("ignore", AdmissibilityWarning)
+        resp = model.simulate(rec.u)
+    for reason in resp.warnings:
+        progress.say(f"warning: {reason}")
+    if not np.all(np.isfinite(resp.y)):
+        raise CommandError(f"--model {args.model}: the simulation diverges on the input of "
+                           f"{args.input} (condition 8 fails); nothing written")
+    y = resp.y
+    if args.noise:
+        y = y + np.random.default_rng(args.seed).normal(0.0, args.noise, len(y))
+    try:
+        return Record(rec.u, y, model.fs, units=model.units,
+                      name=f"{model.name} on {rec.name}")
+    except RecordError as err:  # pragma: no cover - checked above
+        raise CommandError(str(err)) from err
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """``hystid identify``: identify a record, validate, print or write JSON."""
+    from .safeio import dumps_strict
+
     progress = Progress(args.quiet or args.json)
-    rec = _load(args.record, args.fs, args.columns)
-    val = _load(args.val, args.fs, args.columns) if args.val else None
-    if val is not None and not np.isclose(val.fs, rec.fs, rtol=1e-9):
-        raise CommandError(f"--val {args.val}: fs {val.fs:g} Hz differs from {rec.fs:g} Hz "
-                           f"of {args.record}")
-    progress.say(f"identifying {args.record}: {rec.n} samples at {rec.fs:g} Hz")
+    inputs = (args.record, args.val)
+    _check_file(args.history, "--history", args, inputs)
+    _check_dir(args.out, args, inputs)
+    span = _crop_arg(args)
+    rec = _cropped(_load(args.record, args.fs, args.columns), span)
+    val = _cropped(_load(args.val, args.fs, args.columns), span) if args.val else None
+    repeats = [_cropped(_load(p, args.fs, args.columns), span) for p in args.repeat or []]
+    for other, label in [(val, f"--val {args.val}")] + [
+            (r, f"--repeat {p}") for r, p in zip(repeats, args.repeat or [], strict=True)]:
+        if other is not None and not np.isclose(other.fs, rec.fs, rtol=1e-9):
+            raise CommandError(f"{label}: fs {other.fs:g} Hz differs from {rec.fs:g} Hz "
+                               f"of {args.record}")
+    train, target, scored_from = _split_for_validation(rec, val, args)
+    progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
     try:
-        result = _identify_record(rec, args, progress)
-        report, yhat, target = _report(result, rec, val, args)
+        result = _identify_record(train, args, progress)
+        floor_set = [target, *repeats] if repeats else None
+        report, yhat, target = _report(result, train, target if val is not None or scored_from
+                                       is not None else None, args, scored_from, floor_set)
     except ValueError as err:
         raise CommandError(str(err)) from err
+    for w in report["warnings"]:
+        if not args.json:
+            print(f"hystid identify: warning: {w}", file=sys.stderr)
     if args.history:
         _write_history(args.history, result)
     if args.out:
-        _write_outputs(Path(args.out), report, target, yhat, result)
+        from .modelfile import make_provenance
+
+        provenance = make_provenance(result.method, args.record, result.settings)
+        _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(dumps_strict(report))
     else:
         rows = [[k, f"{v:.6g}"] for k, v in report["params"].items()]
+        rows += [[k, f"{report[k]:.6g}"] for k in ("u_rest", "offset")]
         print(_table(rows, ["parameter", "estimate"]))
         v = report["validation"]
-        print(f"\nvalidation ({report['validated_on']}): error {v['err_min']:.4g} .. "
-              f"{v['err_max']:.4g}, RMS {v['rms']:.4g}, fit {v['fit_percent']:.2f} %")
+        if v is not None:
+            print(f"\nvalidation ({report['validated_on']}): error {v['err_min']:.4g} .. "
+                  f"{v['err_max']:.4g}, RMS {v['rms']:.4g}, fit {v['fit_percent']:.2f} %")
+        b = report["baselines"]
+        for row in b["rows"]:
+            model_rms = "diverged" if row["model"] is None else f"{row['model']:.4g}"
+            print(f"held-out RMS [{rec.units.get('y', '')}]: model {model_rms}, static line "
+                  f"{row['static_line']:.4g}, linear model {row['linear']:.4g}"
+                  + ("" if row["beats"] else "  -> the hysteresis model does NOT beat them"))
+        if b["repeat_floor"] is not None:
+            print(f"repeat floor (no deterministic model does better): {b['repeat_floor']:.4g}")
         if report["converged_at"] is not None:
             print(f"converged at sample {report['converged_at']}")
     return 0
 
 
-def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None) -> None:
+def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
+                   provenance: dict | None = None) -> None:
+    """Write report.json, model.json and the figures into ``out`` (each file atomically)."""
     from .metrics import plot_validation
+    from .modelfile import save_model
+    from .safeio import atomic_path, write_json
 
     out.mkdir(parents=True, exist_ok=True)
-    (out / "report.json").write_text(json.dumps(report, indent=2))
-    plot_validation(target.t, target.y, yhat, out / "validation.png",
-                    title=f"{report['model']} sandwich, {report['method']}: validation",
-                    unit=target.units.get("y", ""), skip=report["validation"]["skip"])
+    write_json(out / "report.json", report)
+    save_model(result.model, out / "model.json", provenance=provenance, force=True)
+    with atomic_path(out / "validation.png") as tmp:
+        plot_validation(target.t, target.y, yhat, tmp,
+                        title=f"{report['model']} sandwich, {report['method']}: validation",
+                        unit=target.units.get("y", ""), skip=report["validation"]["skip"])
     if result.history is not None:
         import matplotlib.pyplot as plt
 
         axes = result.plot(truth=truth)
         axes[0].figure.tight_layout()
-        axes[0].figure.savefig(out / "convergence.png", dpi=110)
+        with atomic_path(out / "convergence.png") as tmp:
+            axes[0].figure.savefig(tmp, dpi=110)
         plt.close(axes[0].figure)
 
 
@@ -216,6 +423,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from .reference import PAPER_PARAMS, reference_model, reference_record
 
     progress = Progress(args.quiet)
+    _check_dir(args.out, args)
     truth = reference_model()
     train = reference_record(args.seconds, seed=args.seed, noise=args.noise, name="demo train")
     val = reference_record(args.seconds, seed=args.seed + 1, noise=args.noise, name="demo val")
@@ -258,12 +466,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
     report["validation_of"] = result.method
     report["truth_simulated_rms_um"] = float(np.sqrt(np.mean((truth.simulate(val.u).y
                                                                - val.y) ** 2)))
+    from .modelfile import make_provenance
+
     _write_outputs(out, {"model": "duhem", "method": result.method,
                          "validation": report["methods"][result.method]["validation"],
-                         **report}, val, yhat, result, truth=PAPER_PARAMS)
-    print(f"\nreport written to {out}/report.json (figures: validation.png"
+                         **report}, val, yhat, result, truth=PAPER_PARAMS,
+                   provenance=make_provenance(result.method, settings=result.settings))
+    print(f"\nreport written to {out}/report.json, model to {out}/model.json (figures: "
+          "validation.png"
           f"{', convergence.png' if result.history is not None else ''})")
     return 0
+
+
+_seconds = number(0.0, MAX_SECONDS, strict_minimum=True)
+_seed = integer(0, 2**63 - 1)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -280,22 +496,35 @@ def build_parser() -> argparse.ArgumentParser:
                        "eqs. 26-28 at 30 kHz), identify it, validate on a second record and write "
                        "a short report (JSON + PNG).")
     p.add_argument("--out", default="hystid-demo", help="report folder (default: hystid-demo)")
-    p.add_argument("--seconds", type=_positive(float), default=1.0,
-                   help="length of each record in seconds (default 1.0)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--force", action="store_true", help="replace files already in --out")
+    p.add_argument("--seconds", type=_seconds, default=1.0,
+                   help=f"length of each record in seconds (default 1.0, at most {MAX_SECONDS:g})")
+    p.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
     p.add_argument("--noise", type=_non_negative_float, default=1e-3,
                    help="sensor noise standard deviation in um (default 0.001 = 1 nm)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("simulate", help="write a record from the reference stage",
+    p = sub.add_parser("simulate", help="write a record from the reference stage or a model",
                        description="Simulate the reference stage with the paper's excitation "
-                       "(starting at rest) and write the record (u in V, y in um).")
-    p.add_argument("--seconds", type=_positive(float), required=True, help="record length [s]")
-    p.add_argument("--seed", type=int, required=True, help="random seed")
-    p.add_argument("--noise", type=_non_negative_float, default=1e-3,
-                   help="sensor noise standard deviation in um (default 0.001)")
+                       "(starting at rest; --seconds, --seed) or a saved model on the input of a "
+                       "record (--model, --input), and write the record (u, y).")
+    p.add_argument("--seconds", type=_seconds, default=None,
+                   help=f"record length [s] of the built-in stage (at most {MAX_SECONDS:g})")
+    p.add_argument("--seed", type=_seed, default=None, help="random seed")
+    p.add_argument("--noise", type=_non_negative_float, default=None,
+                   help="sensor noise standard deviation in the output's units (default 0.001 um "
+                   "for the built-in stage, none for --model)")
+    p.add_argument("--model", default=None, metavar="MODEL.json",
+                   help="a saved model (hystid identify --out writes DIR/model.json)")
+    p.add_argument("--input", default=None, metavar="REC",
+                   help="record whose input u drives --model")
+    p.add_argument("--fs", type=_positive(float), default=None,
+                   help="sampling rate of --input in Hz (if it has no t column or fs)")
+    p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
+                   help="where t, u and y are in --input (names or 0-based positions)")
     p.add_argument("--out", required=True, help="output file (.csv, .npz, .mat, .h5)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_simulate)
 
@@ -310,9 +539,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", choices=("duhem", "pi"), default="duhem", help="hysteresis block")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch for duhem, recursive for pi)")
+    p.add_argument("--structure", default=None, metavar="auto|n1a=1,n2a=2,...",
+                   help="model structure: keys n1a, n1b, n2a, n2b, q1, q2, f0 (the paper's "
+                   "experimental one by default), or 'auto' to choose on held-out error")
+    p.add_argument("--crop", default=None, metavar="START:STOP",
+                   help="keep only this time span of every record, in seconds")
+    p.add_argument("--offset", choices=("estimate", "none"), default="estimate",
+                   help="estimate the sensor offset (default) or take the output as zero at rest")
+    p.add_argument("--skip", type=_non_negative_float, default=None, metavar="S",
+                   help="seconds at the start simulated but left out of the fit (default: none "
+                   "for a record that starts at rest, else until the input has swept its range)")
+    p.add_argument("--holdout", type=_holdout_fraction, default=0.4, metavar="F",
+                   help="without --val, the share of the record held out at its end for "
+                   "validation (default 0.4; 0 validates on the record itself)")
+    p.add_argument("--repeat", nargs="+", default=None, metavar="REC",
+                   help="records of the same input as the validation record: their "
+                   "repeat-to-repeat RMS is the floor no deterministic model can beat")
     p.add_argument("--history", help="write the parameter history (CSV: k, one column a parameter)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--out", help="folder for report.json and figures")
+    p.add_argument("--out", help="folder for report.json, model.json and figures")
+    p.add_argument("--force", action="store_true",
+                   help="replace --history and files already in --out")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_identify)
 
@@ -345,6 +592,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except CommandError as err:
         print(f"hystid {args.command}: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as err:  # a full disk, a folder removed meanwhile: no file was half-written
+        where = f" ({err.filename})" if err.filename else ""
+        print(f"hystid {args.command}: error: {err.strerror or err}{where}; no file was "
+              "half-written and files that were already there are left as they were",
+              file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         return 130

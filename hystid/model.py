@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -443,16 +445,20 @@ class DuhemSandwich:
             warn_admissibility(resp.warnings, self.name)
         return resp
 
-    def rest_state(self, u0: float) -> InitialCondition:
-        """The past of a stage resting at input ``u0`` (record units).
+    def rest_state(self, u0: float, steps: int = 400) -> InitialCondition:
+        """The past of a stage brought slowly from its rest to input ``u0`` and held there.
 
-        L1 and L2 sit at their steady state; the Duhem state sits on ``w2 = f(w1)``, midway
-        between the branches, since the direction the stage came from is not known.
+        L1 and L2 sit at their steady state; the Duhem state is the one eq. (7) reaches along a
+        slow ramp of ``w1`` from the rest to its steady value (a stage is brought to its working
+        point before a record starts; the direction of the last move is not known, the ramp
+        takes the direct one).
 
         Parameters
         ----------
         u0 : float
             Input level held before the record starts.
+        steps : int
+            Steps of the ramp.
 
         Returns
         -------
@@ -463,7 +469,12 @@ class DuhemSandwich:
         v = float(u0) - self.u_rest
         w1 = v * (1.0 + np.sum(self.b1)) / (1.0 + np.sum(self.a1))
         p = self.params
-        w2 = p.get("f0", 0.0) * np.sign(w1) + p["f1"] * w1
+        f0 = p.get("f0", 0.0)
+        w2, prev = 0.0, 0.0
+        for x in np.linspace(0.0, w1, steps + 1)[1:]:
+            d = x - prev
+            w2 += p["alpha"] * (f0 * np.sign(prev) + p["f1"] * prev - w2) * abs(d) + p["g0"] * d
+            prev = x
         y = w2 * (1.0 + np.sum(self.b2)) / (1.0 + np.sum(self.a2))
         return InitialCondition(*(np.full(P, x) for x in (v, w1, w2, y)))
 
@@ -498,6 +509,33 @@ class DuhemSandwich:
                        f"{np.max(ratio):.3g}, expected < 2): the Duhem recursion amplifies "
                        "there")
         return out
+
+    def save(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        provenance: Mapping[str, Any] | None = None,
+        force: bool = False,
+    ) -> Path:
+        """Keep the model in a versioned JSON file (see :func:`hystid.modelfile.save_model`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file; an existing one is replaced only with ``force``.
+        provenance : mapping, optional
+            Method, record hash and settings (:func:`hystid.modelfile.make_provenance`).
+        force : bool
+            Replace an existing file.
+
+        Returns
+        -------
+        pathlib.Path
+            The written file; :func:`hystid.load_model` reads it back.
+        """
+        from .modelfile import save_model
+
+        return save_model(self, path, provenance=provenance, force=force)
 
     def __repr__(self) -> str:
         values = ", ".join(f"{k}={v:.6g}" for k, v in self.params.items())

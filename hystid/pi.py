@@ -29,9 +29,12 @@ numerator coefficient of each is derived, ``b11 = 1 + a11 + a12 - b12`` and
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
+from typing import Any
 
 import control as ct
 import numpy as np
@@ -740,6 +743,33 @@ class PISandwich:
             resp.warnings = self.envelope.violations(u)
             warn_admissibility(resp.warnings, self.name)
         return resp
+
+    def save(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        provenance: Mapping[str, Any] | None = None,
+        force: bool = False,
+    ) -> Path:
+        """Keep the model in a versioned JSON file (see :func:`hystid.modelfile.save_model`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file; an existing one is replaced only with ``force``.
+        provenance : mapping, optional
+            Method, record hash and settings (:func:`hystid.modelfile.make_provenance`).
+        force : bool
+            Replace an existing file.
+
+        Returns
+        -------
+        pathlib.Path
+            The written file; :func:`hystid.load_model` reads it back.
+        """
+        from .modelfile import save_model
+
+        return save_model(self, path, provenance=provenance, force=force)
 
     def __repr__(self) -> str:
         lin = ", ".join(f"{k}={v:.6g}" for k, v in self.coefficients.items())

@@ -21,6 +21,21 @@ noisy, ``fs`` is taken from the whole span, ``(n - 1) / (t[-1] - t[0])``, rather
 step. A sampling rate stated beside ``t`` (the ``fs=`` argument, or the comment line written by
 :meth:`Record.save`) must agree with it within :data:`FS_RTOL`; the stated value is then used.
 The time origin is not kept: :attr:`Record.t` always starts at 0.
+
+Hostile files
+-------------
+A record file is read from its own bytes only, and never decodes to much more than it holds:
+
+* HDF5 external links, datasets stored in external files and virtual datasets are refused;
+* the declared size of every array (npz member, MATLAB variable -- read from the variable
+  headers without inflating the data -- or HDF5 dataset) may exceed the file's size at most
+  :data:`MAX_EXPANSION` times, or :data:`EXPANSION_FLOOR` bytes, whichever is larger;
+* an npz member whose header declares more samples than it stores, and an uncompressed HDF5
+  dataset whose storage is smaller than its shape (unwritten or truncated), are refused;
+* truncated or corrupt archives give a :class:`RecordError` naming the file.
+
+Two roles may not read the same column (``columns={"u": "y"}`` would identify ``y`` from
+itself). :meth:`Record.save` writes atomically (see :mod:`hystid.safeio`).
 """
 
 from __future__ import annotations
@@ -37,8 +52,12 @@ from typing import Any
 
 import numpy as np
 
+from .safeio import atomic_open, atomic_path
+
 __all__ = [
+    "EXPANSION_FLOOR",
     "FS_RTOL",
+    "MAX_EXPANSION",
     "T_UNIFORM_RTOL",
     "Record",
     "RecordError",
@@ -52,6 +71,10 @@ __all__ = [
 T_UNIFORM_RTOL = 1e-3
 #: Largest relative difference between a stated ``fs`` and the one derived from ``t``.
 FS_RTOL = 1e-6
+#: Array files may decode to at most this many times their size (beyond EXPANSION_FLOOR).
+MAX_EXPANSION = 20
+#: Decoded bytes always allowed, whatever the file size (64 MiB).
+EXPANSION_FLOOR = 64 << 20
 
 _CSV_SUFFIXES = (".csv", ".txt")
 _H5_SUFFIXES = (".h5", ".hdf5")
@@ -325,7 +348,9 @@ class Record:
         Parameters
         ----------
         path : str or os.PathLike
-            Destination, overwritten if it exists:
+            Destination, replaced if it exists. The file is written under a temporary name in
+            the same folder and renamed over ``path`` once complete, so a failure (a full disk)
+            leaves any previous file as it was:
 
             - ``.csv`` or ``.txt``: a comment line
               ``# hystid record: name=..., fs=..., units u=V y=um``, the header ``t,u,y`` and one
@@ -394,14 +419,14 @@ def _meta_line(rec: Record) -> str:
 
 
 def _save_csv(rec: Record, path: str | os.PathLike[str]) -> None:
-    with open(path, "w", encoding="utf-8", newline="\n") as out:
+    with atomic_open(path, "w", newline="\n") as out:
         out.write(_meta_line(rec))
         out.write("t,u,y\n")
         np.savetxt(out, np.column_stack([rec.t, rec.u, rec.y]), fmt="%.17g", delimiter=",")
 
 
 def _save_npz(rec: Record, path: str | os.PathLike[str]) -> None:
-    with open(path, "wb") as out:  # an open file keeps numpy from appending ".npz"
+    with atomic_open(path, "wb") as out:  # an open file keeps numpy from appending ".npz"
         np.savez(
             out,
             u=rec.u,
@@ -415,17 +440,19 @@ def _save_npz(rec: Record, path: str | os.PathLike[str]) -> None:
 def _save_mat(rec: Record, path: str | os.PathLike[str]) -> None:
     from scipy.io import savemat
 
-    savemat(
-        path,
-        {"u": rec.u, "y": rec.y, "fs": rec.fs, "name": rec.name, "units": json.dumps(rec.units)},
-        oned_as="column",
-    )
+    with atomic_open(path, "wb") as out:
+        savemat(
+            out,
+            {"u": rec.u, "y": rec.y, "fs": rec.fs, "name": rec.name,
+             "units": json.dumps(rec.units)},
+            oned_as="column",
+        )
 
 
 def _save_h5(rec: Record, path: str | os.PathLike[str]) -> None:
     import h5py
 
-    with h5py.File(path, "w") as out:
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as out:
         out.create_dataset("u", data=rec.u)
         out.create_dataset("y", data=rec.y)
         out.attrs["fs"] = rec.fs
@@ -445,8 +472,28 @@ def parse_columns(text: str) -> dict[str, str | int]:
         role, sep, col = (s.strip() for s in part.partition("="))
         if not sep or not role or not col:
             raise ValueError(f"expected role=column pairs like t=1,u=3,y=2, got {text!r}")
+        if role in out:
+            raise ValueError(f"role {role!r} is given twice in {text!r} (expected each of t, u, "
+                             "y at most once)")
         out[role] = int(col) if col.lstrip("-").isdigit() else col
+    _distinct_columns(out, repr(text))
     return out
+
+
+def _distinct_columns(columns: Mapping[str, str | int], shown: str) -> None:
+    """Raise ``ValueError`` when two roles read the same column (roles left out keep their
+    own name, e.g. ``u=y`` alone reads u and y from column 'y')."""
+    positions = columns and all(isinstance(v, int) and not isinstance(v, bool)
+                                for v in columns.values())
+    where = dict(columns) if positions else {r: columns.get(r, r) for r in _ROLES}
+    seen: dict[Any, str] = {}
+    for role, col in where.items():
+        key = col.casefold() if isinstance(col, str) else col
+        if key in seen:
+            raise ValueError(f"{shown}: {seen[key]} and {role} both read column {col!r} "
+                             "(expected a different column for each of t, u, y; an output read "
+                             "from the input column identifies nothing)")
+        seen[key] = role
 
 
 def load_record(
@@ -605,6 +652,10 @@ def _check_columns(columns: Mapping[str, str | int] | None, file: str) -> dict[s
         if not {"u", "y"} <= set(columns):
             raise RecordError(f"columns {dict(columns)!r}: positions of both 'u' and 'y' are "
                               "required for a file without header", file=file)
+    try:
+        _distinct_columns(columns, f"columns {dict(columns)!r}")
+    except ValueError as err:
+        raise RecordError(str(err), file=file) from err
     return dict(columns)
 
 
@@ -961,11 +1012,70 @@ def _units(value: Any) -> dict[str, str] | None:
     return {str(k): str(v) for k, v in units.items()}
 
 
+# --------------------------------------------------------------------------- hostile files
+def _check_declared(nbytes: int, file: str, what: str) -> None:
+    """Refuse data that would expand far beyond what the file can hold.
+
+    A file of ``s`` bytes may decode to at most ``max(EXPANSION_FLOOR, MAX_EXPANSION * s)``
+    bytes: compressed measurements shrink a few times at most, so more is a decompression bomb
+    or a header that lies about the shape.
+    """
+    size = os.path.getsize(file)
+    limit = max(EXPANSION_FLOOR, MAX_EXPANSION * size)
+    if nbytes > limit:
+        raise RecordError(
+            f"{what} declares {nbytes:,} bytes of data but the file has {size:,} bytes (expected "
+            f"at most {limit:,}: {MAX_EXPANSION}x the file size, or {EXPANSION_FLOOR >> 20} MiB; "
+            "a decompression bomb or a lying header is refused)", file=file)
+
+
+def _npz_members(file: str) -> set[str]:
+    """Check every ``.npy`` member's declared shape against its stored bytes; return the keys."""
+    import zipfile
+
+    keys, total = set(), 0
+    with zipfile.ZipFile(file) as archive:
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            key = info.filename[:-4]
+            keys.add(key)
+            total += info.file_size
+            _check_declared(total, file, f"array {key!r} (with the arrays before it)")
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                reader = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                          else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = reader(member)
+                header = member.tell()
+            declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            if declared > info.file_size - header:
+                raise RecordError(
+                    f"array {key!r} declares shape {shape} ({declared:,} bytes) but the archive "
+                    f"holds {info.file_size - header:,} bytes for it (a truncated or lying "
+                    "archive)", file=file)
+    return keys
+
+
+_ARCHIVE_ERRORS: tuple[type[BaseException], ...] = (OSError, ValueError, EOFError, KeyError)
+
+
+def _archive_errors() -> tuple[type[BaseException], ...]:
+    import zipfile
+    import zlib
+
+    return (*_ARCHIVE_ERRORS, zipfile.BadZipFile, zlib.error)
+
+
 def _read_npz(file: str, roles: dict[str, str | int]) -> _Arrays:
     names = _names(roles, file)
+    errors = _archive_errors()
     try:
+        keys = _npz_members(file)
         archive = np.load(file, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as err:
+    except RecordError:
+        raise
+    except errors as err:
         raise RecordError(f"not a readable .npz archive ({err})", file=file) from err
     if not isinstance(archive, np.lib.npyio.NpzFile):
         raise RecordError("holds a single .npy array (expected a .npz archive with arrays u, y, "
@@ -976,11 +1086,17 @@ def _read_npz(file: str, roles: dict[str, str | int]) -> _Arrays:
             try:
                 return archive[key]
             except ValueError as err:
-                raise RecordError(f"array {key!r} is an object array that needs pickle, which is "
-                                  "not loaded for safety (expected a numeric array)",
-                                  file=file) from err
+                if "pickle" in str(err).lower():
+                    raise RecordError(f"array {key!r} is an object array that needs pickle, "
+                                      "which is not loaded for safety (expected a numeric "
+                                      "array)", file=file) from err
+                raise RecordError(f"array {key!r} cannot be read ({err}; a truncated or "
+                                  "corrupt archive)", file=file) from err
+            except errors as err:
+                raise RecordError(f"array {key!r} cannot be read ({err}; a truncated or "
+                                  "corrupt archive)", file=file) from err
 
-        found = set(archive.files)
+        found = set(archive.files) & keys
         arrays, labels = _collect(file, "array", names, found, fetch)
         extra = {key: fetch(key) for key in ("fs", "name", "units") if key in found}
     return _Arrays(file, "array", arrays, labels, fs=extra.get("fs"),
@@ -989,19 +1105,129 @@ def _read_npz(file: str, roles: dict[str, str | int]) -> _Arrays:
 
 
 def _read_mat(file: str, roles: dict[str, str | int]) -> _Arrays:
-    from scipy.io import loadmat
+    from scipy.io import loadmat, whosmat
     from scipy.io.matlab import MatReadError
 
     names = _names(roles, file)
+    errors = (*_archive_errors(), NotImplementedError, TypeError, MatReadError)
     try:
-        content = loadmat(file)
-    except (OSError, ValueError, NotImplementedError, TypeError, MatReadError) as err:
+        listing = _mat_v5_listing(file)
+        if listing is None:  # MATLAB v4 files are never compressed: scipy lists them cheaply
+            listing = [(name, shape) for name, shape, _ in whosmat(file)]
+    except errors as err:
         hint = " (MATLAB v7.3 files are HDF5: rename to .h5)" if "7.3" in str(err) else ""
         raise RecordError(f"not a readable .mat file ({err}){hint}", file=file) from err
-    arrays, labels = _collect(file, "variable", names, content, content.__getitem__)
+    found = {name for name, _ in listing}
+    wanted = sorted(found & ({*names.values(), "fs", "name", "units"}))
+    declared = sum(8 * int(np.prod(shape, dtype=object)) for name, shape in listing
+                   if name in wanted)
+    _check_declared(declared, file, f"variables {wanted}")
+    try:
+        content = loadmat(file, variable_names=wanted)
+    except errors as err:
+        raise RecordError(f"not a readable .mat file ({err}; a truncated or corrupt file)",
+                          file=file) from err
+    arrays, labels = _collect(file, "variable", names, found, content.__getitem__)
     return _Arrays(file, "variable", arrays, labels, fs=content.get("fs"),
                    name=_text(content.get("name")), units=_units(content.get("units")),
                    default_name=Path(file).stem)
+
+
+def _mat_v5_listing(file: str) -> list[tuple[str, tuple[int, ...]]] | None:
+    """Names and declared shapes of a MATLAB v5 file's variables, without decompressing them.
+
+    Only the first bytes of each compressed variable are inflated (its tag, flags, dimensions
+    and name). Returns ``None`` for a file that is not v5 (v4); raises ``ValueError`` on a
+    malformed one.
+    """
+    import struct
+    import zlib
+
+    with open(file, "rb") as src:
+        head = src.read(128)
+        if len(head) < 128 or head[126:128] not in (b"IM", b"MI") or head[:4] == b"\0\0\0\0":
+            return None
+        order = "<" if head[126:128] == b"IM" else ">"
+        size = os.path.getsize(file)
+        out = []
+        while src.tell() + 8 <= size:
+            kind, nbytes = struct.unpack(order + "II", src.read(8))
+            if kind >> 16:  # a small data element at the top level: nothing to list
+                continue
+            payload = src.read(nbytes)
+            if len(payload) < nbytes:
+                raise ValueError(f"variable {len(out) + 1} is truncated ({len(payload)} of "
+                                 f"{nbytes} bytes)")
+            if kind == 15:  # miCOMPRESSED (not padded): inflate only the header
+                payload = zlib.decompressobj().decompress(payload, 512)
+                kind, nbytes = struct.unpack(order + "II", payload[:8])
+                payload = payload[8:]
+            else:
+                src.seek((8 - src.tell() % 8) % 8, os.SEEK_CUR)
+            if kind == 14:  # miMATRIX
+                out.append(_mat_matrix_header(payload, order))
+        return out
+
+
+def _mat_matrix_header(payload: bytes, order: str) -> tuple[str, tuple[int, ...]]:
+    """Name and dimensions from the first sub-elements of a MATLAB v5 miMATRIX."""
+    import struct
+
+    def element(pos: int) -> tuple[bytes, int]:
+        kind, nbytes = struct.unpack(order + "II", payload[pos:pos + 8])
+        if kind >> 16:  # small data element: the data sit in the tag's second word
+            small = (kind >> 16) if order == "<" else (kind & 0xFFFF)
+            return payload[pos + 4:pos + 4 + small], pos + 8
+        end = pos + 8 + nbytes
+        return payload[pos + 8:end], end + (8 - end % 8) % 8
+
+    _, pos = element(0)  # array flags
+    dims, pos = element(pos)
+    name, _ = element(pos)
+    shape = struct.unpack(f"{order}{len(dims) // 4}i", dims[: len(dims) // 4 * 4])
+    return name.decode("latin-1"), tuple(max(d, 0) for d in shape)
+
+
+def _h5_node(handle: Any, group: str | None, file: str) -> Any:
+    """The group ``group`` of an open file, reached without following external links."""
+    import h5py
+
+    node = handle
+    for part in [p for p in (group or "").split("/") if p]:
+        link = node.get(part, getlink=True) if isinstance(node, h5py.Group) else None
+        if isinstance(link, h5py.ExternalLink):
+            raise RecordError(f"group {part!r} is an external link to {link.filename}:"
+                              f"{link.path} (refused: a record is read from its own file only)",
+                              file=file)
+        node = node.get(part) if link is not None else None
+        if node is None:
+            break
+    return node
+
+
+def _h5_dataset(node: Any, key: str, file: str) -> Any:
+    """Dataset ``key`` of ``node`` checked against external data and lying shapes."""
+    import h5py
+
+    link = node.get(key, getlink=True)
+    if isinstance(link, h5py.ExternalLink):
+        raise RecordError(f"dataset {key!r} is an external link to {link.filename}:{link.path} "
+                          "(refused: a record is read from its own file only)", file=file)
+    dset = node[key]
+    if dset.external:
+        raise RecordError(f"dataset {key!r} keeps its data in external files "
+                          f"{[e[0] for e in dset.external]} (refused: a record is read from its "
+                          "own file only)", file=file)
+    if dset.is_virtual:
+        raise RecordError(f"dataset {key!r} is a virtual dataset mapped from other files "
+                          "(refused: a record is read from its own file only)", file=file)
+    declared = int(dset.size) * dset.dtype.itemsize
+    _check_declared(declared, file, f"dataset {key!r} of shape {dset.shape}")
+    stored = dset.id.get_storage_size()
+    if not dset._filters and declared > stored:
+        raise RecordError(f"dataset {key!r} declares shape {dset.shape} ({declared:,} bytes) but "
+                          f"stores {stored:,} bytes (unwritten or truncated data)", file=file)
+    return dset
 
 
 def _read_h5(file: str, group: str | None, roles: dict[str, str | int]) -> _Arrays:
@@ -1014,21 +1240,40 @@ def _read_h5(file: str, group: str | None, roles: dict[str, str | int]) -> _Arra
     except OSError as err:
         raise RecordError(f"not a readable HDF5 file ({err})", file=file) from err
     with handle:
-        node = handle if group is None else handle.get(group)
+        node = _h5_node(handle, group, file)
         if not isinstance(node, h5py.Group):
             groups: list[str] = []
-            handle.visit(lambda key: groups.append(key) if isinstance(handle[key], h5py.Group)
-                         else None)
+            handle.visit(lambda key: groups.append(key) if isinstance(handle.get(key),
+                                                                       h5py.Group) else None)
             raise RecordError(f"no group {group!r} (groups in the file: {groups or 'none'})",
                               file=file)
-        datasets = {key for key, obj in node.items() if isinstance(obj, h5py.Dataset)}
-        arrays, labels = _collect(where, "dataset", names, datasets, lambda key: node[key][()])
+        datasets = {key for key in node if _h5_is_dataset(node, key)}
+
+        def fetch(key: str) -> Any:
+            dset = _h5_dataset(node, key, file)
+            try:
+                return dset[()]
+            except (OSError, ValueError, TypeError) as err:
+                raise RecordError(f"dataset {key!r} cannot be read ({err}; a truncated or "
+                                  "corrupt file)", file=file) from err
+
+        arrays, labels = _collect(where, "dataset", names, datasets, fetch)
         attrs = dict(node.attrs)
         if "fs" in attrs:
             fs, fs_label = attrs["fs"], "attribute 'fs'"
         else:
-            fs, fs_label = (node["fs"][()] if "fs" in datasets else None), "dataset 'fs'"
+            fs, fs_label = (fetch("fs") if "fs" in datasets else None), "dataset 'fs'"
     default = Path(file).stem + (f":{group}" if group else "")
     return _Arrays(where, "dataset", arrays, labels, fs=fs, fs_label=fs_label,
                    name=_text(attrs.get("name")), units=_units(attrs.get("units")),
                    default_name=default)
+
+
+def _h5_is_dataset(node: Any, key: str) -> bool:
+    """True for a dataset, or an external link (refused when used); never opens other files."""
+    import h5py
+
+    link = node.get(key, getlink=True)
+    if isinstance(link, h5py.ExternalLink):
+        return True
+    return isinstance(node.get(key), h5py.Dataset)

@@ -72,7 +72,7 @@ def exit_code(args) -> int:
         (["simulate", "--seconds", "-1", "--seed", "0", "--out", "x.csv"], "positive"),
         (["simulate", "--seconds", "0.01", "--seed", "0", "--out", "x.xyz"], ".csv"),
         (["identify", "REC", "--method", "magic"], "invalid choice"),
-        (["identify", "REC", "--fs", "abc"], "expected a float"),
+        (["identify", "REC", "--fs", "abc"], "--fs: expected a number"),
     ],
 )
 def test_bad_arguments_exit_2_with_a_clear_message(args, needle, capsys, tmp_path, monkeypatch):

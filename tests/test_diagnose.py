@@ -313,7 +313,7 @@ def test_command_bad_input_exit_status(tmp_path, capsys):
     slow, slow_val = _slow_sine_records()
     slow.save(tmp_path / "slow.npz")
     slow_val.save(tmp_path / "slow_val.npz")
-    (tmp_path / "model.json").write_text(json.dumps({"params": reference_model().params}))
+    reference_model().save(tmp_path / "model.json")
     args = _parse([str(tmp_path / "slow.npz"), "--val", str(tmp_path / "slow_val.npz"),
                    "--effects", "delay", "--model", str(tmp_path / "model.json"), "--quiet"])
     assert diagnose_command.run(args) == 2

@@ -132,16 +132,20 @@ def test_failed_bootstrap_falls_back_to_the_uninformed_start():
 def test_non_finite_samples_are_skipped():
     record = reference_record(0.02, seed=7, noise=1e-3)
     u, y = record.u.copy(), record.y.copy()
-    y[100], y[101], u[200] = np.nan, np.inf, np.nan
+    y[100], y[101] = np.nan, np.inf
     bad = SimpleNamespace(u=u, y=y, fs=record.fs)  # a Record refuses gaps; a stream may not
-    with pytest.warns(RuntimeWarning, match="3 non-finite samples"):
+    with pytest.warns(RuntimeWarning, match="2 non-finite output samples"):
         result = KalmanIdentifier(theta0=near_start(7)).fit(bad)
-    assert result.info["n_skipped"] == 3
+    assert result.info["n_skipped"] == 2
     assert np.all(np.isfinite(result.history))
     ekf = KalmanIdentifier(theta0=near_start(7))
-    with pytest.warns(RuntimeWarning, match="skipped"):
-        theta = ekf.update(np.nan, 1.0)
+    theta = ekf.update(1.0, np.nan)
     assert np.all(np.isfinite(theta)) and ekf.n_skipped == 1
+    with pytest.raises(ValueError, match="u_k"):  # the model cannot run without its input
+        ekf.update(np.nan, 1.0)
+    u[200] = np.nan
+    with pytest.raises(ValueError, match="sample 200"):
+        KalmanIdentifier(theta0=near_start(7)).fit(SimpleNamespace(u=u, y=y, fs=record.fs))
 
 
 def test_non_finite_covariance_is_reset():
@@ -201,7 +205,7 @@ def test_bad_samples_and_records_name_the_argument():
     slow = Record(u=record.u, y=record.y, fs=5000.0)
     with pytest.raises(ValueError, match="record"):
         ekf.fit(slow)
-    with pytest.raises(ValueError, match="record"):
+    with pytest.raises(TypeError, match="record"):  # as every estimator (base.record_signals)
         ekf.fit((record.u, record.y))
 
 

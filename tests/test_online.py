@@ -119,7 +119,7 @@ def test_divergence_is_detected_and_recovered():
     good = est.theta.copy()
     est.theta[:] = good * np.array([1.5, 0.5, 3.0, 1.0, 1.0, 1.0])  # a corrupted estimate
     with pytest.warns(RuntimeWarning, match="diverged"):
-        res = est.fit(rec[3000:])
+        res = est.partial_fit(rec[3000:])
     assert est.n_recoveries >= 1
     assert rel_err(res.model.theta)[0] < 0.02
     assert np.all(np.isfinite(res.history))
@@ -176,3 +176,99 @@ def test_identify_entry_point_for_each_recursive_method():
             res = identify(rec, method=method)
         assert res.method == method and res.history.shape == (rec.n, 6)
         assert np.all(np.isfinite(res.history))
+
+
+# --------------------------------------------------------------------------- start-up check
+#: A wrong basin of the 400-sample start-up solve seen on the independent stage (a21 ~ -0.95).
+WRONG_BASIN = {"alpha": 1.073, "f1": 0.31, "g0": 0.002, "a11": -0.423, "a21": -0.945,
+               "a22": 0.538}
+
+
+def stage_record(seconds: float, seed: int, noise: float = 1e-3):
+    """A record of the independently written paper stage (hystid.testing), from rest."""
+    from hystid.testing import paper_excitation as stage_excitation
+    from hystid.testing import paper_stage
+
+    u = stage_excitation(seconds, seed=seed)
+    y = paper_stage().simulate(u)["y"]
+    y = y + noise * np.random.default_rng(seed + 50).standard_normal(len(u))
+    return Record(u, y, 30_000.0, name=f"stage seed {seed}")
+
+
+def test_start_up_check_tells_a_wrong_basin_from_the_truth():
+    from hystid.identify.online import check_start
+    from hystid.model import DuhemSandwich, Structure
+
+    rec = stage_record(400 / 30_000, seed=4)
+    truth = reference_model().simulate(rec.u).y
+    wrong = DuhemSandwich(WRONG_BASIN, Structure()).simulate(rec.u, check=False).y
+    good = check_start(rec.u, rec.y, truth, Structure(), rec.fs)
+    bad = check_start(rec.u, rec.y, wrong, Structure(), rec.fs)
+    assert good.passed and 0.8 < good.rms / good.noise < 1.2
+    assert not bad.passed and "noise estimate" in bad.reason()
+
+
+def _fit_landing_in(wrong_until: int):
+    """The batch fit, except that windows shorter than ``wrong_until`` land in the wrong basin."""
+    from hystid.identify import online
+    from hystid.identify.result import IdentificationResult
+    from hystid.model import DuhemSandwich
+
+    real = online.fit_output_error
+
+    def fit(record, structure, theta0, **kw):
+        if record.n < wrong_until:
+            model = DuhemSandwich(WRONG_BASIN, structure, fs=record.fs)
+            return IdentificationResult(model, "batch", info={"start": "patched"})
+        return real(record, structure, theta0, **kw)
+
+    return fit
+
+
+def test_failed_start_up_check_solves_again_on_more_samples(monkeypatch):
+    from hystid.identify import online
+
+    monkeypatch.setattr(online, "fit_output_error", _fit_landing_in(1_000))
+    rec = stage_record(0.2, seed=4)
+    res = OnlineIdentifier().fit(rec)
+    checks = res.info["start_up"]["checks"]
+    assert [(c["samples"], c["passed"]) for c in checks[:3]] == [
+        (400, False), (1_000, False), (1_000, True)]  # start, check on new samples, re-solve
+    assert res.info["start_up"]["samples"] >= 1_000 and res.info["warnings"] == []
+    assert rel_err(res.model.theta)[0] < 0.02
+
+
+def test_persistent_start_up_mismatch_is_a_warning_never_converged(monkeypatch):
+    from hystid.identify import online
+
+    monkeypatch.setattr(online, "fit_output_error", _fit_landing_in(10**9))
+    res = OnlineIdentifier().fit(stage_record(0.15, seed=4))
+    assert {c["samples"] for c in res.info["start_up"]["checks"]} == {400, 1_000, 3_000}
+    assert not any(c["passed"] for c in res.info["start_up"]["checks"])
+    assert res.converged_at is None
+    assert any("wrong basin" in w for w in res.info["warnings"])
+
+
+def test_rest_level_and_sensor_offset_are_estimated():
+    """An as-measured record: the stage rests at 2 V before the excitation, the sensor reads
+    0.7 um at rest; the model carries both and predicts a fresh record at the noise floor."""
+    from hystid.testing import hold_then_excite, paper_stage, with_offset
+    from hystid.testing import paper_excitation as stage_excitation
+
+    def record(seed):
+        u = hold_then_excite(stage_excitation(0.3, seed=seed), 30_000.0, level=2.0)
+        y = paper_stage().simulate(u)["y"]
+        y = y + 1e-3 * np.random.default_rng(seed).standard_normal(len(u))
+        return with_offset(Record(u, y, 30_000.0), 0.7)
+
+    est = OnlineIdentifier()
+    rec = record(1)
+    res = est.fit(rec)
+    assert res.model.u_rest == pytest.approx(2.0, abs=1e-9)
+    measured_rest = float(np.median(rec.y[:1000]))  # what the sensor reads at rest at 2 V
+    assert res.model.offset == pytest.approx(measured_rest, abs=5e-3)
+    val = record(2)
+    rms = np.sqrt(np.mean((res.model.simulate(val.u, check=False).y - val.y) ** 2))
+    assert rms < 3e-3
+    checks = res.info["start_up"]["checks"]
+    assert checks[-1]["passed"] and res.info["warnings"] == []

@@ -72,6 +72,8 @@ __all__ = [
 
 #: Samples of preview the reversal planner uses by default (10 ms at 30 kHz).
 DEFAULT_PREVIEW = 300
+#: Longest planner preview accepted, in seconds (the planner's buffers grow with it).
+MAX_PREVIEW_SECONDS = 0.1
 #: Default largest ``alpha |dw1|`` per sample (condition 8 needs it below 2).
 DUHEM_BOUND = 1.5
 #: Status flag: the command was clipped to the input limits.
@@ -432,8 +434,11 @@ def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
         preview = 0  # nothing to plan
     elif preview is None:
         preview = DEFAULT_PREVIEW if kind == KIND_DUHEM else 0
-    if int(preview) != preview or preview < 0:
-        raise ValueError(f"preview: expected a non-negative number of samples, got {preview!r}")
+    longest = max(DEFAULT_PREVIEW, int(MAX_PREVIEW_SECONDS * model.fs))
+    if (isinstance(preview, bool) or not isinstance(preview, int | float | np.integer | np.floating)
+            or not np.isfinite(preview) or int(preview) != preview or not 0 <= preview <= longest):
+        raise ValueError(f"preview: expected a whole number of samples in 0..{longest} "
+                         f"({MAX_PREVIEW_SECONDS:g} s at {model.fs:g} Hz), got {preview!r}")
     P = int(preview)
     if reference_lead is None:
         reference_lead = dc_delay(reference_model)

@@ -1,44 +1,33 @@
 """``hystid diagnose``: the sim-to-real gap diagnosis from the command line.
 
-``hystid diagnose TRAIN [--val VAL ...] [--fs HZ] [--json] [--out DIR] [--quiet]`` identifies
-the nominal sandwich on TRAIN, localises its held-out error, screens and refits the candidate
-effects and prints a summary (or, with ``--json``, one JSON object). Bad input (unreadable or
-too-short records, mismatched sampling rates, records that cannot show a requested effect) gives
-a message on stderr and exit status 2.
+``hystid diagnose TRAIN [--val VAL ...] [--fs HZ] [--model MODEL.json] [--json] [--out DIR]
+[--force] [--quiet]`` identifies the nominal sandwich on TRAIN (or takes the saved model given
+with ``--model``), localises its held-out error, screens and refits the candidate effects and
+prints a summary (or, with ``--json``, one JSON object). Bad input (unreadable or too-short
+records, mismatched sampling rates, records that cannot show a requested effect, an output folder
+that would overwrite files) gives a message on stderr and exit status 2 before any work.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import tempfile
 from pathlib import Path
 
-import numpy as np
+from ..options import OptionError, crop, fraction, integer, number, parse_crop, parse_structure
 
-__all__ = ["EXIT_BAD_INPUT", "configure_parser", "run"]
+__all__ = ["EXIT_BAD_INPUT", "OUTPUT_FILES", "configure_parser", "run"]
 
 EXIT_BAD_INPUT = 2
+#: Files ``--out`` receives.
+OUTPUT_FILES = ("report.json", "summary.txt", "error_time.png", "spectrum.png", "branch.png",
+                "gap.png", "correlation.png")
 
-
-def _fraction(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from err
-    if not 0 < v < 1:
-        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1), got {text!r}")
-    return v
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from err
-    if not (np.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return v
+_fraction = fraction
+_positive = number(0.0, strict_minimum=True)
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -59,16 +48,17 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="sampling rate in Hz (for files without a time vector or fs)")
     parser.add_argument("--columns", default=None, metavar="t=1,u=3,y=2",
                         help="where t, u and y are in the files (names or 0-based positions)")
-    parser.add_argument("--model", default=None, metavar="FILE.json",
-                        help="diagnose this model instead of identifying one: a JSON object "
-                        "with 'params' (as written by 'hystid identify --out') and optionally "
-                        "'structure' (n1a, n1b, n2a, n2b, q1, q2, f0)")
+    parser.add_argument("--model", default=None, metavar="MODEL.json",
+                        help="diagnose this saved model instead of identifying one (the "
+                        "model.json written by 'hystid identify --out'; an older report.json "
+                        "with 'params' and 'structure' is read too)")
     parser.add_argument("--structure", default=None, metavar="n1a=1,n2a=2,...",
                         help="structure of the identified nominal model (keys n1a, n1b, n2a, "
                         "n2b, q1, q2, f0); the paper's experimental one by default")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--out", default=None, metavar="DIR",
                         help="write report.json, summary.txt and the figures to DIR")
+    parser.add_argument("--force", action="store_true", help="replace files already in DIR")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     parser.add_argument("--effects", default=None, metavar="NAMES",
                         help=f"comma-separated candidates (default all: {','.join(EFFECT_NAMES)});"
@@ -80,7 +70,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--u-scale", type=_positive, default=1.0, metavar="K",
                         help="multiply the input by K (keeps alpha |dw1| of condition (8) "
                         "in a range the fit starts well from, e.g. 1/150 for +-150 V)")
-    parser.add_argument("--train-skip", type=float, default=0.0, metavar="S",
+    parser.add_argument("--train-skip", type=number(0.0), default=0.0, metavar="S",
                         help="seconds at the start of TRAIN simulated but left out of the fit's "
                         "cost (an initial transient the model cannot represent)")
     parser.add_argument("--initial", choices=("rest", "level"), default="rest",
@@ -91,8 +81,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-reduction", type=_fraction, default=0.02,
                         help="smallest relative held-out RMS reduction worth having "
                         "(default 0.02)")
-    parser.add_argument("--max-rounds", type=int, default=3,
-                        help="greedy rounds at most (default 3)")
+    parser.add_argument("--max-rounds", type=integer(1, 20), default=3,
+                        help="greedy rounds at most (default 3, at most 20)")
     parser.add_argument("--refit-all", action="store_true",
                         help="refit every excited candidate, not only the promising ones")
 
@@ -112,22 +102,6 @@ def _columns(text: str | None) -> dict | None:
         raise _BadInput(f"--columns: {err}") from err
 
 
-def _crop(text: str | None, rec, label: str):
-    if text is None:
-        return rec
-    try:
-        a, b = text.split(":")
-        start = float(a) if a.strip() else 0.0
-        stop = float(b) if b.strip() else rec.duration
-    except ValueError as err:
-        raise _BadInput(f"--crop: expected START:STOP in seconds, got {text!r}") from err
-    i, j = int(round(start * rec.fs)), int(round(stop * rec.fs))
-    if not 0 <= i < j <= rec.n:
-        raise _BadInput(f"--crop {text}: {label} {rec.name!r} covers 0..{rec.duration:g} s "
-                        f"(expected 0 <= START < STOP within it)")
-    return rec[i:j]
-
-
 def _load(path: str, args, label: str):
     from ..records import Record, RecordError, load_record
 
@@ -135,7 +109,10 @@ def _load(path: str, args, label: str):
         rec = load_record(path, fs=args.fs, columns=_columns(args.columns))
     except RecordError as err:
         raise _BadInput(str(err)) from err
-    rec = _crop(args.crop, rec, label)
+    try:
+        rec = crop(rec, parse_crop(args.crop) if args.crop is not None else None)
+    except OptionError as err:
+        raise _BadInput(f"{err} ({label})") from err
     if args.u_scale != 1.0:
         units = dict(rec.units)
         units["u"] = f"{args.u_scale:g} {units.get('u', '')}".strip()
@@ -144,49 +121,75 @@ def _load(path: str, args, label: str):
 
 
 def _model(path: str | None, fs: float):
+    """The model saved in ``path`` (a model file, or an older report.json with a structure)."""
     if path is None:
         return None
     from ..model import DuhemSandwich, Structure
+    from ..modelfile import FORMAT, ModelFileError, load_model
 
     try:
-        data = json.loads(Path(path).read_text())
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError) as err:
         raise _BadInput(f"--model {path}: cannot read a JSON object ({err})") from err
-    if not isinstance(data, dict) or not isinstance(data.get("params"), dict):
-        raise _BadInput(f"--model {path}: expected a JSON object with a 'params' mapping")
-    params = data["params"]
-    if "structure" in data:
+    if isinstance(data, dict) and "format" in data:
+        if data.get("format") != FORMAT:
+            raise _BadInput(f"--model {path}: 'format' is {data.get('format')!r} (expected "
+                            f"{FORMAT!r})")
         try:
-            structure = Structure(**data["structure"])
-        except (TypeError, ValueError) as err:
-            raise _BadInput(f"--model {path}: bad 'structure': {err}") from err
-    else:
-        count = {k: sum(1 for n in params if n.startswith(k) and n[2:].isdigit())
-                 for k in ("a1", "b1", "a2", "b2")}
-        structure = Structure(count["a1"], count["b1"], count["a2"], count["b2"],
-                              f0="f0" in params)
+            model = load_model(path)
+        except ModelFileError as err:
+            raise _BadInput(f"--model {err}") from err
+        if not isinstance(model, DuhemSandwich):
+            raise _BadInput(f"--model {path}: holds a {type(model).__name__} (diagnose needs a "
+                            "Duhem sandwich)")
+        return model
+    if not isinstance(data, dict) or not isinstance(data.get("params"), dict):
+        raise _BadInput(f"--model {path}: expected a model file (model.json) or a JSON object "
+                        "with 'params' and 'structure'")
+    if not isinstance(data.get("structure"), dict):
+        raise _BadInput(f"--model {path}: has parameters but no 'structure' (orders and delays "
+                        "cannot be guessed from names; use the model.json written by "
+                        "hystid identify --out)")
     try:
-        return DuhemSandwich(params, structure, fs=fs, name=f"model from {Path(path).name}")
-    except ValueError as err:
+        structure = Structure(**data["structure"])
+        return DuhemSandwich(data["params"], structure, fs=fs,
+                             name=f"model from {Path(path).name}")
+    except (TypeError, ValueError) as err:
         raise _BadInput(f"--model {path}: {err}") from err
 
 
 def _structure(text: str | None):
     if text is None:
         return None
-    from ..model import Structure
-
-    values: dict[str, int] = {}
-    for part in text.split(","):
-        key, _, val = part.partition("=")
-        try:
-            values[key.strip()] = int(val)
-        except ValueError as err:
-            raise _BadInput(f"--structure: expected key=integer pairs, got {part!r}") from err
     try:
-        return Structure(**{k: (bool(v) if k == "f0" else v) for k, v in values.items()})
-    except (TypeError, ValueError) as err:
-        raise _BadInput(f"--structure: {err}") from err
+        return parse_structure(text)
+    except OptionError as err:
+        raise _BadInput(str(err)) from err
+
+
+def _check_out(args: argparse.Namespace) -> None:
+    """Refuse an output folder that would overwrite files, before any work."""
+    from ..safeio import OutputError, check_output_dir
+
+    if args.out is None:
+        return
+    inputs = [p for p in (args.train, *args.val, args.model) if p]
+    try:
+        check_output_dir(args.out, OUTPUT_FILES, inputs=inputs, force=args.force)
+    except OutputError as err:
+        raise _BadInput(str(err)) from err
+
+
+def _write(out: Path, report: dict, result) -> None:
+    """Write the report, the summary and the figures, each file atomically."""
+    from ..safeio import write_json, write_text
+
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "report.json", report)
+    write_text(out / "summary.txt", result.summary() + "\n")
+    with tempfile.TemporaryDirectory(dir=out, prefix=".figures.") as tmp:
+        for path in result.plot(tmp):
+            os.replace(path, out / Path(path).name)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -201,6 +204,7 @@ def run(args: argparse.Namespace) -> int:
     from .effects import EFFECT_NAMES
 
     try:
+        _check_out(args)
         train = _load(args.train, args, "TRAIN")
         vals = [_load(p, args, f"--val {p}") for p in args.val]
         if args.effects is None:
@@ -208,8 +212,6 @@ def run(args: argparse.Namespace) -> int:
         else:
             names = tuple(n.strip() for n in args.effects.split(",") if n.strip())
             strict = True
-        if args.max_rounds < 1:
-            raise _BadInput(f"--max-rounds: expected a positive integer, got {args.max_rounds}")
         model = _model(args.model, train.fs)
         result = diagnose(
             train, vals, model, structure=_structure(args.structure), effects=names,
@@ -227,15 +229,14 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         out = Path(args.out)
         try:
-            out.mkdir(parents=True, exist_ok=True)
+            _write(out, report, result)
         except OSError as err:
             print(f"hystid diagnose: error: --out {out}: {err}", file=sys.stderr)
             return EXIT_BAD_INPUT
-        (out / "report.json").write_text(json.dumps(report, indent=2))
-        (out / "summary.txt").write_text(result.summary() + "\n")
-        result.plot(out)
     if args.json:
-        print(json.dumps(report, indent=2))
+        from ..safeio import dumps_strict
+
+        print(dumps_strict(report))
     else:
         print(result.summary())
         if args.out:

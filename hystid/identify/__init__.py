@@ -38,7 +38,7 @@ def min_samples(method: str, structure: Structure | None = None, **settings: Any
 def identify(
     record: Record,
     method: str = "batch",
-    structure: Structure | None = None,
+    structure: Structure | str | None = None,
     *,
     progress: Callable[[int, int], None] | None = None,
     **settings: Any,
@@ -52,15 +52,37 @@ def identify(
     method : str
         ``"batch"`` (off-line output error), ``"eria"`` (the paper's recursion, eqs. 15-19),
         ``"online"`` (the converging on-line identifier) or ``"ekf"`` (filterpy baseline).
-    structure : Structure, optional
-        Model structure; the paper's experimental one by default.
+    structure : Structure or "auto", optional
+        Model structure; the paper's experimental one by default; ``"auto"`` chooses orders
+        and delays on held-out error (:func:`~hystid.identify.structure.select_structure`,
+        its table in ``result.info["structure_selection"]``).
     progress : callable, optional
         Called as ``progress(k, n)`` while a long run goes on.
     **settings
         Passed to the estimator's constructor (for example ``theta0``, ``P0``, ``epsilon``).
+
+    Returns
+    -------
+    IdentificationResult
+        The model is placed at the record's rest level and sensor offset, in its units, with
+        the input envelope it was identified on; ``result.info["warnings"]`` says what was
+        found in the record and whether the model is admissible on it.
+
+    Notes
+    -----
+    ``batch`` estimates the offset and the hysteresis state at rest itself. The recursive
+    methods run on the record less its rest level (input) and its output at rest, which is
+    taken from the leading rest segment (see :mod:`hystid.identify.prepare`).
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    selection = None
+    if isinstance(structure, str):
+        if structure != "auto":
+            raise ValueError(f"structure: expected a Structure or 'auto', got {structure!r}")
+        from .structure import select_structure
+
+        structure, selection = select_structure(record)
     need = min_samples(method, structure, **settings)
     if record.n < need:
         raise ValueError(
@@ -69,11 +91,34 @@ def identify(
     if method == "batch":
         if progress is not None:
             progress(0, record.n)
-        return fit_output_error(record, structure, **settings)
+        result = fit_output_error(record, structure, **settings)
+    else:
+        result = _run_recursive(record, method, structure, progress, settings)
+    if selection is not None:
+        result.info["structure_selection"] = selection
+    return result
+
+
+def _run_recursive(record: Record, method: str, structure: Structure | None,
+               progress: Callable[[int, int], None] | None, settings: dict) -> IdentificationResult:
+    """A recursive estimator on the record less its rest level, placed back afterwards."""
+    from .prepare import prepare
+
     if method == "eria":
         from .eria import ERIA as estimator
     elif method == "online":
         from .online import OnlineIdentifier as estimator
     else:
         from .ekf import KalmanIdentifier as estimator
-    return estimator(structure, record.fs, **settings).fit(record, progress=progress)
+    prep = prepare(record)
+    relative = Record(record.u - prep.u_rest, record.y - prep.y_ref, record.fs, record.units,
+                      record.name)
+    result = estimator(structure, record.fs, **settings).fit(relative, progress=progress)
+    model = result.model
+    model.u_rest, model.offset = prep.u_rest + model.u_rest, prep.y_ref + model.offset
+    model.envelope, model.units = prep.envelope, dict(record.units)
+    notes = list(prep.notes) + [f"on the identification record: {w}"
+                                for w in model.admissibility(record.u) if "condition" in w
+                                or "diverged" in w]
+    result.info["warnings"] = list(result.info.get("warnings", [])) + notes
+    return result

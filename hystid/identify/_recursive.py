@@ -2,7 +2,8 @@
 
 A recursive identifier keeps short windows of the signals (most recent sample at the last index)
 and runs a compiled kernel over a chunk of samples. ``update(u_k, y_k)`` is a chunk of one sample,
-``fit(record)`` a chunk of the whole record, so both give the same numbers.
+``partial_fit(record)`` the same over a record, so both give the same numbers; ``fit(record)``
+restarts first (see :mod:`hystid.identify.base`).
 """
 
 from __future__ import annotations
@@ -15,8 +16,9 @@ from numba import njit
 
 from ..model import DuhemSandwich, Structure
 from ..records import Record
+from .base import Estimator, as_sample, record_signals
 from .offline import initial_theta
-from .result import IdentificationResult, converged_at
+from .result import HistoryRecorder, IdentificationResult
 
 __all__ = ["RecursiveIdentifier", "admissible", "admissible_into", "extended", "keep_tail"]
 
@@ -78,11 +80,12 @@ def admissible_into(theta, layout, kmax, work):
     )
 
 
-class RecursiveIdentifier:
-    """Base class: configuration, validated input, the update/fit loop and the result.
+class RecursiveIdentifier(Estimator):
+    """Base class of the compiled recursions: configuration, validated input, the result.
 
     Subclasses set :attr:`method`, implement :meth:`_allocate` (the state arrays) and
-    :meth:`_run` (the compiled kernel over a chunk).
+    :meth:`_run` (the compiled kernel over a chunk). :meth:`update`, :meth:`partial_fit` and
+    :meth:`fit` keep the :class:`~hystid.identify.base.Estimator` contract.
     """
 
     method = "recursive"
@@ -90,16 +93,24 @@ class RecursiveIdentifier:
     divergence_reason = "the estimate diverged"
     #: Samples of signal history kept in the windows beyond the structure's own.
     extra_history = 2
+    #: Samples per compiled call in :meth:`partial_fit`.
+    chunk = 65_536
 
-    def __init__(self, structure: Structure | None, fs: float, theta0, epsilon: float):
+    def __init__(self, structure: Structure | None, fs: float, theta0, epsilon: float,
+                 history: str = "decimated", history_rows: int = 100_000):
         self.structure = structure or Structure()
+        if not isinstance(self.structure, Structure):
+            raise ValueError(f"structure: expected a Structure, got {type(structure).__name__}")
         if not (np.isfinite(fs) and fs > 0):
             raise ValueError(f"fs: expected a positive sampling rate in Hz, got {fs!r}")
         if not (np.isfinite(epsilon) and epsilon > 0):
             raise ValueError(f"epsilon: expected a positive stop index, got {epsilon!r}")
+        HistoryRecorder(2, 1, 0, history, history_rows)  # validates both
         self.fs = float(fs)
         self.epsilon = float(epsilon)
         self.theta0 = theta0
+        self.history = history
+        self.history_rows = int(history_rows)
         self.reset()
 
     # ----------------------------------------------------------------- state
@@ -110,14 +121,21 @@ class RecursiveIdentifier:
         return max(s.q1 + s.q2 + s.n1b + 1, s.q2 + 1 + s.n1a, s.n2a + 1, s.q2 + s.n2b + 1,
                    s.history) + self.extra_history
 
-    def reset(self) -> None:
-        """Forget everything learned: back to theta0 at sample 0."""
+    def reset(self) -> RecursiveIdentifier:
+        """Forget everything learned: back to theta0 at sample 0.
+
+        Returns
+        -------
+        RecursiveIdentifier
+            ``self``.
+        """
         self.theta = initial_theta(self.structure, self.theta0).copy()
         self.k = 0
         self.n_recoveries = 0
         self.n_skipped = 0
         self.first_recovery: int | None = None
         self._allocate()
+        return self
 
     def _allocate(self) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -131,11 +149,20 @@ class RecursiveIdentifier:
     def update(self, u_k: float, y_k: float) -> np.ndarray:
         """Process one sample ``(u(k), y(k))``; returns the new estimate theta(k).
 
-        A non-finite ``y_k`` is skipped (counted in :attr:`n_skipped`); a non-finite ``u_k``
-        is an error since the model cannot be propagated without it.
+        Parameters
+        ----------
+        u_k : float
+            Input sample; a non-finite one is an error (the model cannot be propagated).
+        y_k : float
+            Output sample; a non-finite one is skipped (counted in :attr:`n_skipped`).
+
+        Returns
+        -------
+        ndarray
+            The estimate theta(k), a copy.
         """
-        u = np.array([_scalar(u_k, "u_k")])
-        y = np.array([_scalar(y_k, "y_k")])
+        u = np.array([as_sample(u_k, "u_k")])
+        y = np.array([as_sample(y_k, "y_k")])
         if not np.isfinite(u[0]):
             raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
         self._process(u, y, np.empty((1, len(self.theta))),
@@ -148,18 +175,20 @@ class RecursiveIdentifier:
         self._run(u, y, history, diagnostics)
         self.k += len(u)
         self.n_skipped += skipped
+        self._warn_recoveries(before)
+
+    def _warn_recoveries(self, before: int) -> None:
         if self.n_recoveries > before:
             warnings.warn(
                 f"{self.method}: {self.divergence_reason} {self.n_recoveries - before} "
                 f"time(s), first at sample {self.first_recovery}; restarted from the last "
-                "good estimate", RuntimeWarning, stacklevel=3,
+                "good estimate", RuntimeWarning, stacklevel=4,
             )
 
-    def fit(
-        self, record: Record, progress: Callable[[int, int], None] | None = None,
-        chunk: int = 100_000,
+    def partial_fit(
+        self, record: Record, progress: Callable[[int, int], None] | None = None
     ) -> IdentificationResult:
-        """Run over a whole record from the current state; returns the result with history.
+        """Run over a record from the current state; returns the result with history.
 
         Parameters
         ----------
@@ -168,35 +197,55 @@ class RecursiveIdentifier:
             it has already seen earlier samples).
         progress : callable, optional
             Called as ``progress(k, n)`` after each chunk.
-        chunk : int
-            Samples per compiled call (progress granularity).
+
+        Returns
+        -------
+        IdentificationResult
+            The estimate; ``history`` as the ``history`` setting says (``history_index`` gives
+            the sample of each row when decimated).
         """
-        if not isinstance(record, Record):
-            raise TypeError(f"record: expected a hystid Record, got {type(record).__name__}")
-        if not np.isclose(record.fs, self.fs, rtol=1e-9):
-            raise ValueError(f"record {record.name!r}: fs {record.fs:g} Hz differs from the "
-                             f"identifier's fs {self.fs:g} Hz")
-        n = record.n
-        history = np.empty((n, len(self.theta)))
-        diagnostics = np.empty((n, self.n_diagnostics))
-        for start in range(0, n, chunk):
-            stop = min(n, start + chunk)
-            self._process(record.u[start:stop], record.y[start:stop], history[start:stop],
-                          diagnostics[start:stop])
+        u, y, _ = record_signals(record, self.fs)
+        n = len(u)
+        before = self.n_skipped
+        rec = HistoryRecorder(n, len(self.theta), self.n_diagnostics, self.history,
+                              self.history_rows, self.epsilon)
+        size = min(n, self.chunk)
+        history = np.empty((size, len(self.theta)))
+        diagnostics = np.empty((size, self.n_diagnostics))
+        for start in range(0, n, size or 1):
+            stop = min(n, start + size)
+            m = stop - start
+            self._process(u[start:stop], y[start:stop], history[:m], diagnostics[:m])
+            rec.add(history[:m], diagnostics[:m])
             if progress is not None:
                 progress(stop, n)
-        return self.result(history, diagnostics)
+        self._warn_skipped(before)
+        return self.result(rec)
 
-    def result(
-        self, history: np.ndarray | None = None, diagnostics: np.ndarray | None = None
-    ) -> IdentificationResult:
-        """The current estimate as an :class:`IdentificationResult`."""
+    def result(self, recorder: HistoryRecorder | None = None) -> IdentificationResult:
+        """The current estimate as an :class:`IdentificationResult`.
+
+        Parameters
+        ----------
+        recorder : HistoryRecorder, optional
+            The history of the run that led to it.
+
+        Returns
+        -------
+        IdentificationResult
+        """
         info = {"n_recoveries": self.n_recoveries, "first_recovery": self.first_recovery,
-                "n_skipped": self.n_skipped, "samples": self.k}
-        if diagnostics is not None and self.n_diagnostics:
-            info["diagnostics"] = diagnostics
-        conv = converged_at(history, self.epsilon) if history is not None else None
-        return IdentificationResult(self.model, self.method, self.settings, history, conv, info)
+                "n_skipped": self.n_skipped, "samples": self.k, "warnings": []}
+        history = index = conv = None
+        if recorder is not None:
+            conv = recorder.converged_at
+            if recorder.mode != "none":
+                history = recorder.history
+                index = None if recorder.every == 1 else recorder.index
+                if recorder.diagnostics is not None and self.n_diagnostics:
+                    info["diagnostics"] = recorder.diagnostics
+        return IdentificationResult(self.model, self.method, self.settings, history, conv, info,
+                                    history_index=index)
 
     @property
     def model(self) -> DuhemSandwich:
@@ -207,17 +256,16 @@ class RecursiveIdentifier:
     @property
     def settings(self) -> dict:
         """The identifier's configuration (JSON-ready)."""
-        return {"epsilon": self.epsilon, "theta0": _jsonable(self.theta0)}
-
-
-def _scalar(value, name: str) -> float:
-    arr = np.asarray(value, dtype=float)
-    if arr.ndim != 0 and arr.shape != (1,):
-        raise ValueError(f"{name}: expected one sample (a scalar), got shape {arr.shape}")
-    return float(arr.reshape(()))
+        s = self.structure
+        return {"structure": {k: getattr(s, k) for k in ("n1a", "n1b", "n2a", "n2b", "q1", "q2",
+                                                          "f0")},
+                "fs": self.fs, "epsilon": self.epsilon, "theta0": _jsonable(self.theta0),
+                "history": self.history, "history_rows": self.history_rows}
 
 
 def _jsonable(value):
     if isinstance(value, np.ndarray):
         return value.tolist()
+    if isinstance(value, dict):
+        return {str(k): float(v) for k, v in value.items()}
     return value

@@ -48,9 +48,10 @@ from ..kernels import offsets, sgn
 from ..model import DuhemSandwich, Structure
 from ..records import Record
 from ._recursive import admissible
+from .base import Estimator, as_sample, record_signals
 from .constraints import is_admissible, project_admissible
 from .offline import initial_theta, linear_start
-from .result import IdentificationResult, converged_at
+from .result import HistoryRecorder, IdentificationResult
 
 __all__ = ["KalmanIdentifier", "state_sizes", "transition"]
 
@@ -192,7 +193,7 @@ def _variances(value, n: int, argname: str, positive: bool = False) -> np.ndarra
     return arr
 
 
-class KalmanIdentifier:
+class KalmanIdentifier(Estimator):
     """Extended-Kalman-filter identifier of the Duhem sandwich (a filterpy baseline).
 
     Parameters
@@ -234,6 +235,12 @@ class KalmanIdentifier:
         Samples used by the ``"linear"`` bootstrap.
     p_max : float
         A covariance with a diagonal entry above this (or non-finite) triggers a reset.
+    epsilon : float
+        Stop index for ``converged_at`` (the paper's 1e-4).
+    history : {"decimated", "full", "none"}
+        Parameter history kept by :meth:`fit` (:class:`~hystid.identify.result.HistoryRecorder`).
+    history_rows : int
+        Rows kept by ``history="decimated"``.
 
     Attributes
     ----------
@@ -264,6 +271,8 @@ class KalmanIdentifier:
     >>> result.model.params  # doctest: +SKIP
     """
 
+    method = "ekf"
+
     def __init__(
         self,
         structure: Structure | None = None,
@@ -279,6 +288,9 @@ class KalmanIdentifier:
         alpha_min: float = 0.1,
         n_bootstrap: int = 300,
         p_max: float = 1e6,
+        epsilon: float = 1e-4,
+        history: str = "decimated",
+        history_rows: int = 100_000,
     ) -> None:
         self.structure = structure or Structure()
         if not isinstance(self.structure, Structure):
@@ -292,6 +304,11 @@ class KalmanIdentifier:
         if not (np.isscalar(alpha_min) and np.isfinite(alpha_min) and alpha_min > 0):
             raise ValueError(f"alpha_min: expected a positive lower bound, got {alpha_min!r}")
         self.alpha_min = float(alpha_min)
+        if not (np.isscalar(epsilon) and np.isfinite(epsilon) and epsilon > 0):
+            raise ValueError(f"epsilon: expected a positive stop index, got {epsilon!r}")
+        self.epsilon = float(epsilon)
+        HistoryRecorder(2, 1, 0, history, history_rows)  # validates both
+        self.history, self.history_rows = history, int(history_rows)
         if not (np.isscalar(p_max) and p_max > 0):
             raise ValueError(f"p_max: expected a positive number, got {p_max!r}")
         self.fs = float(fs)
@@ -320,7 +337,7 @@ class KalmanIdentifier:
         else:
             self._check_theta0(self._numeric_theta0(theta0))
         self._kf: _SandwichEKF | None = None
-        self._quiet = False
+        self.k = self.n_skipped = 0
         if not isinstance(theta0, str):
             self.initialize()  # theta, P, model are available at once
 
@@ -432,9 +449,8 @@ class KalmanIdentifier:
     def update(self, u_k: float, y_k: float) -> np.ndarray:
         """Process one sample: predict with ``u_k``, correct with the measurement ``y_k``.
 
-        Constant time and memory. A non-finite ``u_k`` is replaced by the last finite input
-        and a non-finite ``y_k`` gives a prediction without correction; both count in
-        ``n_skipped``.
+        Constant time and memory. A non-finite ``y_k`` gives a prediction without correction
+        (counted in ``n_skipped``); a non-finite ``u_k`` is an error.
 
         Parameters
         ----------
@@ -450,18 +466,13 @@ class KalmanIdentifier:
         """
         if self._kf is None:
             self.initialize()
-        u_k = _scalar(u_k, "u_k")
-        y_k = _scalar(y_k, "y_k")
-        skip = False
+        u_k = as_sample(u_k, "u_k")
+        y_k = as_sample(y_k, "y_k")
         if not np.isfinite(u_k):
-            u_k, skip = self._u_last, True
-        if not np.isfinite(y_k):
-            skip = True
+            raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+        skip = not np.isfinite(y_k)
         if skip:
             self.n_skipped += 1
-            if not self._quiet:
-                warnings.warn("KalmanIdentifier: non-finite sample skipped (see n_skipped)",
-                              RuntimeWarning, stacklevel=2)
         self._u_last = u_k
         ub = self._ubuf
         ub[1:] = ub[:-1]
@@ -515,7 +526,8 @@ class KalmanIdentifier:
             raise ValueError("model: no estimate yet; call initialize(), update() or fit() first")
         return DuhemSandwich(self.theta, self.structure, fs=self.fs, name="EKF estimate")
 
-    def get_settings(self) -> dict[str, Any]:
+    @property
+    def settings(self) -> dict[str, Any]:
         """The constructor's configuration as plain values (for reports and JSON)."""
         t0 = self.theta0
         if isinstance(t0, Mapping):
@@ -530,14 +542,38 @@ class KalmanIdentifier:
             "P0_state": self.P0_state.tolist(), "q_theta": self.q_theta.tolist(),
             "q_anneal": self.q_anneal.tolist(), "anneal_samples": self.anneal_samples,
             "q_state": self.q_state.tolist(), "r": self.r, "n_bootstrap": self.n_bootstrap,
-            "p_max": self.p_max, "alpha_min": self.alpha_min,
+            "p_max": self.p_max, "alpha_min": self.alpha_min, "epsilon": self.epsilon,
+            "history": self.history, "history_rows": self.history_rows,
         }
+
+    def get_settings(self) -> dict[str, Any]:
+        """The same as :attr:`settings` (kept for existing callers).
+
+        Returns
+        -------
+        dict
+        """
+        return self.settings
+
+    def reset(self) -> KalmanIdentifier:
+        """Back to the start (:meth:`initialize`; a ``"linear"`` start waits for a record).
+
+        Returns
+        -------
+        KalmanIdentifier
+            ``self``.
+        """
+        if isinstance(self.theta0, str):
+            self._kf = None
+            self.k = self.n_skipped = 0
+            return self
+        return self.initialize()
 
     def fit(
         self, record: Record, progress: Callable[[int, int], None] | None = None
     ) -> IdentificationResult:
-        """Run the filter over a whole record, from :meth:`initialize` (fit restarts; call
-        :meth:`update` to go on from the current estimate).
+        """Restart (:meth:`initialize`, with the record's prefix for ``theta0="linear"``) and
+        run the filter over a whole record.
 
         Parameters
         ----------
@@ -549,54 +585,59 @@ class KalmanIdentifier:
         Returns
         -------
         IdentificationResult
-            ``method='ekf'``; ``history`` holds theta after each sample (N x n_params),
-            ``converged_at`` the stop-index sample (epsilon = 1e-4); ``info`` the counters, the
-            start used and the RMS innovation over the last tenth of the record.
+            See :meth:`partial_fit`.
         """
-        u, y = _record_signals(record)
-        fs = getattr(record, "fs", self.fs)
-        if not np.isclose(fs, self.fs):
-            raise ValueError(f"record: sampled at {fs:g} Hz but the identifier has fs={self.fs:g}; "
-                             f"pass fs={fs:g}")
+        record_signals(record, self.fs)
         self.initialize(record if isinstance(self.theta0, str) else None)
+        return self.partial_fit(record, progress=progress)
+
+    def partial_fit(
+        self, record: Record, progress: Callable[[int, int], None] | None = None
+    ) -> IdentificationResult:
+        """Run the filter over a record from its current state.
+
+        Parameters
+        ----------
+        record : Record
+            Input ``u`` and measured output ``y`` sampled at ``fs``.
+        progress : callable, optional
+            Called as ``progress(k, n)`` every 1 000 samples and at the end.
+
+        Returns
+        -------
+        IdentificationResult
+            ``method='ekf'``; ``history`` holds theta after each sample (N x n_params, or
+            decimated: ``history_index``), ``converged_at`` the stop-index sample; ``info`` the
+            counters, the start used and the RMS innovation over the last tenth of the record.
+        """
+        u, y, _ = record_signals(record, self.fs)
+        if self._kf is None:
+            self.initialize(record if isinstance(self.theta0, str) else None)
         n = len(u)
-        history = np.empty((n, len(self.structure.names)))
-        innovation = np.zeros(n)
-        self._quiet = True  # one warning at the end instead of one per sample
-        try:
-            for k in range(n):
-                history[k] = self.update(u[k], y[k])
-                innovation[k] = self.e
-                if progress is not None and ((k + 1) % 1000 == 0 or k + 1 == n):
+        before = self.n_skipped
+        rec = HistoryRecorder(n, len(self.structure.names), 0, self.history, self.history_rows,
+                              self.epsilon)
+        tail = max(1, n // 10)
+        innovation = np.zeros(tail)
+        block = np.empty((min(n, 1000), len(self.structure.names)))
+        for k in range(n):
+            block[k % len(block)] = self.update(u[k], y[k])
+            if k >= n - tail:
+                innovation[k - (n - tail)] = self.e
+            if (k + 1) % len(block) == 0 or k + 1 == n:
+                rec.add(block[: k % len(block) + 1])
+                if progress is not None:
                     progress(k + 1, n)
-        finally:
-            self._quiet = False
-        if self.n_skipped:
-            warnings.warn(f"KalmanIdentifier.fit: {self.n_skipped} non-finite samples skipped",
-                          RuntimeWarning, stacklevel=2)
+        self._warn_skipped(before)
         info = {"n_skipped": self.n_skipped, "n_resets": self.n_resets,
                 "n_projections": self.n_projections, "start": self.start_,
                 "theta_start": self.theta_start_.tolist(),
                 "filter": "filterpy.kalman.ExtendedKalmanFilter", "samples": n,
-                "rms_innovation": float(np.sqrt(np.mean(innovation[-max(1, n // 10):] ** 2)))
-                if n else None}
-        settings = {**self.get_settings(), "samples": n}
+                "rms_innovation": float(np.sqrt(np.mean(innovation ** 2))) if n else None,
+                "warnings": []}
+        settings = {**self.settings, "samples": n}
+        history = None if rec.mode == "none" else rec.history
+        index = None if rec.every == 1 else rec.index
         return IdentificationResult(self.model, "ekf", settings, history=history,
-                                    converged_at=converged_at(history, 1e-4), info=info)
-
-
-def _scalar(value, argname: str) -> float:
-    arr = np.asarray(value, dtype=float)
-    if arr.size != 1:
-        raise ValueError(f"{argname}: expected one sample (a scalar), got shape {arr.shape}")
-    return float(arr.reshape(()))
-
-
-def _record_signals(record) -> tuple[np.ndarray, np.ndarray]:
-    if not (hasattr(record, "u") and hasattr(record, "y")):
-        raise ValueError(f"record: expected a Record with u and y, got {type(record).__name__}")
-    u = np.asarray(record.u, dtype=float)
-    y = np.asarray(record.y, dtype=float)
-    if u.ndim != 1 or y.ndim != 1 or u.shape != y.shape:
-        raise ValueError(f"record: u and y must be 1-D of one length, got {u.shape} and {y.shape}")
-    return u, y
+                                    converged_at=rec.converged_at, info=info,
+                                    history_index=index)

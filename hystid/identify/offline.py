@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..kernels import sensitivities_into
+from ..kernels import sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
 from ..operating import Envelope
 from ..records import Record
@@ -151,6 +151,12 @@ class _Reparam:
 #: Fits keep ``alpha max |L1| min(2 A sin(w/2), slew)`` (condition 8 over every sine inside the
 #: training input's envelope, :meth:`DuhemSandwich.envelope_bound`) below this.
 BOUND_MAX = 1.95
+#: Fits keep ``alpha`` times the normalised input's span at least this: one sweep of the input
+#: forgets all but ``exp(-WIPE_OUT)`` of the hysteresis state it started from (the wiping-out
+#: of a piezo's memory by a full stroke). A model with less memory loss carries the unknown
+#: initial state through the whole record and cannot be validated on records that start
+#: elsewhere.
+WIPE_OUT = 1.0
 #: Evaluations given to each start before the best ones are polished.
 SCREEN_NFEV = 25
 
@@ -212,17 +218,20 @@ def _rescale(theta, structure, su, sy, inverse):
 class _OutputError:
     """The output-error problem on a prepared record: residuals and Jacobian in ``z``.
 
-    ``z`` holds the reparametrised model (:class:`_Reparam`) and, last, the normalised sensor
-    offset ``y0``. The signal and sensitivity arrays are allocated once and reused by every
-    evaluation. One extra residual keeps the model admissible over the training envelope: it
-    is ``weight * max(0, bound - BOUND_MAX)``.
+    ``z`` holds the reparametrised model (:class:`_Reparam`), then the normalised sensor offset
+    ``y0`` and the hysteresis state at the start ``e0`` (``w2`` off its rest value: a stage at
+    rest still remembers how it got there; fitted for records that start at rest, its
+    derivative by a finite difference). The signal and sensitivity arrays are allocated once
+    and reused by every evaluation. One extra residual keeps the model admissible over the
+    training envelope: it is ``weight * max(0, bound - BOUND_MAX)``.
     """
 
     def __init__(self, prep: Prepared, structure: Structure, x0: InitialCondition,
-                 fit_offset: bool, admissible: bool):
+                 fit_offset: bool, admissible: bool, fit_state: bool = False):
         self.structure, self.prep = structure, prep
         self.rp = _Reparam(structure)
         self.fit_offset, self.admissible = fit_offset, admissible
+        self.fit_state = fit_state and prep.at_rest
         P, n, npar = structure.history, len(prep.un), len(structure.names)
         self.P = P
         self.U, self.W1, self.W2, self.Y = (
@@ -247,30 +256,29 @@ class _OutputError:
         grad = np.zeros(len(z))
         if not self.admissible:
             return 0.0, grad
-        theta = self.rp.to_theta(z[:-1])[0]
+        n = self.npar
+        theta = self.rp.to_theta(z[:n])[0]
         b = self.bound(theta)
         if b <= BOUND_MAX:
             return 0.0, grad
         for i in self.rp.l1_and_alpha:
             dz = np.zeros(len(z))
             dz[i] = 1e-6 * max(abs(z[i]), 1.0)
-            grad[i] = (self.bound(self.rp.to_theta(z[:-1] + dz[:-1])[0]) - b) / dz[i]
+            grad[i] = (self.bound(self.rp.to_theta(z[:n] + dz[:n])[0]) - b) / dz[i]
         return self.pen_weight * (b - BOUND_MAX), self.pen_weight * grad
 
     def evaluate(self, z: np.ndarray) -> None:
         if "z" in self._cache and np.array_equal(self._cache["z"], z):
             return
-        theta, dtheta = self.rp.to_theta(z[:-1])
-        y0 = z[-1] if self.fit_offset else 0.0
-        P = self.P
-        for a, past in zip((self.W1, self.W2, self.Y), self.past, strict=True):
-            a[:P] = past
-        self.S1[:P] = self.S2[:P] = self.SY[:P] = 0.0
+        n = self.npar
+        theta, dtheta = self.rp.to_theta(z[:n])
+        y0 = z[n] if self.fit_offset else 0.0
+        e0 = z[n + 1] if self.fit_state else 0.0
         with np.errstate(over="ignore", invalid="ignore"):
-            sensitivities_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y,
-                               self.S1, self.S2, self.SY, P)
-            yhat = self.Y[P:][self.idx]
-            S = self.SY[P:][self.idx]
+            yhat, S = self._run(theta, e0, sensitivities=True)
+            if self.fit_state:
+                h = 1e-6 * max(abs(e0), 1.0)
+                de0 = (self._run(theta, e0 + h) - yhat) / h
             blown = not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(S)))
             blown = blown or float(np.max(np.abs(yhat))) > self.ceiling
         m = len(self.idx)
@@ -283,11 +291,32 @@ class _OutputError:
             r = np.empty(m + 1)
             r[:m] = yhat + y0 - self.target
             r[m] = pen
-            J = np.empty((m + 1, len(z)))
-            J[:m, :-1] = S @ dtheta
-            J[:m, -1] = 1.0 if self.fit_offset else 0.0
+            J = np.zeros((m + 1, len(z)))
+            J[:m, :n] = S @ dtheta
+            J[:m, n] = 1.0 if self.fit_offset else 0.0
+            if self.fit_state:
+                J[:m, n + 1] = de0
             J[m] = dpen
         self._cache = {"z": z.copy(), "r": r, "J": J}
+
+    def _run(self, theta: np.ndarray, e0: float, sensitivities: bool = False):
+        """Simulate from the past with the Duhem state ``e0`` off rest (and L2 settled on it)."""
+        P = self.P
+        for a, past in zip((self.W1, self.W2, self.Y), self.past, strict=True):
+            a[:P] = past
+        if e0:
+            s = self.structure
+            a2 = theta[[s.names.index(f"a2{i}") for i in range(1, s.n2a + 1)]]
+            b2 = theta[[s.names.index(f"b2{i}") for i in range(1, s.n2b + 1)]]
+            self.W2[:P] += e0
+            self.Y[:P] += e0 * (1.0 + np.sum(b2)) / (1.0 + np.sum(a2))
+        if not sensitivities:
+            simulate_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y, P)
+            return self.Y[P:][self.idx].copy()
+        self.S1[:P] = self.S2[:P] = self.SY[:P] = 0.0
+        sensitivities_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y,
+                           self.S1, self.S2, self.SY, P)
+        return self.Y[P:][self.idx].copy(), self.SY[P:][self.idx]
 
     def fun(self, z: np.ndarray) -> np.ndarray:
         self.evaluate(z)
@@ -299,10 +328,13 @@ class _OutputError:
 
     def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
         lo, hi = self.rp.bounds()
-        lo, hi = np.r_[lo, -np.inf], np.r_[hi, np.inf]
-        return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac, bounds=(lo, hi),
-                             method="trf", ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev,
-                             x_scale="jac")
+        lo, hi = np.r_[lo, -np.inf, -np.inf], np.r_[hi, np.inf, np.inf]
+        if self.admissible:
+            lo[self.rp.ialpha] = WIPE_OUT / max(self.env_n.u_max - self.env_n.u_min, 1e-12)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
+                                 bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
+                                 max_nfev=max_nfev, x_scale="jac")
 
 
 def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndarray,
@@ -405,11 +437,12 @@ def fit_output_error(
     elif not offset:
         prep.y_ref, prep.yn = 0.0, record.y / prep.y_scale
     x0n = _normalise_past(x0, prep) if x0 is not None else InitialCondition()
-    problem = _OutputError(prep, structure, x0n, offset and x0 is None, admissible)
+    problem = _OutputError(prep, structure, x0n, offset and x0 is None, admissible,
+                           fit_state=x0 is None)
     starts = _starts(prep, structure, theta0, linear_init)
     screened = []
     for label, start in starts.items():
-        z0 = np.r_[problem.rp.to_z(start[:-1]), start[-1]]
+        z0 = np.r_[problem.rp.to_z(start[:-1]), start[-1], 0.0]
         sol = problem.solve(z0, SCREEN_NFEV if len(starts) > 1 else max_nfev, tol)
         screened.append((sol.cost, label, sol))
     screened.sort(key=lambda item: item[0])
@@ -445,8 +478,9 @@ def _normalise_past(x0: InitialCondition, prep: Prepared) -> InitialCondition:
 def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, label: str,
             name: str, settings: dict) -> IdentificationResult:
     """Place the fitted model in record units and say what is worth knowing about it."""
-    theta_n = problem.rp.to_theta(sol.x[:-1])[0]
-    y0n = float(sol.x[-1]) if problem.fit_offset else 0.0
+    n = problem.npar
+    theta_n = problem.rp.to_theta(sol.x[:n])[0]
+    y0n = float(sol.x[n]) if problem.fit_offset else 0.0
     theta = to_physical(theta_n, structure, prep.u_scale, prep.y_scale)
     rec = prep.record
     model = DuhemSandwich(theta, structure, fs=rec.fs, name=name, u_rest=prep.u_rest,

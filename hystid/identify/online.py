@@ -1,12 +1,13 @@
 """An on-line identifier of the sandwich that converges: recursive prediction error (RPEM).
 
 The estimate minimises the simulation (output) error of the whole sandwich, not the equation
-error of eq. (12). Each sample:
+error of eq. (12). The sandwich sees ``u - u_rest`` and the sensor reads ``y_model + offset``;
+the offset is estimated with the parameters (sensitivity 1). Each sample:
 
 1. the model runs one step with the current estimate, and the compiled sensitivity recursion
    gives ``psi(k) = d yhat(k) / d theta`` exactly through L1, the Duhem block and L2;
-2. the residual ``e(k) = y(k) - yhat(k)`` is clipped at ``clip`` times a running robust scale
-   ``sigma(k)`` (a burst of bad samples moves the estimate by a bounded amount);
+2. the residual ``e(k) = y(k) - yhat(k) - offset`` is clipped at ``clip`` times a running
+   robust scale ``sigma(k)`` (a burst of bad samples moves the estimate by a bounded amount);
 3. a recursive Gauss-Newton step with forgetting factor ``lambda(k)``::
 
        K(k)     = P(k-1) psi / (lambda(k) + psi^T P(k-1) psi)
@@ -18,42 +19,81 @@ error of eq. (12). Each sample:
    phase: Assumption 1; ``alpha |dw1| < 2``: condition 8) is not taken.
 
 Start-up: a cold start from theta = 0.01 is a local minimum for any gradient method (the
-measured facts: 400 samples are not enough for a batch fit from there). The identifier therefore
-collects the first ``n_start`` samples (a fixed-size buffer) and solves the output-error problem
-on them once (Gauss-Newton from theta0 and from the linear ARX start, the better kept), then runs
-the recursion from that estimate with ``P`` set to the inverse Gauss-Newton information.
+measured facts: 400 samples are not enough for a batch fit from there). The identifier collects
+the first ``n_start`` samples and solves the output-error problem on them
+(:func:`~hystid.identify.offline.fit_output_error`: the batch fit's preparation, rest level,
+offset and data-driven starts) and runs the recursion from that solution with ``P`` set to the
+inverse Gauss-Newton information. The start is **checked** (:func:`check_start`): the simulation
+error must reach its own noise estimate (from the residual's sample-to-sample differences: a
+white residual is noise, a smooth one is a misfit) and beat a linear model of the same orders
+(:class:`hystid.baselines.LinearModel`). The check runs on the start-up window and again, on
+the running estimate, once ``start_retries`` samples (1 000 and 3 000 by default) have come,
+most of which the start-up solve never saw -- a window can be fitted to its noise by a wrong
+solution when it does not excite the stage enough. When such a check fails the problem is
+solved again on all the samples so far (from the best solution so far and the data-driven
+starts) and the recursion restarts from the better of the two. A mismatch that persists to the
+last window is a warning in ``info["warnings"]``, and ``converged_at`` is then never reported.
 
 Divergence watch: the short-term residual RMS is compared with its long-term level; when it
 exceeds ``diverge_ratio`` times that level for ``diverge_hold`` samples the estimate is declared
 diverging, a warning is issued and the identifier restarts from the last estimate that had a
 low residual, with ``P`` reset.
+
+State: every array of the recursion lives in one preallocated buffer (signal windows as linear
+ring buffers of ``window + block`` samples that slide back when full), so :meth:`update` is one
+compiled call per sample with no allocation.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import math
+import warnings
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
 
-from ..kernels import offsets, step_sens
-from ..model import Structure
+from ..kernels import offsets, sensitivities_into, step_sens
+from ..model import DuhemSandwich, Structure
 from ..records import Record
-from ._recursive import RecursiveIdentifier, admissible_into, extended, keep_tail
-from .offline import fit_output_error, output_sensitivities
+from ._recursive import RecursiveIdentifier, admissible_into
+from .base import as_sample
+from .offline import fit_output_error
+from .prepare import IdentificationDataError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .result import IdentificationResult
+    from .result import HistoryRecorder, IdentificationResult
 
-__all__ = ["OnlineIdentifier", "DIAGNOSTICS"]
+__all__ = ["DIAGNOSTICS", "N_START", "START_RETRIES", "OnlineIdentifier", "StartUpCheck",
+           "check_start"]
 
 #: Columns of the diagnostics array kept per sample.
-DIAGNOSTICS = ("e", "sigma", "lambda", "trace_P", "rms_short", "rms_long")
+DIAGNOSTICS = ("e", "sigma", "lambda", "trace_P", "rms_short", "rms_long", "offset")
+
+#: Default length of the start-up window, in samples.
+N_START = 400
+#: Default longer windows solved again when the start-up check fails.
+START_RETRIES = (1_000, 3_000)
+#: Samples of a leading hold kept at the head of the start-up window (the rest level).
+REST_KEEP = 50
+#: The start-up residual may exceed its noise estimate by this factor (white: about 1).
+NOISE_RATIO = 1.3
 
 # scal layout
-_K, _LAM, _SIG, _SHORT, _LONG, _NPROJ, _NCLIP, _NREC, _FIRST, _HOLD, _GOODAGE, _NPRESET = range(12)
+(_K, _LAM, _SIG, _SHORT, _LONG, _NPROJ, _NCLIP, _NREC, _FIRST, _HOLD, _GOODAGE,
+ _NPRESET) = range(12)
+_NSCAL = 12
+# settings layout
+(_S_LAM_INF, _S_LAM_RATE, _S_CLIP, _S_TRACE, _S_DIV_RATIO, _S_DIV_HOLD, _S_PRESET, _S_KMAX,
+ _S_SHORT, _S_LONG, _S_SIG, _S_TRACK) = range(12)
+_NSET = 12
+# ints layout: the structure's layout (7 entries), then sizes and the cursor
+_I_NPAR, _I_W, _I_CAP, _I_POS = 7, 8, 9, 10
+_NINTS = 11
 
 
+# =========================================================================== compiled kernels
 @njit(cache=True)
 def _resync(theta, layout, W1, W2, Yh, Ym, S1, S2, SY, lo, L):
     """After a restart: the model output takes the measured output, w2 follows from inverting
@@ -82,123 +122,291 @@ def _covariance_ok(P, trace_max):
     n = P.shape[0]
     tr = 0.0
     for i in range(n):
-        if not (P[i, i] > 0.0) or not np.isfinite(P[i, i]):
+        if not (P[i, i] >= 0.0) or not np.isfinite(P[i, i]):
             return False
         tr += P[i, i]
         for j in range(i):
             if not (P[i, j] * P[i, j] <= P[i, i] * P[j, j]):
                 return False
-    return tr < trace_max
+    return tr < trace_max and tr > 0.0
 
 
 @njit(cache=True)
-def rpem_run(theta, P, scal, theta_good, P_good, layout, U, W1, W2, Yh, Ym, S1, S2, SY, settings,
-             u_in, y_in, history, diag):
-    """The recursion over a chunk; see the module docstring.
+def _views(buf, ints):
+    """The named arrays of the packed state (views into ``buf``, no copy)."""
+    npar, w, cap = ints[_I_NPAR], ints[_I_W], ints[_I_CAP]
+    ne = npar + 1
+    o = 0
+    est = buf[o:o + ne]
+    o += ne
+    P = buf[o:o + ne * ne].reshape((ne, ne))
+    o += ne * ne
+    est_good = buf[o:o + ne]
+    o += ne
+    P_good = buf[o:o + ne * ne].reshape((ne, ne))
+    o += ne * ne
+    scal = buf[o:o + _NSCAL]
+    o += _NSCAL
+    sett = buf[o:o + _NSET]
+    o += _NSET
+    diag = buf[o:o + len(DIAGNOSTICS)]
+    o += len(DIAGNOSTICS)
+    PH = buf[o:o + ne]
+    o += ne
+    cand = buf[o:o + ne]
+    o += ne
+    work = buf[o:o + ne]
+    o += ne
+    U = buf[o:o + cap]
+    o += cap
+    W1 = buf[o:o + cap]
+    o += cap
+    W2 = buf[o:o + cap]
+    o += cap
+    Yh = buf[o:o + cap]
+    o += cap
+    Ym = buf[o:o + cap]
+    o += cap
+    S1 = buf[o:o + cap * npar].reshape((cap, npar))
+    o += cap * npar
+    S2 = buf[o:o + cap * npar].reshape((cap, npar))
+    o += cap * npar
+    SY = buf[o:o + cap * npar].reshape((cap, npar))
+    return (est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym,
+            S1, S2, SY, w)
 
-    ``settings = [lambda0, lambda_inf, lambda_rate, clip, trace_max, diverge_ratio,
-    diverge_hold, P_reset, kmax, short_rate, long_rate, sigma_rate]``.
-    """
-    npar = theta.shape[0]
-    w = U.shape[0] - u_in.shape[0]
-    lam_inf, lam_rate, clip, trace_max = settings[1], settings[2], settings[3], settings[4]
-    div_ratio, div_hold, P_reset, kmax = settings[5], settings[6], settings[7], settings[8]
-    a_short, a_long, a_sig = settings[9], settings[10], settings[11]
+
+def _buffer_size(npar: int, cap: int) -> int:
+    ne = npar + 1
+    return (2 * ne + 2 * ne * ne + _NSCAL + _NSET + len(DIAGNOSTICS) + 3 * ne + 5 * cap
+            + 3 * cap * npar)
+
+
+@njit(cache=True)
+def _slide(ints, U, W1, W2, Yh, Ym, S1, S2, SY, w):
+    """The windows are full: move their last ``w`` samples to the front."""
+    cap = ints[_I_CAP]
+    for a in (U, W1, W2, Yh, Ym):
+        a[:w] = a[cap - w:cap]
+    for a in (S1, S2, SY):
+        a[:w] = a[cap - w:cap]
+    ints[_I_POS] = w
+
+
+@njit(cache=True)
+def _rpem_sample(est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym,
+                 S1, S2, SY, w, ints, layout, u, y):
+    """One sample of the recursion (see the module docstring); fills the diagnostics view."""
+    npar = ints[_I_NPAR]
+    ne = npar + 1
+    if ints[_I_POS] >= ints[_I_CAP]:
+        _slide(ints, U, W1, W2, Yh, Ym, S1, S2, SY, w)
+    L = ints[_I_POS]
+    theta = est[:npar]
+    clip, trace_max, kmax = sett[_S_CLIP], sett[_S_TRACE], sett[_S_KMAX]
+    a_short, a_long, a_sig = sett[_S_SHORT], sett[_S_LONG], sett[_S_SIG]
+    div_ratio, div_hold, track = sett[_S_DIV_RATIO], sett[_S_DIV_HOLD], sett[_S_TRACK]
     i_alpha = offsets(layout)[1]
-    PH = np.empty(npar)
-    cand = np.empty(npar)
-    work = np.empty(npar)
-    for n in range(u_in.shape[0]):
-        L = w + n
-        U[L] = u_in[n]
-        Ym[L] = y_in[n] if np.isfinite(y_in[n]) else Yh[L - 1]
-        # 1. model step with theta(k-1) and the exact sensitivities psi(k)
-        step_sens(theta, layout, U, W1, W2, Yh, S1, S2, SY, L)
-        psi = SY[L]
-        scal[_LAM] = lam_inf - (lam_inf - scal[_LAM]) * lam_rate
-        lam = scal[_LAM]
-        e = np.nan
-        restart = not np.isfinite(Yh[L])
-        if np.isfinite(y_in[n]) and not restart:
-            e = y_in[n] - Yh[L]
-            # 2. clipped residual, robust scale, short- and long-term residual levels
-            sig = scal[_SIG]
-            ec = e
-            if abs(e) > clip * sig:
-                ec = clip * sig if e > 0 else -clip * sig
-                scal[_NCLIP] += 1.0
-            scal[_SIG] = np.sqrt((1.0 - a_sig) * sig * sig + a_sig * ec * ec) + 1e-300
-            scal[_SHORT] = (1.0 - a_short) * scal[_SHORT] + a_short * e * e
-            alarm = scal[_SHORT] > div_ratio * div_ratio * scal[_LONG]
-            if not alarm:
-                scal[_LONG] = (1.0 - a_long) * scal[_LONG] + a_long * scal[_SHORT]
-            # 3. Gauss-Newton step with forgetting
-            hPh = 0.0
-            for i in range(npar):
-                s = 0.0
-                for j in range(npar):
-                    s += P[i, j] * psi[j]
-                PH[i] = s
-                hPh += psi[i] * s
-            denom = lam + hPh
-            for i in range(npar):
-                cand[i] = theta[i] + PH[i] * (ec / denom)
-            # 4. projection onto the admissible set (Assumption 1, condition 8)
-            dw1 = abs(W1[L] - W1[L - 1])
-            if admissible_into(cand, layout, kmax, work) and cand[i_alpha] * dw1 < 2.0:
-                theta[:] = cand
-            else:
-                scal[_NPROJ] += 1.0
-            for i in range(npar):
-                for j in range(i + 1):
-                    v = (P[i, j] - PH[i] * PH[j] / denom) / lam
-                    P[i, j] = v
-                    P[j, i] = v
-            if not _covariance_ok(P, trace_max):
-                scal[_NPRESET] += 1.0
-                for i in range(npar):
-                    for j in range(npar):
-                        P[i, j] = P_reset if i == j else 0.0
-            # divergence watch
-            if alarm:
-                scal[_HOLD] += 1.0
-            else:
-                scal[_HOLD] = 0.0
-                if scal[_SHORT] < 4.0 * scal[_LONG]:
-                    scal[_GOODAGE] += 1.0
-                    if scal[_GOODAGE] > div_hold:
-                        theta_good[:] = theta
-                        P_good[:, :] = P
-                        scal[_GOODAGE] = 0.0
-            restart = scal[_HOLD] > div_hold
-        if restart:
-            scal[_NREC] += 1.0
-            if scal[_FIRST] < 0:
-                scal[_FIRST] = scal[_K] + 1.0
-            theta[:] = theta_good
-            P[:, :] = P_good
-            _resync(theta, layout, W1, W2, Yh, Ym, S1, S2, SY, max(0, L - w + 1), L)
+    finite_y = np.isfinite(y)
+    U[L] = u
+    # 1. model step with theta(k-1) and the exact sensitivities psi(k)
+    step_sens(theta, layout, U, W1, W2, Yh, S1, S2, SY, L)
+    Ym[L] = y - est[npar] if finite_y else Yh[L - 1]
+    psi = SY[L]
+    scal[_LAM] = sett[_S_LAM_INF] - (sett[_S_LAM_INF] - scal[_LAM]) * sett[_S_LAM_RATE]
+    lam = scal[_LAM]
+    e = np.nan
+    restart = not np.isfinite(Yh[L])
+    if finite_y and not restart:
+        e = y - Yh[L] - est[npar]
+        # 2. clipped residual, robust scale, short- and long-term residual levels
+        sig = scal[_SIG]
+        ec = e
+        if abs(e) > clip * sig:
+            ec = clip * sig if e > 0 else -clip * sig
+            scal[_NCLIP] += 1.0
+        scal[_SIG] = np.sqrt((1.0 - a_sig) * sig * sig + a_sig * ec * ec) + 1e-300
+        scal[_SHORT] = (1.0 - a_short) * scal[_SHORT] + a_short * e * e
+        alarm = scal[_SHORT] > div_ratio * div_ratio * scal[_LONG]
+        if not alarm:
+            scal[_LONG] = (1.0 - a_long) * scal[_LONG] + a_long * scal[_SHORT]
+        # 3. Gauss-Newton step with forgetting; the offset's sensitivity is 1
+        hPh = 0.0
+        for i in range(ne):
+            s = P[i, npar]
+            for j in range(npar):
+                s += P[i, j] * psi[j]
+            PH[i] = s
+            hPh += (psi[i] if i < npar else 1.0) * s
+        denom = lam + hPh
+        for i in range(ne):
+            cand[i] = est[i] + PH[i] * (ec / denom)
+        # 4. projection onto the admissible set (Assumption 1, condition 8)
+        dw1 = abs(W1[L] - W1[L - 1])
+        if admissible_into(cand[:npar], layout, kmax, work) and cand[i_alpha] * dw1 < 2.0:
+            est[:] = cand
+        else:
+            scal[_NPROJ] += 1.0
+        for i in range(ne):
+            for j in range(i + 1):
+                v = (P[i, j] - PH[i] * PH[j] / denom) / lam
+                P[i, j] = v
+                P[j, i] = v
+        if not _covariance_ok(P, trace_max):
+            scal[_NPRESET] += 1.0
+            for i in range(ne):
+                for j in range(ne):
+                    P[i, j] = 0.0
+                P[i, i] = sett[_S_PRESET] if i < npar else sett[_S_PRESET] * track
+        # divergence watch
+        if alarm:
+            scal[_HOLD] += 1.0
+        else:
             scal[_HOLD] = 0.0
-            scal[_GOODAGE] = 0.0
-            scal[_SHORT] = scal[_LONG]
-            scal[_SIG] = np.sqrt(scal[_LONG])
-        scal[_K] += 1.0
-        history[n, :] = theta
-        tr = 0.0
+            if scal[_SHORT] < 4.0 * scal[_LONG]:
+                scal[_GOODAGE] += 1.0
+                if scal[_GOODAGE] > div_hold:
+                    est_good[:] = est
+                    P_good[:, :] = P
+                    scal[_GOODAGE] = 0.0
+        restart = scal[_HOLD] > div_hold
+    if restart:
+        scal[_NREC] += 1.0
+        if scal[_FIRST] < 0:
+            scal[_FIRST] = scal[_K] + 1.0
+        est[:] = est_good
+        P[:, :] = P_good
+        _resync(est[:npar], layout, W1, W2, Yh, Ym, S1, S2, SY, max(0, L - w + 1), L)
+        scal[_HOLD] = 0.0
+        scal[_GOODAGE] = 0.0
+        scal[_SHORT] = scal[_LONG]
+        scal[_SIG] = np.sqrt(scal[_LONG])
+    scal[_K] += 1.0
+    ints[_I_POS] = L + 1
+    tr = 0.0
+    for i in range(ne):
+        tr += P[i, i]
+    diag[0] = e
+    diag[1] = scal[_SIG]
+    diag[2] = lam
+    diag[3] = tr
+    diag[4] = np.sqrt(scal[_SHORT])
+    diag[5] = np.sqrt(scal[_LONG])
+    diag[6] = est[npar]
+
+
+@njit(cache=True)
+def rpem_run(buf, ints, u_in, y_in, history, diagnostics):
+    """The recursion over a chunk: :func:`_rpem_sample` per sample, rows of history kept."""
+    (est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym, S1, S2,
+     SY, w) = _views(buf, ints)
+    layout = ints[:7].copy()
+    npar = ints[_I_NPAR]
+    nd = diagnostics.shape[1]
+    for n in range(u_in.shape[0]):
+        _rpem_sample(est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh,
+                     Ym, S1, S2, SY, w, ints, layout, u_in[n], y_in[n])
         for i in range(npar):
-            tr += P[i, i]
-        diag[n, 0] = e
-        diag[n, 1] = scal[_SIG]
-        diag[n, 2] = lam
-        diag[n, 3] = tr
-        diag[n, 4] = np.sqrt(scal[_SHORT])
-        diag[n, 5] = np.sqrt(scal[_LONG])
+            history[n, i] = est[i]
+        for i in range(nd):
+            diagnostics[n, i] = diag[i]
 
 
-#: Default length of the start-up window, in samples.
-N_START = 400
+@njit(cache=True)
+def rpem_one(buf, ints, u, y):
+    """The recursion for one sample; returns the restart count (the estimate is in ``buf``)."""
+    (est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym, S1, S2,
+     SY, w) = _views(buf, ints)
+    _rpem_sample(est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym,
+                 S1, S2, SY, w, ints, ints[:7], u, y)
+    return int(scal[_NREC])
 
 
+# =========================================================================== start-up check
+@dataclass
+class StartUpCheck:
+    """The start-up solution against its own noise estimate and a linear model.
+
+    Attributes
+    ----------
+    samples : int
+        Samples the solution was fitted on.
+    rms : float
+        RMS simulation error of the solution on them (output units).
+    noise : float
+        Noise estimate from the same residual: ``RMS(diff r) / sqrt(2)`` (a white residual has
+        ``noise ~ rms``; a misfit is smooth and has ``noise << rms``).
+    rms_linear : float
+        RMS simulation error of a linear model of the sandwich's orders with its own offset.
+    start : str
+        Which start the solution came from.
+    passed : bool
+        ``rms <= NOISE_RATIO noise`` (or at round-off level) and ``rms < rms_linear``.
+    """
+
+    samples: int
+    rms: float
+    noise: float
+    rms_linear: float
+    start: str
+    passed: bool
+
+    def reason(self) -> str:
+        """Why the check failed, in words (empty when it passed).
+
+        Returns
+        -------
+        str
+        """
+        if self.passed:
+            return ""
+        parts = []
+        if self.rms > NOISE_RATIO * self.noise:
+            ratio = self.rms / max(self.noise, 1e-300)
+            parts.append(f"its simulation error ({self.rms:.3g} RMS) is {ratio:.2g}x its noise "
+                         f"estimate ({self.noise:.3g})")
+        if self.rms >= self.rms_linear:
+            parts.append(f"it does not beat a linear model ({self.rms_linear:.3g} RMS)")
+        return " and ".join(parts)
+
+
+def check_start(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, structure: Structure, fs: float,
+                start: str = "") -> StartUpCheck:
+    """Check a start-up solution on the samples it was fitted on.
+
+    Parameters
+    ----------
+    u, y : ndarray
+        The window's input and measured output.
+    yhat : ndarray
+        The solution's simulated output (offset included).
+    structure : Structure
+        The sandwich's structure (orders of the linear baseline).
+    fs : float
+        Sampling rate in Hz.
+    start : str
+        Label of the start the solution came from.
+
+    Returns
+    -------
+    StartUpCheck
+    """
+    from ..baselines import LinearModel
+
+    r = y - yhat
+    rms = float(np.sqrt(np.mean(r**2)))
+    noise = float(np.sqrt(np.mean(np.diff(r) ** 2) / 2.0))
+    s = structure
+    rec = Record(u, y, fs, name="start-up window")
+    linear = LinearModel.fit(rec, s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
+    rms_linear = float(np.sqrt(np.mean((y - linear.predict(u)) ** 2)))
+    round_off = 1e-9 * max(float(np.std(y)), 1e-300)
+    white = rms <= NOISE_RATIO * noise or rms <= round_off
+    passed = bool(white and rms < rms_linear)
+    return StartUpCheck(len(u), rms, noise, rms_linear, start, passed)
+
+
+# =========================================================================== the identifier
 class OnlineIdentifier(RecursiveIdentifier):
     """Converging on-line identifier of the Duhem sandwich (recursive prediction error).
 
@@ -212,13 +420,24 @@ class OnlineIdentifier(RecursiveIdentifier):
         Initial estimate (0.01 for every parameter, as in the paper). An inadmissible start
         (unstable L1/L2, alpha <= 0) is projected onto the admissible set with a warning.
     n_start : int
-        Samples collected before the one-off start-up solve (see the module docstring).
+        Samples collected before the start-up solve (see the module docstring).
+    start_retries : sequence of int
+        Longer windows solved again, in turn, while the start-up check fails.
+    u_rest : float, optional
+        Input level at which the stage rests before the record. By default the start-up solve
+        finds it as the batch fit does (:func:`hystid.identify.prepare.rest_level`: a leading
+        constant segment, or the first sample); a number is taken off the input first.
+    offset : float, optional
+        Sensor offset (the output at rest). By default it is estimated in the start-up solve
+        and tracked by the recursion (sensitivity 1); a number fixes it.
     memory : float
         Asymptotic memory in samples: ``lambda -> 1 - 1/memory``. Shorter tracks faster
         parameter changes, longer averages the noise better.
     lambda0 : float
         Forgetting factor right after start-up; rises to ``1 - 1/memory`` with time constant
         ``lambda_time`` samples.
+    lambda_time : float
+        Time constant of that rise, in samples.
     clip : float
         Residuals beyond ``clip`` running standard deviations are clipped.
     trace_max : float
@@ -228,19 +447,28 @@ class OnlineIdentifier(RecursiveIdentifier):
         times the long-term RMS for ``diverge_hold`` samples.
     epsilon : float
         Stop index for ``converged_at`` (1e-4).
+    history : {"decimated", "full", "none"}
+        Parameter history kept by :meth:`fit`: by default at most ``history_rows`` rows (every
+        m-th sample), so that a long run stays small.
+    history_rows : int
+        Rows kept by ``history="decimated"``.
+    block : int
+        Samples of room in the signal windows before they slide back.
 
     Attributes
     ----------
     theta : ndarray
-        Current estimate.
+        Current estimate (a view of the state: assigning into it changes the estimate).
+    offset_estimate : float
+        Current sensor-offset estimate.
+    u_rest_ : float or None
+        The input rest level in use (None before the start-up solve).
     P : ndarray
-        Current covariance-like matrix of the Gauss-Newton recursion.
-    psi : ndarray
-        Last output sensitivity d yhat / d theta.
-    e : float
-        Last residual y(k) - yhat(k).
-    sigma : float
-        Running robust residual scale.
+        Current covariance-like matrix of the Gauss-Newton recursion (theta, then the offset).
+    start_checks : list of StartUpCheck
+        The start-up solutions tried and their checks.
+    start_warnings : list of str
+        A start-up check that never passed, in words.
     """
 
     method = "online"
@@ -254,6 +482,9 @@ class OnlineIdentifier(RecursiveIdentifier):
         *,
         theta0=0.01,
         n_start: int = N_START,
+        start_retries: tuple[int, ...] = START_RETRIES,
+        u_rest: float | None = None,
+        offset: float | None = None,
         memory: float = 100_000.0,
         lambda0: float = 0.9999,
         lambda_time: float = 2_000.0,
@@ -262,19 +493,32 @@ class OnlineIdentifier(RecursiveIdentifier):
         diverge_ratio: float = 20.0,
         diverge_hold: int = 200,
         epsilon: float = 1e-4,
+        history: str = "decimated",
+        history_rows: int = 100_000,
+        block: int = 4_096,
     ) -> None:
         if int(n_start) != n_start or n_start < 50:
             raise ValueError(f"n_start: expected an integer >= 50 samples, got {n_start!r}")
+        retries = tuple(start_retries)
+        if any(int(r) != r or r <= n_start for r in retries) or list(retries) != sorted(retries):
+            raise ValueError(f"start_retries: expected increasing sample counts above n_start "
+                             f"({n_start}), got {start_retries!r}")
         if not (memory > 1):
             raise ValueError(f"memory: expected more than 1 sample, got {memory!r}")
         if not (0 < lambda0 <= 1):
             raise ValueError(f"lambda0: expected a value in (0, 1], got {lambda0!r}")
         for name, value in (("lambda_time", lambda_time), ("clip", clip),
                             ("trace_max", trace_max), ("diverge_ratio", diverge_ratio),
-                            ("diverge_hold", diverge_hold)):
+                            ("diverge_hold", diverge_hold), ("block", block)):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a positive number, got {value!r}")
+        for name, value in (("u_rest", u_rest), ("offset", offset)):
+            if value is not None and not np.isfinite(value):
+                raise ValueError(f"{name}: expected a finite number or None, got {value!r}")
         self.n_start = int(n_start)
+        self.start_retries = tuple(int(r) for r in retries)
+        self.u_rest = None if u_rest is None else float(u_rest)
+        self.offset = None if offset is None else float(offset)
         self.memory = float(memory)
         self.lambda0 = float(lambda0)
         self.lambda_time = float(lambda_time)
@@ -282,123 +526,354 @@ class OnlineIdentifier(RecursiveIdentifier):
         self.trace_max = float(trace_max)
         self.diverge_ratio = float(diverge_ratio)
         self.diverge_hold = int(diverge_hold)
-        super().__init__(structure, fs, theta0, epsilon)
+        self.block = int(block)
+        super().__init__(structure, fs, theta0, epsilon, history, history_rows)
 
     # ----------------------------------------------------------------- state
     def _allocate(self) -> None:
-        import warnings
-
         from .constraints import is_admissible, project_admissible
 
-        if not is_admissible(self.theta, self.structure):
+        theta = self.__dict__.pop("theta", None)  # set by reset(); from now on a state view
+        if theta is None:  # a reset: the setter wrote theta0 into the previous state
+            theta = self._est[:-1].copy()
+        if not is_admissible(theta, self.structure):
             warnings.warn(
                 "online: theta0 is outside the admissible set (alpha > 0, stable and "
                 "minimum-phase L1, L2); projected onto it", RuntimeWarning, stacklevel=4)
-            self.theta = project_admissible(self.theta, self.structure)
-        n = len(self.theta)
-        w = self.window
-        self.P = np.eye(n)
-        self._P_good = self.P.copy()
-        self._theta_good = self.theta.copy()
-        self._scal = np.zeros(12)
+            theta = project_admissible(theta, self.structure)
+        npar = len(theta)
+        cap = self.window + self.block
+        self._ints = np.zeros(_NINTS, dtype=np.int64)
+        self._ints[:7] = self.structure.layout
+        self._ints[_I_NPAR], self._ints[_I_W], self._ints[_I_CAP] = npar, self.window, cap
+        self._buf = np.zeros(_buffer_size(npar, cap))
+        self._bind_views()
+        self._n_rec_seen = 0
+        self._est[:npar] = theta
+        self._est[npar] = 0.0 if self.offset is None else self.offset
+        self.P[:] = np.eye(npar + 1)
         self._scal[_LAM] = self.lambda0
         self._scal[_FIRST] = -1.0
-        self._U, self._W1, self._W2, self._Yh, self._Ym = (np.zeros(w) for _ in range(5))
-        self._S1, self._S2, self._SY = (np.zeros((w, n)) for _ in range(3))
-        self._windows = (self._U, self._W1, self._W2, self._Yh, self._Ym,
-                         self._S1, self._S2, self._SY)
-        self._buf_u = np.zeros(self.n_start)
-        self._buf_y = np.zeros(self.n_start)
-        self._diag_last = np.full(len(DIAGNOSTICS), np.nan)
+        self._diag[:] = np.nan
+        self._sett[:] = [1.0 - 1.0 / self.memory, np.exp(-1.0 / self.lambda_time), self.clip,
+                         self.trace_max, self.diverge_ratio, float(self.diverge_hold),
+                         min(1.0, self.trace_max / (npar + 1)), 1.0 - 1e-6, 1.0 / 50.0,
+                         1.0 / 5_000.0, 1.0 / 500.0, float(self.offset is None)]
+        self._start_u = np.zeros(max((self.n_start, *self.start_retries)))
+        self._start_y = np.zeros_like(self._start_u)
+        self._stages = [self.n_start, *self.start_retries]
+        self._running = False
+        self.u_rest_: float | None = self.u_rest
+        self.start_checks: list[StartUpCheck] = []
         self.start_info: dict = {}
+        self.start_warnings: list[str] = []
+        self._tried: list = []
+        self._filled = 0
+        self._verify_at: int | None = None
+        self._u_first: float | None = None
+        self._rest_u = self._rest_y = np.zeros(0)
+        self._candidate: DuhemSandwich | None = None
+
+    _VIEWS = ("_est", "P", "_est_good", "_P_good", "_scal", "_sett", "_diag", "_windows",
+              "_theta_view")
+
+    def _bind_views(self) -> None:
+        """Name the parts of the packed state (numpy views of ``_buf``)."""
+        (self._est, self.P, self._est_good, self._P_good, self._scal, self._sett, self._diag,
+         *rest) = _views(self._buf, self._ints)
+        self._windows = tuple(rest[3:11])
+        self._theta_view = self._est[:-1]
+
+    def __getstate__(self) -> dict[str, Any]:
+        """State for copy and pickle: the packed buffer, without its views."""
+        return {k: v for k, v in self.__dict__.items() if k not in self._VIEWS}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore the state and bind the views to the restored buffer."""
+        self.__dict__.update(state)
+        self._bind_views()
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Current estimate theta(k) (a view of the state)."""
+        return self._est[:-1]
+
+    @theta.setter
+    def theta(self, value: np.ndarray) -> None:
+        if "_est" in self.__dict__:
+            self._est[:-1] = value
+        else:
+            self.__dict__["theta"] = np.asarray(value, float)
+
+    @property
+    def offset_estimate(self) -> float:
+        """Current sensor-offset estimate (output units)."""
+        return float(self._est[-1])
 
     @property
     def started(self) -> bool:
-        """True once the start-up solve has run."""
-        return self.k >= self.n_start
+        """True once the start-up solve has run and the recursion is on."""
+        return self._running
 
-    def _start(self) -> None:
-        """The one-off start-up solve on the buffered samples; sets theta, P and the windows."""
-        y = self._buf_y.copy()
-        bad = ~np.isfinite(y)
-        if bad.all():
+    @property
+    def n_recoveries(self) -> int:
+        """Restarts after a divergence."""
+        return int(self._scal[_NREC]) if "_scal" in self.__dict__ else 0
+
+    @n_recoveries.setter
+    def n_recoveries(self, value: int) -> None:
+        if "_scal" in self.__dict__:
+            self._scal[_NREC] = value
+
+    @property
+    def first_recovery(self) -> int | None:
+        """Sample of the first restart (None: none)."""
+        if "_scal" not in self.__dict__ or self._scal[_FIRST] <= 0:
+            return None
+        return int(self._scal[_FIRST])
+
+    @first_recovery.setter
+    def first_recovery(self, value: int | None) -> None:
+        if "_scal" in self.__dict__:
+            self._scal[_FIRST] = -1.0 if value is None else value
+
+    # ----------------------------------------------------------------- start-up
+    def _window(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The first ``n`` buffered samples: input, output, which outputs are finite."""
+        y = self._start_y[:n]
+        return self._start_u[:n], y, np.isfinite(y)
+
+    def _solve(self, n: int) -> tuple[DuhemSandwich, str]:
+        """Output-error solve on the first ``n`` samples (the batch fit's preparation, rest
+        level, offset and starts), from theta0 or, on a retry, the best solution so far."""
+        u, y, ok = self._window(n)
+        if not ok.any():
             raise ValueError("online: every output sample of the start-up window is non-finite")
-        if bad.any():  # fill skipped samples by interpolation for the start-up solve only
-            idx = np.arange(len(y))
-            y[bad] = np.interp(idx[bad], idx[~bad], y[~bad])
-        rec = Record(self._buf_u.copy(), y, self.fs, name="start-up window")
-        fit = fit_output_error(rec, self.structure, self.theta, max_nfev=100)
-        theta = fit.model.theta
-        yhat, J = output_sensitivities(theta, self.structure, rec.u)
-        r = rec.y - yhat
-        sigma = max(float(np.sqrt(np.mean(r**2))), 1e-12)
-        info = J.T @ J
-        P = np.linalg.pinv(info + 1e-9 * np.trace(info) / len(theta) * np.eye(len(theta)))
-        self.theta = theta.copy()
-        self._theta_good = theta.copy()
-        self.P = P
-        self._P_good = P.copy()
-        # windows at the end of the buffer, from a simulation with the start estimate
-        s = self.structure
-        n, w = len(rec.u), self.window
-        Pp = s.history
-        from ..kernels import sensitivities_into
+        y = y.copy()
+        if not ok.all():  # fill skipped samples by interpolation for the start-up solve only
+            idx = np.arange(n)
+            y[~ok] = np.interp(idx[~ok], idx[ok], y[ok])
+        shift_u = self.u_rest or 0.0
+        shift_y = self.offset or 0.0
+        rec = Record(u - shift_u, y - shift_y, self.fs, name="start-up window")
+        start = self.theta0
+        if self._tried:
+            start = min(self._tried, key=lambda t: t[0].rms)[1].theta
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fit = fit_output_error(rec, self.structure, start, offset=self.offset is None,
+                                   max_nfev=100)
+        m = fit.model
+        model = DuhemSandwich(m.theta, self.structure, fs=self.fs, u_rest=m.u_rest + shift_u,
+                              offset=m.offset + shift_y)
+        label = fit.info.get("start", "theta0")
+        return model, label if not self._tried else f"{label} (retry on {n} samples)"
 
+    def _try_start(self, n: int) -> bool:
+        """Solve and check on ``n`` samples; returns whether the check passed."""
+        try:
+            model, label = self._solve(n)
+        except IdentificationDataError as exc:  # e.g. the input has not moved enough yet
+            if n == self._stages[-1]:
+                raise
+            self.start_checks.append(StartUpCheck(n, np.nan, np.nan, np.nan, str(exc), False))
+            return False
+        u, y, ok = self._window(n)
+        yhat = model.simulate(u, check=False).y
+        check = check_start(u[ok], y[ok], yhat[ok], self.structure, self.fs, label)
+        self.start_checks.append(check)
+        self._tried.append((check, model))
+        self._candidate = model
+        if check.passed:
+            return True
+        if n == self._stages[-1]:  # no longer window left: keep the best, say so
+            self._candidate = min(self._tried, key=lambda t: self._rms_on(t[1], n))[1]
+            self.start_warnings.append(
+                f"start-up: the solution on {n} samples fails its check: {check.reason()} "
+                f"(tried {', '.join(str(c.samples) for c in self.start_checks)} samples); the "
+                "estimate may sit in a wrong basin")
+        return False
+
+    def _rms_on(self, model: DuhemSandwich, n: int) -> float:
+        u, y, ok = self._window(n)
+        return float(np.sqrt(np.mean((y - model.simulate(u, check=False).y)[ok] ** 2)))
+
+    def _hold(self, model: DuhemSandwich) -> None:
+        """Show a start-up solution as the estimate (the recursion is not on yet)."""
+        self._est[:-1] = model.theta
+        self._est[-1] = model.offset
+        self.u_rest_ = model.u_rest
+
+    def _start(self, n: int, k: int) -> None:
+        """Start the recursion on the first ``n`` buffered samples (sample ``k`` of the run)."""
+        model = self._candidate
+        self._hold(model)
+        theta, offset = model.theta, model.offset
+        s = self.structure
+        u, y, ok = self._window(n)
+        u = u - model.u_rest
+        npar = len(theta)
+        Pp = s.history
         U, W1, W2, Y = (np.zeros(Pp + n) for _ in range(4))
-        U[Pp:] = rec.u
-        S1, S2, SY = (np.zeros((Pp + n, len(theta))) for _ in range(3))
+        U[Pp:] = u
+        S1, S2, SY = (np.zeros((Pp + n, npar)) for _ in range(3))
         sensitivities_into(theta, s.layout, U, W1, W2, Y, S1, S2, SY, Pp)
-        Ym = np.concatenate([np.zeros(Pp), rec.y])
+        r = (y - Y[Pp:] - offset)[ok]
+        sigma = max(float(np.sqrt(np.mean(r**2))), 1e-12)
+        J = SY[Pp:][ok]
+        if self.offset is None:
+            J = np.column_stack([J, np.ones(len(J))])
+        info = J.T @ J
+        P = np.linalg.pinv(info + 1e-9 * np.trace(info) / len(info) * np.eye(len(info)))
+        self.P[:] = 0.0
+        self.P[:len(P), :len(P)] = P
+        self._est[:npar] = theta
+        self._est[npar] = offset
+        self._est_good[:] = self._est
+        self._P_good[:] = self.P
+        Ym = np.concatenate([np.zeros(Pp), np.where(np.isfinite(y), y - offset, Y[Pp:])])
+        w = self.window
         for dst, src in zip(self._windows, (U, W1, W2, Y, Ym, S1, S2, SY), strict=True):
-            dst[-min(w, len(src)):] = src[-min(w, len(src)):]
+            m = min(w, len(src))
+            dst[w - m:w] = src[len(src) - m:]
+        self._ints[_I_POS] = w
         self._scal[_SIG] = sigma
         self._scal[_SHORT] = self._scal[_LONG] = sigma**2
-        self.start_info = {"rms_residual": sigma, "start": fit.info["start"],
-                           "nfev": fit.info["nfev"]}
+        self._scal[_K] = k
+        last = self.start_checks[-1]
+        self.start_info = {"rms_residual": sigma, "start": last.start, "samples": n,
+                           "checks": [asdict(c) for c in self.start_checks]}
+        self._running = True
+
+    def _collect(self, u: np.ndarray, y: np.ndarray, history: np.ndarray,
+                 diagnostics: np.ndarray) -> int:
+        """Buffer start-up samples (solving at each stage); returns how many were taken.
+
+        A leading hold (the input at its first value) is not buffered beyond its last
+        :data:`REST_KEEP` samples: the windows count from the end of the hold.
+        """
+        take = 0
+        while take < len(u) and not self._running:
+            history[take:] = self.theta
+            diagnostics[take:] = np.nan
+            diagnostics[take:, -1] = self._est[-1]
+            if self._filled == 0:
+                take = self._hold_samples(u, y, take)
+                if take == len(u):
+                    break
+            stage = next(s for s in self._stages if s > self._filled)
+            m = min(len(u) - take, stage - self._filled)
+            a = self._filled
+            self._start_u[a:a + m] = u[take:take + m]
+            self._start_y[a:a + m] = y[take:take + m]
+            self._filled += m
+            take += m
+            if self._filled == stage:
+                self._try_start(stage)
+                if self._candidate is not None:  # start; later stages check it on new samples
+                    self._start(stage, self.k + take)
+                    self._verify_at = self._next_stage(stage)
+                history[take - 1] = self.theta
+        return take
+
+    def _next_stage(self, n: int) -> int | None:
+        return next((s for s in self._stages if s > n), None)
+
+    def _verify(self, n: int, k: int) -> None:
+        """Check the running estimate on all ``n`` buffered samples (most of them not seen by
+        the start-up solve); when it fails, solve again on them and restart from the better."""
+        current = self.model
+        u, y, ok = self._window(n)
+        yhat = current.simulate(u, check=False).y
+        check = check_start(u[ok], y[ok], yhat[ok], self.structure, self.fs,
+                            f"estimate at sample {n}")
+        self.start_checks.append(check)
+        self._verify_at = self._next_stage(n)
+        if check.passed:
+            return
+        self._tried.append((check, current))
+        self._try_start(n)
+        if self._rms_on(self._candidate, n) < check.rms:
+            self._start(n, k)
+
+    def _hold_samples(self, u: np.ndarray, y: np.ndarray, take: int) -> int:
+        """Pass over a leading hold; when the input moves, start the buffer with its end."""
+        if self._u_first is None:
+            self._u_first = float(u[take])
+        tol = 1e-12 * max(1.0, abs(self._u_first))
+        moving = np.flatnonzero(np.abs(u[take:] - self._u_first) > tol)
+        end = take + (int(moving[0]) if len(moving) else len(u) - take)
+        self._rest_u = np.r_[self._rest_u, u[take:end]][-REST_KEEP:]
+        self._rest_y = np.r_[self._rest_y, y[take:end]][-REST_KEEP:]
+        if end < len(u):
+            r = len(self._rest_u)
+            self._start_u[:r], self._start_y[:r] = self._rest_u, self._rest_y
+            self._filled = r
+        return end
 
     def _run(self, u, y, history, diagnostics) -> None:
         done = 0
-        if self.k < self.n_start:  # start-up window: collect, estimate stays at theta0
-            take = min(len(u), self.n_start - self.k)
-            self._buf_u[self.k:self.k + take] = u[:take]
-            self._buf_y[self.k:self.k + take] = y[:take]
-            history[:take] = self.theta
-            diagnostics[:take] = np.nan
-            done = take
-            if self.k + take == self.n_start:
-                self._start()
-                history[take - 1] = self.theta
-            self._scal[_K] = self.k + take
-        if done < len(u):
-            settings = np.array([
-                self.lambda0, 1.0 - 1.0 / self.memory, np.exp(-1.0 / self.lambda_time),
-                self.clip, self.trace_max, self.diverge_ratio, float(self.diverge_hold),
-                min(1.0, self.trace_max / len(self.theta)), 1.0 - 1e-6, 1.0 / 50.0,
-                1.0 / 5_000.0, 1.0 / 500.0])
-            m = len(u) - done
-            arrays = [extended(a, m) for a in self._windows]
-            rpem_run(self.theta, self.P, self._scal, self._theta_good, self._P_good,
-                     self.structure.layout,
-                     *arrays, settings, np.ascontiguousarray(u[done:], float),
-                     np.ascontiguousarray(y[done:], float), history[done:], diagnostics[done:])
-            for window, ext in zip(self._windows, arrays, strict=True):
-                keep_tail(window, ext)
-            self._diag_last = diagnostics[-1].copy()
-        self.n_recoveries = int(self._scal[_NREC])
-        self.first_recovery = int(self._scal[_FIRST]) if self._scal[_FIRST] > 0 else None
-        # keep the counter in step with self.k (updated by the caller)
-        self._scal[_K] = self.k + len(u)
+        if not self._running:
+            done = self._collect(u, y, history, diagnostics)
+        while done < len(u):
+            stop = len(u)
+            if self._verify_at is not None:  # keep buffering until the next check
+                stop = min(len(u), done + self._verify_at - self._filled)
+                a = self._filled
+                self._start_u[a:a + stop - done] = u[done:stop]
+                self._start_y[a:a + stop - done] = y[done:stop]
+                self._filled += stop - done
+            rpem_run(self._buf, self._ints, np.ascontiguousarray(u[done:stop], float),
+                     np.ascontiguousarray(y[done:stop], float), history[done:stop],
+                     diagnostics[done:stop])
+            done = stop
+            if self._verify_at is not None and self._filled == self._verify_at:
+                self._verify(self._filled, self.k + done)
+                history[done - 1] = self.theta
+        self._n_rec_seen = self.n_recoveries
+
+    def update(self, u_k: float, y_k: float) -> np.ndarray:
+        """Process one sample ``(u(k), y(k))``: one compiled call, no allocation.
+
+        Parameters
+        ----------
+        u_k : float
+            Input sample; a non-finite one is an error.
+        y_k : float
+            Output sample; a non-finite one is skipped (counted in :attr:`n_skipped`).
+
+        Returns
+        -------
+        ndarray
+            The estimate theta(k), a copy.
+        """
+        if (self._verify_at is None and self._running and isinstance(u_k, float)
+                and isinstance(y_k, float) and u_k - u_k == 0.0):  # the real-time path
+            n_rec = rpem_one(self._buf, self._ints, u_k, y_k)
+            self.k += 1
+            if y_k - y_k != 0.0:
+                self.n_skipped += 1
+            if n_rec != self._n_rec_seen:
+                self._warn_recoveries(self._n_rec_seen)
+                self._n_rec_seen = n_rec
+            return self._theta_view.copy()
+        if not self._running or self._verify_at is not None:
+            return super().update(u_k, y_k)
+        u, y = as_sample(u_k, "u_k"), as_sample(y_k, "y_k")
+        if not math.isfinite(u):
+            raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+        return self.update(u, y)
 
     # ----------------------------------------------------------------- intermediates
     @property
     def psi(self) -> np.ndarray:
         """Last output sensitivity d yhat(k) / d theta."""
-        return self._SY[-1].copy()
+        return self._windows[-1][self._ints[_I_POS] - 1].copy()
 
     @property
     def e(self) -> float:
-        """Last residual y(k) - yhat(k)."""
-        return float(self._diag_last[0])
+        """Last residual y(k) - yhat(k) - offset."""
+        return float(self._diag[0])
 
     @property
     def sigma(self) -> float:
@@ -423,22 +898,44 @@ class OnlineIdentifier(RecursiveIdentifier):
     @property
     def diagnostics(self) -> dict[str, float]:
         """Monitored quantities at the last sample."""
-        return dict(zip(DIAGNOSTICS, map(float, self._diag_last), strict=True))
+        return dict(zip(DIAGNOSTICS, map(float, self._diag), strict=True))
 
-    def result(
-        self, history: np.ndarray | None = None, diagnostics: np.ndarray | None = None
-    ) -> IdentificationResult:
-        """The current estimate as an IdentificationResult (with start-up and guard counts)."""
-        res = super().result(history, diagnostics)
+    @property
+    def model(self) -> DuhemSandwich:
+        """The model of the current estimate, at the rest level and sensor offset in use."""
+        return DuhemSandwich(self.theta.copy(), self.structure, fs=self.fs,
+                             name=f"{self.method} estimate", u_rest=self.u_rest_ or 0.0,
+                             offset=self.offset_estimate)
+
+    def result(self, recorder: HistoryRecorder | None = None) -> IdentificationResult:
+        """The current estimate as an IdentificationResult (with start-up and guard counts).
+
+        Parameters
+        ----------
+        recorder : HistoryRecorder, optional
+            The history of the run.
+
+        Returns
+        -------
+        IdentificationResult
+            ``info["warnings"]`` holds a failed start-up check; ``converged_at`` is then None.
+        """
+        res = super().result(recorder)
         res.info.update({"n_projections": self.n_projections, "n_clipped": self.n_clipped,
                          "n_covariance_resets": self.n_covariance_resets,
-                         "start_up": self.start_info})
+                         "start_up": self.start_info, "u_rest": self.u_rest_,
+                         "offset": self.offset_estimate})
+        res.info["warnings"] = list(self.start_warnings)
+        if self.start_warnings or not self._running:
+            res.converged_at = None
         return res
 
     @property
-    def settings(self) -> dict:
+    def settings(self) -> dict[str, Any]:
         """The configuration, JSON-ready."""
-        return {**super().settings, "n_start": self.n_start, "memory": self.memory,
-                "lambda0": self.lambda0, "lambda_time": self.lambda_time, "clip": self.clip,
+        return {**super().settings, "n_start": self.n_start,
+                "start_retries": list(self.start_retries), "u_rest": self.u_rest,
+                "offset": self.offset, "memory": self.memory, "lambda0": self.lambda0,
+                "lambda_time": self.lambda_time, "clip": self.clip,
                 "trace_max": self.trace_max, "diverge_ratio": self.diverge_ratio,
-                "diverge_hold": self.diverge_hold}
+                "diverge_hold": self.diverge_hold, "block": self.block}

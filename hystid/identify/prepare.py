@@ -17,7 +17,10 @@ their last sample round. :func:`prepare` turns a :class:`~hystid.records.Record`
    output's spread) and a saturated sensor, left out of the cost with a note;
 5. :func:`burn_in` -- for a record that does not start at rest, the samples until the input
    has swept its range once are simulated but not fitted: the stage's state before the record
-   began is unknown, and the Duhem block forgets it as ``w1`` moves.
+   began is unknown, and the Duhem block forgets it as ``w1`` moves. The same holds after an
+   isolated input jump (many times the slew the input otherwise holds: a step out of rest, a
+   generator wrapping its last sample round): what it excites lies outside the input envelope
+   the model is identified for.
 
 The sensor offset is not removed here: it is a parameter of every fit (``y0``), started from
 the output's level at rest.
@@ -39,8 +42,11 @@ __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "che
 REST_SAMPLES = 10
 #: A spike is a sample this many robust standard deviations off the running median.
 SPIKE_SIGMAS = 10.0
-#: A far value is this many output spreads away from the median output.
-FAR_SPREADS = 5.0
+#: A far value is this many output spreads (2 % to 98 % quantiles) away from the median.
+FAR_SPREADS = 3.0
+#: An input step this many times the envelope's slew is a jump (out of rest, a wrapped
+#: sample): what it excites is outside the envelope the model is identified for.
+JUMP_SLEWS = 10.0
 #: Share of samples pinned at an extreme for the sensor to count as saturated.
 SATURATION_SHARE = 0.005
 
@@ -179,11 +185,12 @@ def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, f
     y_ref : float
         The median output.
     y_scale : float
-        Half the spread between the 1 % and 99 % quantiles of ``y``.
+        Half the spread between the 2 % and 98 % quantiles of ``y`` (a burst or a clipped
+        stretch shorter than 2 % of the record does not move it).
     """
     dev = np.abs(u - u_rest)
     u_scale = float(np.quantile(dev, 0.999)) or float(np.max(dev))
-    lo, med, hi = np.quantile(y, [0.01, 0.5, 0.99])
+    lo, med, hi = np.quantile(y, [0.02, 0.5, 0.98])
     y_scale = 0.5 * float(hi - lo) or float(np.max(np.abs(y - med))) or 1.0
     return u_scale, float(med), y_scale
 
@@ -191,8 +198,8 @@ def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, f
 def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """Samples of ``y`` that a deterministic model should not be fitted to.
 
-    * far values: more than :data:`FAR_SPREADS` output spreads from the median (a burst, a
-      sensor glitch of 1e12);
+    * far values: more than :data:`FAR_SPREADS` output spreads (2 % to 98 % quantiles) from
+      the median (a burst, a sensor glitch of 1e12);
     * spikes: a sample off the mean of its two neighbours by more than :data:`SPIKE_SIGMAS`
       robust standard deviations of that second difference and by more than 5 % of the
       output's spread, while the neighbours agree with each other to a third of that (a
@@ -213,7 +220,7 @@ def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
         One sentence per kind found.
     """
     notes = []
-    lo, med, hi = np.quantile(y, [0.01, 0.5, 0.99])
+    lo, med, hi = np.quantile(y, [0.02, 0.5, 0.98])
     spread = max(float(hi - lo), 1e-300)
     far = np.abs(y - med) > FAR_SPREADS * spread
     z = np.pad(np.where(far, med, y), 1, mode="edge")
@@ -243,7 +250,7 @@ def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
     return far | spike | pinned, notes
 
 
-def burn_in(u: np.ndarray, at_rest: bool, limit: float = 0.25) -> int:
+def burn_in(u: np.ndarray, at_rest: bool, limit: float = 0.25, sweeps: float = 2.0) -> int:
     """Leading samples to leave out of the cost of a record that does not start at rest.
 
     Parameters
@@ -254,17 +261,19 @@ def burn_in(u: np.ndarray, at_rest: bool, limit: float = 0.25) -> int:
         Whether the record starts at rest (then nothing is left out).
     limit : float
         Largest share of the record left out.
+    sweeps : float
+        Travel of the input, in input ranges, that the burn-in waits for.
 
     Returns
     -------
     int
-        The samples until the input has travelled twice its range (down and up once), at
-        most ``limit`` of the record.
+        The samples until the input has travelled ``sweeps`` times its range (2: down and up
+        once), at most ``limit`` of the record.
     """
     if at_rest:
         return 0
     travel = np.cumsum(np.abs(np.diff(u, prepend=u[0])))
-    k = int(np.searchsorted(travel, 2.0 * float(np.ptp(u))))
+    k = int(np.searchsorted(travel, sweeps * float(np.ptp(u))))
     return min(k, int(limit * len(u)))
 
 
@@ -305,10 +314,16 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     weight[:skip] = False
     du = np.abs(np.diff(u))
     slew = np.quantile(du, 0.999) if len(du) else 0.0
-    if len(du) and du[-1] > 10.0 * max(slew, 1e-300):
+    if len(du) and du[-1] > JUMP_SLEWS * max(slew, 1e-300):
         weight[-1] = False
         notes.append(f"the input jumps by {du[-1]:.4g} on its last sample (a generator "
                      "wrapping round?); that sample is left out of the fit")
+    for j in np.flatnonzero(du[:-1] > JUMP_SLEWS * max(slew, 1e-300)) + 1:
+        n = burn_in(u[j:], False, sweeps=0.5)
+        weight[j:j + n] = False
+        notes.append(f"the input jumps by {du[j - 1]:.4g} at sample {j}, {du[j - 1] / slew:.0f} "
+                     f"times the slew it otherwise holds; the {n} samples after it (until the "
+                     "input has travelled half its range) are simulated but left out of the fit")
     if weight.sum() < 0.5 * len(u):
         raise IdentificationDataError(
             f"record {record.name!r}: only {int(weight.sum())} of {len(u)} samples are usable "

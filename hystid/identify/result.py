@@ -13,7 +13,11 @@ from ..model import DuhemSandwich
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
 
-__all__ = ["IdentificationResult", "converged_at"]
+__all__ = ["HISTORY_MODES", "HistoryRecorder", "IdentificationResult", "converged_at"]
+
+#: How an on-line estimator keeps its parameter history: every sample, every m-th sample so that
+#: at most ``history_rows`` rows are kept, or none.
+HISTORY_MODES = ("full", "decimated", "none")
 
 
 def converged_at(history: np.ndarray, epsilon: float) -> int | None:
@@ -36,6 +40,91 @@ def converged_at(history: np.ndarray, epsilon: float) -> int | None:
     return k if k < len(history) - 1 else None
 
 
+def _relative_steps(rows: np.ndarray) -> np.ndarray:
+    """``max_i |theta_i(k) - theta_i(k-1)| / max(|theta_i(k)|, 1e-12)`` between successive rows."""
+    return np.max(np.abs(np.diff(rows, axis=0)) / np.maximum(np.abs(rows[1:]), 1e-12), axis=1)
+
+
+class HistoryRecorder:
+    """The parameter history of a run, kept in full, decimated or not at all.
+
+    The stop index (:func:`converged_at`) is followed on every sample whatever is kept, so a
+    decimated history gives the same ``converged_at`` as the full one.
+
+    Parameters
+    ----------
+    n : int
+        Samples the run will see.
+    n_params : int
+        Parameters per row.
+    n_diagnostics : int
+        Diagnostic columns per row (0 for none).
+    mode : {"full", "decimated", "none"}
+        What to keep (see :data:`HISTORY_MODES`).
+    rows : int
+        Most rows kept by ``"decimated"``: every ``ceil(n / rows)``-th sample.
+    epsilon : float
+        Stop index of :func:`converged_at`.
+    """
+
+    def __init__(self, n: int, n_params: int, n_diagnostics: int, mode: str = "decimated",
+                 rows: int = 100_000, epsilon: float = 1e-4) -> None:
+        if mode not in HISTORY_MODES:
+            raise ValueError(f"history: expected one of {', '.join(HISTORY_MODES)}, got {mode!r}")
+        if int(rows) != rows or rows < 2:
+            raise ValueError(f"history_rows: expected an integer >= 2, got {rows!r}")
+        self.n, self.mode, self.epsilon = int(n), mode, float(epsilon)
+        self.every = 1 if mode == "full" else max(1, -(-self.n // int(rows)))
+        kept = 0 if mode == "none" else -(-self.n // self.every)
+        self.history = np.empty((kept, n_params))
+        self.diagnostics = np.empty((kept, n_diagnostics)) if n_diagnostics else None
+        self.index = np.arange(kept) * self.every + (self.every - 1)
+        if kept:
+            self.index[-1] = min(self.index[-1], self.n - 1)
+        self._seen = 0
+        self._last = None
+        self._last_above = -1
+
+    def add(self, history: np.ndarray, diagnostics: np.ndarray | None = None) -> None:
+        """Take the rows of the next samples (one row per sample).
+
+        Parameters
+        ----------
+        history : ndarray
+            Estimates after each of the next samples, shape ``(m, n_params)``.
+        diagnostics : ndarray, optional
+            Diagnostics after each of them, shape ``(m, n_diagnostics)``.
+        """
+        m = len(history)
+        if m == 0:
+            return
+        rows = history if self._last is None else np.vstack([self._last, history])
+        if len(rows) > 1:
+            above = np.flatnonzero(_relative_steps(rows) > self.epsilon)
+            if len(above):
+                shift = 0 if self._last is None else 1
+                self._last_above = self._seen - shift + int(above[-1])
+        self._last = history[-1:].copy()
+        if len(self.history):
+            first = self._seen
+            pick = np.flatnonzero((np.arange(first, first + m) + 1) % self.every == 0)
+            if first + m == self.n and (self.n % self.every):
+                pick = np.r_[pick, m - 1]
+            slot = (first + pick) // self.every
+            self.history[slot] = history[pick]
+            if self.diagnostics is not None and diagnostics is not None:
+                self.diagnostics[slot] = diagnostics[pick]
+        self._seen += m
+
+    @property
+    def converged_at(self) -> int | None:
+        """First sample after which the estimate stays within the stop index (None: never)."""
+        if self._seen < 2:
+            return None
+        k = self._last_above + 1
+        return k if k < self._seen - 1 else None
+
+
 @dataclass
 class IdentificationResult:
     """What an identifier returns. Unpacks as ``model, history``.
@@ -53,7 +142,10 @@ class IdentificationResult:
     converged_at : int or None
         First sample after which the estimate stays within the stop index.
     info : dict
-        Method-specific figures (cost, iterations, warnings...).
+        Method-specific figures (cost, iterations, warnings...). ``info["warnings"]`` (a list
+        of str), when present, says what the result should not be trusted for.
+    history_index : ndarray or None
+        Sample index of each row of :attr:`history` (``None``: one row per sample).
     """
 
     model: DuhemSandwich
@@ -62,6 +154,7 @@ class IdentificationResult:
     history: np.ndarray | None = field(default=None, repr=False)
     converged_at: int | None = None
     info: dict[str, Any] = field(default_factory=dict, repr=False)
+    history_index: np.ndarray | None = field(default=None, repr=False)
 
     def __iter__(self) -> Iterator[Any]:
         yield self.model

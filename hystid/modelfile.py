@@ -1,0 +1,360 @@
+"""The hystid model file: an identified sandwich kept as versioned JSON.
+
+A model file holds everything needed to simulate the model again bit for bit, and where it came
+from::
+
+    {
+      "format": "hystid-model",
+      "version": 1,
+      "kind": "duhem",                        # or "pi"
+      "name": "...",
+      "structure": {"n1a": 1, "n1b": 0, "n2a": 2, "n2b": 0, "q1": 1, "q2": 0, "f0": false},
+      "params": {"alpha": 0.8365, ...},       # floats written with 17 significant digits
+      "thresholds": [...],                    # PI sandwich only
+      "fs": 30000.0,
+      "u_rest": 0.0, "offset": 0.0,
+      "envelope": {"u_min": ..., "u_max": ..., "slew": ...} or null,
+      "units": {"u": "V", "y": "um"},
+      "provenance": {"hystid_version": "...", "method": "...", "date": "...Z",
+                     "record_sha256": "...", "settings": {...}}
+    }
+
+:func:`save_model` writes it (atomically, never over an existing file unless ``force``) and
+:func:`load_model` reads it back, refusing an unknown format, version or kind with a message
+naming the file and the entry. Python writes floats with the shortest text that reads back to
+the same double, so a saved and loaded model simulates to the same bits.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .model import DuhemSandwich, Structure
+from .operating import Envelope
+from .safeio import check_output, dumps_strict, write_text
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .pi import PISandwich
+
+__all__ = ["FORMAT", "KINDS", "VERSION", "ModelFileError", "file_sha256", "load_model",
+           "make_provenance", "model_document", "save_model"]
+
+#: Value of the ``format`` entry.
+FORMAT = "hystid-model"
+#: Version written by this hystid; the only one it reads.
+VERSION = 1
+#: Model kinds a file may hold.
+KINDS = ("duhem", "pi")
+
+_DUHEM_KEYS = ("n1a", "n1b", "n2a", "n2b", "q1", "q2", "f0")
+_PI_KEYS = ("n_operators", "n1a", "n1b", "n2a", "n2b", "q1", "q2")
+
+
+class ModelFileError(ValueError):
+    """A model file cannot be read or written; the message names the file and the entry."""
+
+
+# --------------------------------------------------------------------------- provenance
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 of a file's bytes, as hex (an HDF5 ``file.h5:group`` suffix is ignored).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    str
+    """
+    from .safeio import _strip_group
+
+    digest = hashlib.sha256()
+    with open(_strip_group(os.fspath(path)), "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def make_provenance(
+    method: str | None = None,
+    record: str | os.PathLike[str] | None = None,
+    settings: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Where a model came from: hystid's version, the method, the date and the record's hash.
+
+    Parameters
+    ----------
+    method : str, optional
+        The identification method.
+    record : path, optional
+        The record file the model was identified on; its bytes are hashed.
+    settings : mapping, optional
+        The identifier's settings; entries that are not JSON are left out.
+
+    Returns
+    -------
+    dict
+        Keys ``hystid_version``, ``method``, ``date`` (UTC, ISO 8601), ``record``,
+        ``record_sha256`` and ``settings``.
+    """
+    from . import __version__
+
+    return {
+        "hystid_version": __version__,
+        "method": method,
+        "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
+        "record": None if record is None else os.fspath(record),
+        "record_sha256": None if record is None else file_sha256(record),
+        "settings": {k: v for k, v in (settings or {}).items() if _is_json(v)},
+    }
+
+
+def _is_json(value: Any) -> bool:
+    try:
+        json.dumps(value, allow_nan=False)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+# --------------------------------------------------------------------------- saving
+def model_document(
+    model: DuhemSandwich | PISandwich, provenance: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """The model file's content as a dictionary.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+    provenance : mapping, optional
+        See :func:`make_provenance`; one with only hystid's version and the date by default.
+
+    Returns
+    -------
+    dict
+    """
+    from dataclasses import asdict
+
+    kind = _kind_of(model)
+    structure = asdict(model.structure)
+    doc: dict[str, Any] = {
+        "format": FORMAT,
+        "version": VERSION,
+        "kind": kind,
+        "name": model.name,
+        "structure": {k: (bool(v) if k == "f0" else int(v)) for k, v in structure.items()},
+        "params": {k: float(v) for k, v in model.params.items()},
+    }
+    if kind == "pi":
+        doc["thresholds"] = [float(r) for r in model.thresholds]
+    doc.update({
+        "fs": float(model.fs),
+        "u_rest": float(model.u_rest),
+        "offset": float(model.offset),
+        "envelope": None if model.envelope is None else model.envelope.to_dict(),
+        "units": dict(model.units),
+        "provenance": dict(provenance) if provenance is not None else make_provenance(),
+    })
+    return doc
+
+
+def save_model(
+    model: DuhemSandwich | PISandwich,
+    path: str | os.PathLike[str],
+    *,
+    provenance: Mapping[str, Any] | None = None,
+    force: bool = False,
+) -> Path:
+    """Write a model file.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model to keep.
+    path : str or os.PathLike
+        The file (``.json`` by convention). Written atomically: a failure leaves any previous
+        file as it was.
+    provenance : mapping, optional
+        See :func:`make_provenance`.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    ModelFileError
+        If the model is of another kind, or the path exists (without ``force``), is a link or
+        a folder, or cannot be written.
+    """
+    try:
+        out = check_output(path, option="model file", force=force)
+    except ValueError as err:
+        raise ModelFileError(str(err)) from err
+    text = dumps_strict(model_document(model, provenance))
+    write_text(out, text + "\n")
+    return out
+
+
+def _kind_of(model: Any) -> str:
+    if isinstance(model, DuhemSandwich):
+        return "duhem"
+    from .pi import PISandwich
+
+    if isinstance(model, PISandwich):
+        return "pi"
+    raise ModelFileError(f"model: expected a DuhemSandwich or a PISandwich, got "
+                         f"{type(model).__name__}")
+
+
+# --------------------------------------------------------------------------- loading
+def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
+    """Read a model file written by :func:`save_model`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    DuhemSandwich or PISandwich
+        The model, with its structure, parameters, sampling rate, rest level, offset, envelope
+        and units. The file's provenance is in the model's ``provenance`` attribute.
+
+    Raises
+    ------
+    ModelFileError
+        If the file cannot be read, is not JSON, is not a hystid model file, has another
+        version or an unknown kind, or an entry is missing or invalid (the message names it).
+    """
+    where = os.fspath(path)
+    doc = _read_document(where)
+    _check_header(doc, where)
+    kind = doc["kind"]
+    common = {
+        "fs": _number(doc, "fs", where),
+        "name": str(doc.get("name") or Path(where).stem),
+        "u_rest": _number(doc, "u_rest", where, default=0.0),
+        "offset": _number(doc, "offset", where, default=0.0),
+        "envelope": _envelope(doc.get("envelope"), where),
+        "units": _units(doc.get("units"), where),
+    }
+    params = doc.get("params")
+    if not isinstance(params, Mapping):
+        raise ModelFileError(f"{where}: 'params' must be a mapping of parameter names to numbers")
+    try:
+        if kind == "duhem":
+            structure = Structure(**_structure(doc, _DUHEM_KEYS, where))
+            model = DuhemSandwich(params, structure, **common)
+        else:
+            from .pi import PISandwich, PIStructure
+
+            structure = PIStructure(**_structure(doc, _PI_KEYS, where))
+            thresholds = doc.get("thresholds")
+            if not isinstance(thresholds, list):
+                raise ModelFileError(f"{where}: 'thresholds' must be a list of numbers (a PI "
+                                     "model's play-operator thresholds)")
+            model = PISandwich(params, thresholds, structure, **common)
+    except ModelFileError:
+        raise
+    except (TypeError, ValueError) as err:
+        raise ModelFileError(f"{where}: {err}") from err
+    model.provenance = dict(doc.get("provenance") or {})
+    return model
+
+
+def _read_document(where: str) -> dict[str, Any]:
+    try:
+        text = Path(where).read_text(encoding="utf-8")
+    except FileNotFoundError as err:
+        raise ModelFileError(f"{where}: the model file does not exist") from err
+    except IsADirectoryError as err:
+        raise ModelFileError(f"{where}: is a folder (expected a model file)") from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise ModelFileError(f"{where}: cannot read the model file ({err})") from err
+    try:
+        doc = json.loads(text, parse_constant=_refuse_constant)
+    except ValueError as err:
+        raise ModelFileError(f"{where}: not a JSON model file ({err})") from err
+    if not isinstance(doc, dict):
+        raise ModelFileError(f"{where}: expected a JSON object, got {type(doc).__name__}")
+    return doc
+
+
+def _refuse_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def _check_header(doc: Mapping[str, Any], where: str) -> None:
+    if doc.get("format") != FORMAT:
+        raise ModelFileError(f"{where}: 'format' is {doc.get('format')!r} (expected {FORMAT!r}; "
+                             "a model file is written by hystid identify --out or model.save)")
+    version = doc.get("version")
+    if version != VERSION or isinstance(version, bool):
+        newer = isinstance(version, int) and not isinstance(version, bool) and version > VERSION
+        hint = " (written by a newer hystid: upgrade to read it)" if newer else ""
+        raise ModelFileError(f"{where}: model file version {version!r} is not supported "
+                             f"(expected {VERSION}){hint}")
+    if doc.get("kind") not in KINDS:
+        raise ModelFileError(f"{where}: unknown model kind {doc.get('kind')!r} (expected one of "
+                             f"{', '.join(KINDS)})")
+
+
+def _number(doc: Mapping[str, Any], key: str, where: str, default: float | None = None) -> float:
+    value = doc.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ModelFileError(f"{where}: '{key}' must be a number, got {value!r}")
+    return float(value)
+
+
+def _structure(doc: Mapping[str, Any], keys: tuple[str, ...], where: str) -> dict[str, Any]:
+    data = doc.get("structure")
+    if not isinstance(data, Mapping):
+        raise ModelFileError(f"{where}: 'structure' must be a mapping with {', '.join(keys)}")
+    unknown = sorted(set(data) - set(keys))
+    missing = [k for k in keys if k not in data]
+    if unknown or missing:
+        raise ModelFileError(f"{where}: 'structure' expected the keys {', '.join(keys)}; "
+                             f"missing {missing}, unknown {unknown}")
+    out: dict[str, Any] = {}
+    for key in keys:
+        value = data[key]
+        if key == "f0":
+            if not isinstance(value, bool):
+                raise ModelFileError(f"{where}: structure 'f0' must be true or false, got "
+                                     f"{value!r}")
+        elif isinstance(value, bool) or not isinstance(value, int):
+            raise ModelFileError(f"{where}: structure {key!r} must be an integer, got {value!r}")
+        out[key] = value
+    return out
+
+
+def _envelope(data: Any, where: str) -> Envelope | None:
+    if data is None:
+        return None
+    if not isinstance(data, Mapping):
+        raise ModelFileError(f"{where}: 'envelope' must be null or a mapping u_min, u_max, slew")
+    try:
+        return Envelope.from_dict(data)
+    except ValueError as err:
+        raise ModelFileError(f"{where}: {err}") from err
+
+
+def _units(data: Any, where: str) -> dict[str, str] | None:
+    if data is None:
+        return None
+    if not isinstance(data, Mapping) or not all(isinstance(v, str) for v in data.values()):
+        raise ModelFileError(f"{where}: 'units' must map signal names to strings, got {data!r}")
+    return {str(k): v for k, v in data.items()}

@@ -1,0 +1,392 @@
+"""Writing files without losing what the user had.
+
+Three rules, applied by every writer in hystid:
+
+1. **Check before work.** :func:`check_output` refuses an output that is one of the inputs, an
+   existing file (unless ``force``), a symbolic link, or a place that cannot be written, before
+   any computation starts; :func:`check_output_dir` does the same for a folder and the files
+   that will be written into it.
+2. **Write atomically.** :func:`atomic_path` and :func:`atomic_open` write to a temporary file in
+   the destination's folder and rename it over the destination (``os.replace``) only once the
+   writing succeeded; on any failure (a full disk, an exception in the writer) the temporary
+   file is removed and the previous file is left as it was.
+3. **Strict JSON.** :func:`dumps_strict` never writes ``NaN`` or ``Infinity`` (which are not
+   JSON): non-finite floats become ``null`` and the replacements are listed in a ``"notes"``
+   entry of the top-level object.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+__all__ = [
+    "OutputError",
+    "atomic_open",
+    "atomic_path",
+    "check_output",
+    "check_output_dir",
+    "dumps_strict",
+    "same_file",
+    "strict_json",
+    "write_json",
+    "write_text",
+]
+
+PathLike = str | os.PathLike[str]
+
+
+class OutputError(ValueError):
+    """An output path that must not be written (the message names the option and the path)."""
+
+
+# --------------------------------------------------------------------------- checks
+def same_file(a: PathLike, b: PathLike) -> bool:
+    """True when ``a`` and ``b`` name the same file (links and ``..`` resolved).
+
+    Parameters
+    ----------
+    a, b : str or os.PathLike
+        Paths; ``b`` may carry an HDF5 group suffix ``file.h5:group``.
+
+    Returns
+    -------
+    bool
+    """
+    pa, pb = Path(a), Path(_strip_group(os.fspath(b)))
+    try:
+        if pa.exists() and pb.exists():
+            return os.path.samefile(pa, pb)
+    except OSError:
+        pass
+    return pa.resolve() == pb.resolve()
+
+
+def _strip_group(text: str) -> str:
+    head, sep, _ = text.rpartition(":")
+    if sep and Path(head).suffix.lower() in (".h5", ".hdf5"):
+        return head
+    return text
+
+
+def check_output(
+    path: PathLike,
+    *,
+    option: str,
+    inputs: Iterable[PathLike] = (),
+    force: bool = False,
+) -> Path:
+    """Check that ``path`` may be written, before any work is done.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file that will be written.
+    option : str
+        How the user named it (``"--out"``, ``"--history"``), used in the messages.
+    inputs : iterable of path
+        Files the command reads; none of them may be the output, even with ``force``.
+    force : bool
+        Allow replacing an existing regular file.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputError
+        If the output is an input, a symbolic link, a folder, an existing file without
+        ``force``, or lies in a folder that does not exist or cannot be written.
+    """
+    out = Path(path)
+    label = f"{option} {out}"
+    for source in inputs:
+        if source is not None and same_file(out, source):
+            raise OutputError(f"{label}: is the input file {source} (expected a new file; "
+                              "hystid never writes over its inputs)")
+    if out.is_symlink():
+        raise OutputError(f"{label}: is a symbolic link (expected a plain file path; links are "
+                          "not followed when writing)")
+    if out.is_dir():
+        raise OutputError(f"{label}: is a folder (expected a file name)")
+    if out.exists():
+        if not out.is_file():
+            raise OutputError(f"{label}: exists and is not a regular file")
+        if not force:
+            raise OutputError(f"{label}: the file exists (pass --force, or force=True from "
+                              "Python, to replace it)")
+        if not os.access(out, os.W_OK):
+            raise OutputError(f"{label}: the file is not writable")
+    _check_writable_folder(out.parent, label)
+    return out
+
+
+def check_output_dir(
+    folder: PathLike,
+    names: Iterable[str],
+    *,
+    option: str = "--out",
+    inputs: Iterable[PathLike] = (),
+    force: bool = False,
+) -> Path:
+    """Check that a report folder and the files to be written into it may be written.
+
+    The folder may exist or not (it is created later, with its parents); each of ``names``
+    inside it is checked with :func:`check_output`.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The output folder.
+    names : iterable of str
+        File names that will be written into it.
+    option : str
+        The option naming the folder, for the messages.
+    inputs : iterable of path
+        Files the command reads.
+    force : bool
+        Allow replacing existing files inside the folder.
+
+    Returns
+    -------
+    pathlib.Path
+        The folder.
+
+    Raises
+    ------
+    OutputError
+        If the folder is a file or a link, cannot be created or written, or holds one of the
+        files and ``force`` is not given.
+    """
+    out = Path(folder)
+    label = f"{option} {out}"
+    inputs = [p for p in inputs if p is not None]
+    if out.is_symlink():
+        raise OutputError(f"{label}: is a symbolic link (expected a plain folder path)")
+    if out.exists():
+        if not out.is_dir():
+            raise OutputError(f"{label}: is a file (expected a folder)")
+        if not os.access(out, os.W_OK | os.X_OK):
+            raise OutputError(f"{label}: the folder is not writable")
+        existing = [name for name in names if (out / name).exists() or (out / name).is_symlink()]
+        for name in names:
+            check_output(out / name, option=option, inputs=inputs, force=True)
+        if existing and not force:
+            raise OutputError(f"{label}: holds {', '.join(existing)} already (pass --force to "
+                              "replace them)")
+    else:
+        _check_writable_folder(out.parent, label, create=True)
+        for name in names:
+            for source in inputs:
+                if same_file(out / name, source):
+                    raise OutputError(f"{label}: {name} would be the input file {source}")
+    return out
+
+
+def _check_writable_folder(folder: Path, label: str, create: bool = False) -> None:
+    """The nearest existing ancestor must be a writable folder (and ``folder`` itself exist
+    unless ``create``)."""
+    folder = folder if str(folder) else Path(".")
+    probe = folder
+    while not probe.exists():
+        if probe.is_symlink():
+            raise OutputError(f"{label}: {probe} is a broken symbolic link")
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not create and probe != folder:
+        raise OutputError(f"{label}: the folder {folder} does not exist (expected an existing "
+                          "folder)")
+    if not probe.is_dir():
+        raise OutputError(f"{label}: {probe} is not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise OutputError(f"{label}: cannot write in {probe} (permission denied)")
+
+
+# --------------------------------------------------------------------------- atomic writes
+@contextlib.contextmanager
+def atomic_path(path: PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it over ``path`` when the block succeeds.
+
+    The temporary file has the destination's suffix (some writers look at it). When the block
+    raises, the temporary file is removed and ``path`` is untouched.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The destination. A symbolic link there is replaced, not followed.
+
+    Yields
+    ------
+    pathlib.Path
+        Where the writer must write.
+    """
+    dest = Path(path)
+    folder = dest.parent if str(dest.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=f".tmp{dest.suffix}",
+                               dir=folder)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        _fsync(tmp_path)
+        _keep_mode(dest, tmp_path)
+        os.replace(tmp_path, dest)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp_path.unlink()
+        raise
+
+
+@contextlib.contextmanager
+def atomic_open(path: PathLike, mode: str = "w", **kwargs: Any) -> Iterator[IO[Any]]:
+    """Open a temporary file for writing; it replaces ``path`` when the block succeeds.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The destination.
+    mode : str
+        ``"w"`` (text) or ``"wb"`` (binary).
+    **kwargs
+        Passed to :func:`open` (``encoding``, ``newline``).
+
+    Yields
+    ------
+    file object
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"mode: expected 'w' or 'wb', got {mode!r}")
+    if mode == "w":
+        kwargs.setdefault("encoding", "utf-8")
+    with atomic_path(path) as tmp, open(tmp, mode, **kwargs) as handle:
+        yield handle
+
+
+def _fsync(path: Path) -> None:
+    with open(path, "rb") as handle:
+        os.fsync(handle.fileno())
+
+
+def _keep_mode(dest: Path, tmp: Path) -> None:
+    """Give the new file the old file's permissions, or the umask's default for a new file."""
+    try:
+        mode = dest.stat().st_mode & 0o777 if dest.is_file() else 0o666 & ~_umask()
+        os.chmod(tmp, mode)
+    except OSError:
+        pass
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def write_text(path: PathLike, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The destination.
+    text : str
+        The content.
+    """
+    with atomic_open(path, "w", newline="\n") as handle:
+        handle.write(text)
+
+
+# --------------------------------------------------------------------------- strict JSON
+def strict_json(value: Any, where: str = "$", notes: list[str] | None = None) -> Any:
+    """A copy of ``value`` made of JSON types only, with non-finite floats replaced by ``None``.
+
+    Parameters
+    ----------
+    value : object
+        Nested dicts, lists, tuples, numbers (NumPy scalars and arrays included), strings,
+        booleans and ``None``.
+    where : str
+        Path of ``value`` in the document, for the notes.
+    notes : list of str, optional
+        Receives one sentence per replaced value.
+
+    Returns
+    -------
+    object
+        The converted value.
+
+    Raises
+    ------
+    TypeError
+        On a value of another type (naming where it sits).
+    """
+    notes = [] if notes is None else notes
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    elif isinstance(value, np.generic):
+        value = value.item()
+    if value is None or isinstance(value, bool | str):
+        return value
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float):
+        if math.isfinite(value):
+            return value
+        notes.append(f"{where} was {value!r}, written as null")
+        return None
+    if isinstance(value, Mapping):
+        return {str(k): strict_json(v, f"{where}.{k}", notes) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [strict_json(v, f"{where}[{i}]", notes) for i, v in enumerate(value)]
+    raise TypeError(f"{where}: {type(value).__name__} is not JSON (expected numbers, strings, "
+                    "lists or mappings)")
+
+
+def dumps_strict(document: Any, indent: int | None = 2) -> str:
+    """Serialise ``document`` as strict JSON (never ``NaN`` or ``Infinity``).
+
+    Non-finite floats become ``null``; when ``document`` is a mapping the replacements are
+    listed under ``"notes"`` (appended to an existing list of notes).
+
+    Parameters
+    ----------
+    document : object
+        What :func:`strict_json` accepts.
+    indent : int, optional
+        Passed to :func:`json.dumps`.
+
+    Returns
+    -------
+    str
+    """
+    notes: list[str] = []
+    clean = strict_json(document, "$", notes)
+    if notes and isinstance(clean, dict):
+        previous = clean.get("notes")
+        clean["notes"] = ([*previous] if isinstance(previous, list) else
+                          ([previous] if previous is not None else [])) + notes
+    return json.dumps(clean, indent=indent, allow_nan=False)
+
+
+def write_json(path: PathLike, document: Any) -> None:
+    """Write ``document`` as strict JSON to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The destination.
+    document : object
+        What :func:`dumps_strict` accepts.
+    """
+    write_text(path, dumps_strict(document) + "\n")
