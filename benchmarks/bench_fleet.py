@@ -23,6 +23,7 @@ The withheld-effect cases of ``bench_withheld_effects.py`` (its ``run_case``, th
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import tempfile
 import time
@@ -35,7 +36,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 from _common import table, write_json  # noqa: E402
 
-from hystid.fleet import Job, map_seeds, run_fleet, run_job  # noqa: E402
+from hystid.fleet import Job, fleet_client, map_seeds, run_fleet, run_job  # noqa: E402
 from hystid.reference import reference_record  # noqa: E402
 
 
@@ -83,12 +84,12 @@ def time_withheld(jobs: list[tuple[str, int, int]], n: int, clusters: dict) -> d
     keys = ("diagnosis", "accepted", "top1", "rms_val_final")
     warm = (jobs[0][0], jobs[0][1], jobs[0][2] + 1)  # another case: kernels loaded everywhere
     withheld_case(warm, n // 3)
-    for _, client, _ in clusters.values():
+    for client, _ in clusters.values():
         client.run(withheld_case, warm, n // 3)
     t0 = time.perf_counter()
     serial = [withheld_case(j, n) for j in jobs]
     out = {"serial": time.perf_counter() - t0}
-    for workers, (_, client, _) in clusters.items():
+    for workers, (client, _) in clusters.items():
         t0 = time.perf_counter()
         rows = map_seeds(withheld_case, jobs, n, client=client)
         out[f"{workers} worker{'s' if workers > 1 else ''}"] = time.perf_counter() - t0
@@ -113,20 +114,17 @@ def time_fleet(client, jobs: list[Job], out: Path) -> float:
     return elapsed
 
 
-def start_cluster(workers: int, warm_path: str):
-    """A local cluster of ``workers`` single-threaded processes, warmed up; and its start-up
-    time (cluster, client, kernels on every worker, one fleet of one record)."""
-    import distributed
-
+def start_cluster(workers: int, warm_path: str, stack: contextlib.ExitStack):
+    """A local cluster of ``workers`` single-threaded processes (:func:`fleet_client`, closed
+    with ``stack``), warmed up; and its start-up time (cluster, client, kernels on every worker,
+    one fleet of one record)."""
     t0 = time.perf_counter()
-    cluster = distributed.LocalCluster(host="127.0.0.1", n_workers=workers, threads_per_worker=1,
-                                       processes=True, dashboard_address=None)
-    client = distributed.Client(cluster)
+    client = stack.enter_context(fleet_client(workers))
     client.run(warm_up, warm_path)
     # the client's side too: pandas and pyarrow imported, the writers used once
     run_fleet([Job("warm-up", warm_path)], Path(warm_path).parent / f"warm{workers}",
               client=client, progress=False)
-    return cluster, client, time.perf_counter() - t0
+    return client, time.perf_counter() - t0
 
 
 def main() -> None:
@@ -147,22 +145,19 @@ def main() -> None:
         warm_path = str(folder / "warm.npz")
         reference_record(0.05, seed=999).save(warm_path)
         warm_up(warm_path)
-        clusters = {n: start_cluster(n, warm_path) for n in (1, 2)}
+        stack = contextlib.ExitStack()
+        clusters = {n: start_cluster(n, warm_path, stack) for n in (1, 2)}
         times: dict[str, list[float]] = {"serial": [], "1 worker": [], "2 workers": []}
-        try:
+        with stack:
             for r in range(args.repeat):
                 times["serial"].append(time_serial(jobs))
-                for n, (_, client, _) in clusters.items():
+                for n, (client, _) in clusters.items():
                     label = f"{n} worker{'s' if n > 1 else ''}"
                     times[label].append(time_fleet(client, jobs, folder / f"out{n}-{r}"))
                 print(f"round {r + 1}/{args.repeat}: " + ", ".join(
                     f"{k} {v[-1]:.2f} s" for k, v in times.items()), flush=True)
             withheld = (time_withheld(withheld_jobs(args.withheld), 9000, clusters)
                         if args.withheld else {})
-        finally:
-            for cluster, client, _ in clusters.values():
-                client.close()
-                cluster.close()
     load_after = os.getloadavg()
     best = {k: min(v) for k, v in times.items()}
     speedup = best["1 worker"] / best["2 workers"]
@@ -173,7 +168,7 @@ def main() -> None:
           f" identify + held-out comparison with the baselines")
     print(table(rows, ["configuration", "best [s]", "ms per record", "speed vs serial",
                        "all timings [s]"]))
-    startup = {f"{n} worker{'s' if n > 1 else ''}": c[2] for n, c in clusters.items()}
+    startup = {f"{n} worker{'s' if n > 1 else ''}": c[1] for n, c in clusters.items()}
     print(f"\nspeed-up from 1 to 2 workers: {speedup:.2f}x (goal >= 1.7x)")
     print(f"Dask overhead with 1 worker: {100 * (best['1 worker'] / best['serial'] - 1):+.1f} % "
           f"against the serial loop")
