@@ -248,7 +248,8 @@ class BaselineComparison:
     ----------
     rows : list of dict
         One per record: ``record``, ``model``, ``static_line``, ``linear`` (RMS in output
-        units) and ``beats`` (the model beats both baselines on it).
+        units), ``beats`` (the model beats both baselines on it) and ``samples`` (how many
+        samples were scored).
     static_line : StaticLine
     linear : LinearModel
     floor : float or None
@@ -337,7 +338,7 @@ def compare(model: Any, train: Record, records: Sequence[Record],
         beats = rms < min(r_line, r_lin)
         label = rec.name if not k else f"{rec.name} [{k}:]"
         rows.append({"record": label, "model": rms, "static_line": r_line, "linear": r_lin,
-                     "beats": bool(beats)})
+                     "beats": bool(beats), "samples": int(y.size)})
         if not beats:
             notes.append(f"on {label!r} the hysteresis model ({rms:.4g}) does not beat "
                          f"the {'static line' if r_line <= r_lin else 'linear model'} "

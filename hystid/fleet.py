@@ -275,7 +275,7 @@ def _load_job(job: Job, settings: dict[str, Any]):
 def _split(train, vals, settings: dict[str, Any]):
     """The part to fit on and the held-out records (with the sample each is scored from)."""
     if vals:
-        return train, [(v, 0) for v in vals], f"{len(vals)} record(s)"
+        return train, list(vals), f"{len(vals)} record(s)"
     holdout = float(settings.get("holdout", 0.4))
     if not 0 < holdout < 1:
         raise ValueError(f"holdout: expected a fraction in (0, 1), got {holdout}")
@@ -315,40 +315,17 @@ def _model_columns(model, fit_on) -> dict[str, Any]:
 
 
 def _held_out_columns(model, fit_on, held) -> dict[str, Any]:
-    """Held-out RMS of the model and of the baselines, pooled over the held-out samples.
+    """Held-out RMS of the model and of the baselines, pooled over the scored samples."""
+    from .baselines import compare
 
-    Separate held-out records go through :func:`hystid.baselines.compare` (every model from
-    rest at the record's first input). The held-out end of the train record is scored on the
-    models run through the whole record, so that they enter it in the state the record left
-    them in.
-    """
-    from .baselines import LinearModel, StaticLine, compare, simulate_from_rest
-
-    if all(start == 0 for _, start in held):
-        rows = compare(model, fit_on, [r for r, _ in held]).rows
-        lengths = [r.n for r, _ in held]
-    else:
-        s = model.structure
-        line = StaticLine.fit(fit_on)
-        linear = LinearModel.fit(fit_on, s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
-        rows, lengths = [], []
-        for rec, start in held:
-            with np.errstate(over="ignore", invalid="ignore"):
-                outputs = {"model": simulate_from_rest(model, rec.u, check=False),
-                           "static_line": line.predict(rec.u), "linear": linear.predict(rec.u)}
-            rows.append({k: _rms(y[start:] - rec.y[start:]) for k, y in outputs.items()})
-            lengths.append(rec.n - start)
-    pooled = {k: math.sqrt(sum(n * r[k] ** 2 for r, n in zip(rows, lengths, strict=True))
-                           / sum(lengths)) for k in ("model", "static_line", "linear")}
+    rows = compare(model, fit_on, held).rows
+    total = sum(r["samples"] for r in rows)
+    pooled = {k: math.sqrt(sum(r["samples"] * r[k] ** 2 for r in rows) / total)
+              for k in ("model", "static_line", "linear")}
     return {"rms_model": pooled["model"], "rms_static_line": pooled["static_line"],
             "rms_linear": pooled["linear"],
             "beats_baselines": bool(pooled["model"] < min(pooled["static_line"],
                                                           pooled["linear"]))}
-
-
-def _rms(e: np.ndarray) -> float:
-    value = float(np.sqrt(np.mean(e**2)))
-    return value if np.isfinite(value) else math.inf
 
 
 def _finite_or_nan(value: Any) -> float:
