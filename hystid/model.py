@@ -10,6 +10,7 @@ import numpy as np
 
 from .kernels import as_layout, simulate_into
 from .operating import Envelope, Placed, warn_admissibility
+from .poly import is_stable
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
@@ -232,11 +233,7 @@ class DuhemSandwich(Placed):
 
     def is_stable(self) -> bool:
         """True when L1 and L2 are stable and minimum phase (Assumption 1) and alpha > 0."""
-        polys = [self.a1, self.b1, self.a2, self.b2]
-        radius = max(
-            (np.max(np.abs(np.roots(np.r_[1.0, p]))) if len(p) else 0.0) for p in polys
-        )
-        return bool(radius < 1.0 and self.params["alpha"] > 0)
+        return is_stable(self.a1, self.b1, self.a2, self.b2) and self.params["alpha"] > 0
 
     def envelope_bound(self, envelope: Envelope | None = None) -> float:
         """Largest ``alpha |dw1|`` over every sine inside an input envelope (condition 8).

@@ -40,6 +40,7 @@ from numba import njit
 from . import blocks
 from .model import InitialCondition, SandwichResponse, params_vector
 from .operating import Envelope, Placed, warn_admissibility
+from .poly import is_stable
 
 __all__ = [
     "PISandwich",
@@ -539,7 +540,7 @@ class PISandwich(Placed):
 
     def is_stable(self) -> bool:
         """True when the poles of L1 and L2 lie inside the unit circle."""
-        return bool(max(_radius(self.a1), _radius(self.a2)) < 1.0)
+        return is_stable(self.a1, self.a2)
 
     def is_invertible(self) -> bool:
         """True when the PI operator has an exact inverse (see :func:`pi_inverse_parameters`)."""
@@ -746,10 +747,6 @@ class PISandwich(Placed):
 
 
 # =========================================================================== helpers
-def _radius(a: np.ndarray) -> float:
-    return float(np.max(np.abs(np.roots(np.r_[1.0, a])))) if len(a) else 0.0
-
-
 def _read_tf(tf, q: int, na: int, nb: int, label: str) -> tuple[np.ndarray, np.ndarray]:
     """``(a, b)`` of ``sum_j b_j z^-(q+j-1) / (1 + sum_i a_i z^-i)`` from a SISO transfer fn."""
     if not isinstance(tf, ct.TransferFunction) or tf.ninputs != 1 or tf.noutputs != 1:

@@ -48,6 +48,7 @@ import numpy as np
 from numba import njit
 
 from ..model import DuhemSandwich
+from ..poly import roots_inside
 from .duhem_inverse import check_bound, duhem_forward, plan_step
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -284,7 +285,7 @@ class _Chain:
 
 
 def _min_phase(poly: np.ndarray, label: str) -> None:
-    if len(poly) > 1 and np.max(np.abs(np.roots(poly))) >= 1.0:
+    if not roots_inside(poly):
         raise ValueError(
             f"model: {label} is not minimum phase (a zero on or outside the unit circle); "
             "its inverse would be unstable (Assumption 1)"

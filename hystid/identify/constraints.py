@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Structure
+from ..poly import STABILITY_MARGIN, schur_stable
 
 __all__ = [
     "K_MAX",
@@ -73,16 +74,16 @@ def polynomial_groups(structure: Structure) -> list[np.ndarray]:
     return groups
 
 
-def is_admissible(theta: np.ndarray, structure: Structure, margin: float = 0.0) -> bool:
+def is_admissible(
+    theta: np.ndarray, structure: Structure, margin: float = STABILITY_MARGIN
+) -> bool:
     """True when alpha > 0 and every polynomial's reflection coefficients are below 1 - margin."""
     if not np.all(np.isfinite(theta)):
         return False
     if theta[structure.names.index("alpha")] <= 0:
         return False
-    return all(
-        np.all(np.abs(poly_to_reflection(theta[g])) < 1.0 - margin)
-        for g in polynomial_groups(structure)
-    )
+    return all(schur_stable(np.ascontiguousarray(theta[g]), 1.0 - margin)
+               for g in polynomial_groups(structure))
 
 
 def project_admissible(theta: np.ndarray, structure: Structure, kmax: float = 0.999) -> np.ndarray:

@@ -53,6 +53,7 @@ from numba import njit
 
 from ..model import InitialCondition
 from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds
+from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
 from .constraints import K_MAX, poly_to_reflection, reflection_to_poly
 from .result import IdentificationResult, converged_at
@@ -209,28 +210,11 @@ def pi_sensitivities_into(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start)
 
 
 @njit(cache=True)
-def _is_stable_poly(a):
-    # Schur-Cohn step-down: 1 + a_1 z^-1 + ... stable iff every |k_m| < 1
-    n = a.shape[0]
-    c = a.copy()
-    for m in range(n, 0, -1):
-        km = c[m - 1]
-        if not abs(km) < 1.0:
-            return False
-        if m > 1:
-            d = 1.0 - km * km
-            tmp = np.empty(m - 1)
-            for i in range(m - 1):
-                tmp[i] = (c[i] - km * c[m - 2 - i]) / d
-            c[: m - 1] = tmp
-    return True
-
-
-@njit(cache=True)
 def _admissible(theta, layout, c):
     full_coefficients(theta, layout, c)
     ia1, ib1, imu, ia2, ib2 = _layout_offsets(layout)
-    return _is_stable_poly(c[ia1:ib1]) and _is_stable_poly(c[ia2:ib2])
+    return (schur_stable(c[ia1:ib1], KMAX_STABLE)
+            and schur_stable(c[ia2:ib2], KMAX_STABLE))
 
 
 @njit(cache=True)
@@ -279,7 +263,8 @@ def _eria_update(theta, U, D, lam, rho_prev, rho, psi, e, K, f, ia1, n1a, ia2, n
     for _ in range(31):                                 # (16), kept stable
         for a in range(n):
             theta[a] = old[a] + step * K[a] * e
-        if _is_stable_poly(theta[ia1 : ia1 + n1a]) and _is_stable_poly(theta[ia2 : ia2 + n2a]):
+        if (schur_stable(theta[ia1 : ia1 + n1a], KMAX_STABLE)
+                and schur_stable(theta[ia2 : ia2 + n2a], KMAX_STABLE)):
             return lam
         step *= 0.5
     theta[:] = old
