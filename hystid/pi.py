@@ -105,8 +105,26 @@ def _check_thresholds(r, name: str = "thresholds") -> np.ndarray:
 
 # =========================================================================== compiled kernels
 @njit(cache=True, inline="always")
-def _play(v, p_prev, r):
-    # eq. (30): p(k) = max{v(k) - r, min[v(k) + r, p(k-1)]}
+def play(v, p_prev, r):
+    """One step of the play operator, eq. (30): ``p(k) = max{v(k) - r, min[v(k) + r, p(k-1)]}``.
+
+    The one play operator of hystid (the PI block, its inverse, the PI identifier and the
+    compensator call it, compiled or not).
+
+    Parameters
+    ----------
+    v : float
+        Input ``v(k)``.
+    p_prev : float
+        Operator state ``p(k-1)``.
+    r : float
+        Threshold ``r >= 0``.
+
+    Returns
+    -------
+    float
+        The state and output ``p(k)``.
+    """
     return max(v - r, min(v + r, p_prev))
 
 
@@ -115,7 +133,7 @@ def _pi_operator_into(v, r, mu, p, out):
     for k in range(v.shape[0]):
         acc = 0.0
         for i in range(r.shape[0]):
-            p[i] = _play(v[k], p[i], r[i])
+            p[i] = play(v[k], p[i], r[i])
             acc += mu[i] * p[i]
         out[k] = acc
 
@@ -124,7 +142,7 @@ def _pi_operator_into(v, r, mu, p, out):
 def _play_operator_into(v, r, p, out):
     for k in range(v.shape[0]):
         for i in range(r.shape[0]):
-            p[i] = _play(v[k], p[i], r[i])
+            p[i] = play(v[k], p[i], r[i])
             out[k, i] = p[i]
 
 
@@ -147,7 +165,7 @@ def pi_simulate_into(a1, b1, q1, mu, r, a2, b2, q2, U, W1, W2, Y, p, start):
         # eq. (30)
         w2 = 0.0
         for i in range(r.shape[0]):
-            p[i] = _play(w1, p[i], r[i])
+            p[i] = play(w1, p[i], r[i])
             w2 += mu[i] * p[i]
         W2[k] = w2
         # eq. (31)

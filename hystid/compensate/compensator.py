@@ -48,6 +48,7 @@ import numpy as np
 from numba import njit
 
 from ..model import DuhemSandwich
+from ..pi import play
 from ..poly import roots_inside
 from .duhem_inverse import check_bound, duhem_forward, plan_step
 
@@ -98,12 +99,6 @@ COMPENSATIONS = {"inverse": KIND_DUHEM, "linear": KIND_LINEAR, "none": KIND_NONE
 
 
 # =========================================================================== compiled chain
-@njit(cache=True, inline="always")
-def _play(v, p_prev, r):
-    # eq. (30)
-    return max(v - r, min(v + r, p_prev))
-
-
 @njit(cache=True)
 def _push_reference(x, r, ispec, fpar, a2, b2t, AM, BM, CM, DM):
     """Feed one reference sample through ``M`` and ``L2^-1`` into the lines (in place)."""
@@ -178,7 +173,7 @@ def chain_step(x, r, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi,
             pinv[i] += cum * xn[oH + i]
         w1c = 0.0
         for i in range(n):
-            w1c += mu_inv[i] * _play(w2d, pinv[i], r_inv[i])
+            w1c += mu_inv[i] * play(w2d, pinv[i], r_inv[i])
     else:
         w1c = w2d / fpar[_KH]
     # L1^-1 (eq. 1 solved for u(k))
@@ -204,7 +199,7 @@ def chain_step(x, r, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi,
         xn[oH] = duhem_forward(w1, w1p, xn[oH], alpha, f0, f1, g0)
     elif kind == KIND_PI:
         for i in range(ispec[_NPI]):
-            xn[oH + i] = _play(w1, xn[oH + i], r_pi[i])
+            xn[oH + i] = play(w1, xn[oH + i], r_pi[i])
     for i in range(H1 - 1):
         xn[oW1 + i] = xn[oW1 + i + 1]
     xn[oW1 + H1 - 1] = w1

@@ -52,7 +52,7 @@ import numpy as np
 from numba import njit
 
 from ..model import InitialCondition
-from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds
+from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds, play
 from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
 from .constraints import K_MAX, poly_to_reflection, reflection_to_poly
@@ -70,9 +70,37 @@ FORMS = ("key-term", "output-error")
 
 
 # =========================================================================== compiled kernels
-@njit(cache=True, inline="always")
-def _play(v, p_prev, r):
-    return max(v - r, min(v + r, p_prev))
+@njit(cache=True)
+def _l1_step(c, n1a, n1b, q1, U, W1, S1, k):
+    # eq. (29) at index k and d w1 / d (a1, b1) with c = [a1 (n1a), b1 (n1b), ...]; returns w1
+    w1 = 0.0
+    for j in range(n1b):
+        w1 += c[n1a + j] * U[k - q1 - j]
+    for i in range(n1a):
+        w1 -= c[i] * W1[k - 1 - i]
+    W1[k] = w1
+    for m in range(n1a + n1b):
+        s = 0.0
+        for i in range(n1a):
+            s -= c[i] * S1[k - 1 - i, m]
+        S1[k, m] = s
+    for i in range(n1a):
+        S1[k, i] -= W1[k - 1 - i]
+    for j in range(n1b):
+        S1[k, n1a + j] += U[k - q1 - j]
+    return w1
+
+
+@njit(cache=True)
+def _operators_step(w1, r, p, SP, S1, k, n1):
+    # eq. (30) for every operator with d p_i / d c1: an operator that moves follows w1
+    # (dp/dw1 = 1), one that holds keeps its state and its sensitivity
+    for i in range(r.shape[0]):
+        q = play(w1, p[i], r[i])
+        if q != p[i]:
+            p[i] = q
+            for m in range(n1):
+                SP[i, m] = S1[k, m]
 
 
 @njit(cache=True)
@@ -146,37 +174,12 @@ def pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k):
     ia1, ib1, imu, ia2, ib2 = _layout_offsets(layout)
     nc = c.shape[0]
     n1 = n1a + n1b
-    # eq. (29) and d w1 / d (a1, b1)
-    w1 = 0.0
-    for j in range(n1b):
-        w1 += c[ib1 + j] * U[k - q1 - j]
-    for i in range(n1a):
-        w1 -= c[ia1 + i] * W1[k - 1 - i]
-    W1[k] = w1
-    for m in range(n1):
-        s = 0.0
-        for i in range(n1a):
-            s -= c[ia1 + i] * S1[k - 1 - i, m]
-        S1[k, m] = s
-    for i in range(n1a):
-        S1[k, ia1 + i] -= W1[k - 1 - i]
-    for j in range(n1b):
-        S1[k, ib1 + j] += U[k - q1 - j]
-    # eq. (30): an operator that moves follows w1 (dp/dw1 = 1), one that holds keeps its state
+    w1 = _l1_step(c, n1a, n1b, q1, U, W1, S1, k)       # eq. (29)
+    _operators_step(w1, r, p, SP, S1, k, n1)            # eq. (30)
     w2 = 0.0
     for m in range(nc):
         SW2[k, m] = 0.0
     for i in range(n):
-        lo = w1 - r[i]
-        hi = w1 + r[i]
-        if lo > p[i]:
-            p[i] = lo
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
-        elif hi < p[i]:
-            p[i] = hi
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
         w2 += c[imu + i] * p[i]
         SW2[k, imu + i] = p[i]
         for m in range(n1):
@@ -308,32 +311,9 @@ def _l1_operators(theta, layout, r, U, W1, S1, PH, SPH, p, SP, k, c1):
         c1[n1a + j] = theta[n1a + j - 1]
         gain -= theta[n1a + j - 1]
     c1[n1a] = gain
-    w1 = 0.0
-    for j in range(n1b):
-        w1 += c1[n1a + j] * U[k - q1 - j]
-    for i in range(n1a):
-        w1 -= c1[i] * W1[k - 1 - i]
-    W1[k] = w1
-    for m in range(n1):
-        s = 0.0
-        for i in range(n1a):
-            s -= c1[i] * S1[k - 1 - i, m]
-        S1[k, m] = s
-    for i in range(n1a):
-        S1[k, i] -= W1[k - 1 - i]
-    for j in range(n1b):
-        S1[k, n1a + j] += U[k - q1 - j]
+    w1 = _l1_step(c1, n1a, n1b, q1, U, W1, S1, k)
+    _operators_step(w1, r, p, SP, S1, k, n1)
     for i in range(n):
-        lo = w1 - r[i]
-        hi = w1 + r[i]
-        if lo > p[i]:
-            p[i] = lo
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
-        elif hi < p[i]:
-            p[i] = hi
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
         PH[k, i] = p[i]
         for m in range(n1):
             SPH[k, i, m] = SP[i, m]
