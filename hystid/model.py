@@ -11,6 +11,7 @@ import numpy as np
 from .kernels import as_layout, simulate_into
 from .operating import Envelope, Placed, warn_admissibility
 from .poly import is_stable
+from .signals import finite_signal
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
@@ -422,7 +423,7 @@ class DuhemSandwich(Placed):
         SandwichResponse
             Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
         """
-        u = _as_signal(u, "u")
+        u = finite_signal(u, "u")
         x0 = x0 or InitialCondition()
         P = self.structure.history
         U, W1, W2, Y = (
@@ -550,11 +551,3 @@ def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:
     return ct.tf(num, den, tf.dt, inputs=tf.input_labels, outputs=tf.output_labels)
 
 
-def _as_signal(u, argname: str) -> np.ndarray:
-    arr = np.asarray(u, dtype=float)
-    if arr.ndim != 1:
-        raise ValueError(f"{argname}: expected a 1-D array of samples, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        k = int(np.flatnonzero(~np.isfinite(arr))[0])
-        raise ValueError(f"{argname}: non-finite value at sample {k}")
-    return np.ascontiguousarray(arr)

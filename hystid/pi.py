@@ -41,6 +41,7 @@ from . import blocks
 from .model import InitialCondition, SandwichResponse, params_vector
 from .operating import Envelope, Placed, warn_admissibility
 from .poly import is_stable
+from .signals import finite_signal
 
 __all__ = [
     "PISandwich",
@@ -86,9 +87,7 @@ def pi_thresholds(
     """
     if int(n_operators) != n_operators or n_operators < 1:
         raise ValueError(f"n_operators: expected a positive integer, got {n_operators!r}")
-    u = np.asarray(u, dtype=float).ravel()
-    if u.size == 0 or not np.all(np.isfinite(u)):
-        raise ValueError("u: expected finite input samples or a (min, max) pair")
+    u = finite_signal(np.ravel(u), "u (input samples or a (min, max) pair)", min_size=1)
     span = float(u.max() - u.min())
     if not span > 0:
         raise ValueError(f"u: the input range is empty (min = max = {u.min():g})")
@@ -198,7 +197,7 @@ def play_operator(
     ndarray
         Shape ``(len(v), N)``: ``p_i(k)``.
     """
-    v = _signal(v, "v")
+    v = finite_signal(v, "v")
     r = _check_thresholds(thresholds)
     p = _initial_states(p0, len(r))
     out = np.empty((len(v), len(r)))
@@ -228,7 +227,7 @@ def pi_operator(
     ndarray
         Output samples, same length as ``v``.
     """
-    v = _signal(v, "v")
+    v = finite_signal(v, "v")
     r = _check_thresholds(thresholds)
     mu = _weights(weights, len(r))
     p = _initial_states(p0, len(r))
@@ -740,7 +739,7 @@ class PISandwich(Placed):
         SandwichResponse
             Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
         """
-        u = _signal(u, "u")
+        u = finite_signal(u, "u")
         x0 = x0 or InitialCondition()
         P = self.structure.history
         U, W1, W2, Y = (
@@ -787,16 +786,6 @@ def _read_tf(tf, q: int, na: int, nb: int, label: str) -> tuple[np.ndarray, np.n
             "denominator coefficients)"
         )
     return den[1 : 1 + na].copy(), num[q : q + nb].copy()
-
-
-def _signal(u, argname: str) -> np.ndarray:
-    arr = np.asarray(u, dtype=float)
-    if arr.ndim != 1:
-        raise ValueError(f"{argname}: expected a 1-D array of samples, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        k = int(np.flatnonzero(~np.isfinite(arr))[0])
-        raise ValueError(f"{argname}: non-finite value at sample {k}")
-    return np.ascontiguousarray(arr)
 
 
 def _weights(weights, n: int) -> np.ndarray:

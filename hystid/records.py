@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from .safeio import atomic_open, atomic_path
+from .signals import finite_signal
 
 __all__ = [
     "EXPANSION_FLOOR",
@@ -187,8 +188,9 @@ class Record:
     def __post_init__(self) -> None:
         self.name = str(self.name)
         where = f"record {self.name!r}"
-        self.u = _as_signal(self.u, "u", where)
-        self.y = _as_signal(self.y, "y", where)
+        self.u, self.y = (finite_signal(v, f"{where}: {label}", min_size=1, copy=True,
+                                        error=RecordError)
+                          for v, label in ((self.u, "u"), (self.y, "y")))
         if self.u.size != self.y.size:
             raise RecordError(
                 f"{where}: u and y have different lengths (u: {self.u.size}, y: {self.y.size}) "
@@ -373,27 +375,6 @@ class Record:
         if suffix not in writers:
             raise RecordError(_unknown_extension(suffix), file=path)
         writers[suffix](self, path)
-
-
-def _as_signal(values: Any, label: str, where: str) -> np.ndarray:
-    if np.iscomplexobj(values):
-        raise RecordError(f"{where}: {label} is complex (expected real numbers)")
-    try:
-        array = np.array(values, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise RecordError(f"{where}: {label} is not numeric (expected real numbers)") from err
-    if array.ndim != 1:
-        raise RecordError(
-            f"{where}: {label} has shape {array.shape} (expected a 1-D array; "
-            f"use np.ravel({label}) for a single column)"
-        )
-    if array.size == 0:
-        raise RecordError(f"{where}: {label} is empty (expected at least 1 sample)")
-    bad = np.flatnonzero(~np.isfinite(array))
-    if bad.size:
-        k = int(bad[0])
-        raise RecordError(f"{where}: {label}[{k}] is {array[k]} (expected finite values)")
-    return array
 
 
 def _as_fs(fs: Any, where: str) -> float:
@@ -660,15 +641,6 @@ def _check_columns(columns: Mapping[str, str | int] | None, file: str) -> dict[s
 
 
 # --------------------------------------------------------------------------- shared checks
-def _finite(values: np.ndarray, locate: Locator, raw: list[str] | None = None) -> None:
-    """Raise on the first non-finite value, located by ``locate(index)``."""
-    bad = np.flatnonzero(~np.isfinite(values))
-    if bad.size:
-        k = int(bad[0])
-        shown = repr(raw[k].strip()) if raw is not None else str(values[k])
-        raise RecordError(f"value {shown} is not finite (expected a finite number)", **locate(k))
-
-
 def _fs_from_time(t: np.ndarray, stated: float | None, stated_by: str, locate: Locator,
                   file: str) -> float:
     """Check that ``t`` is increasing and uniform; return the sampling rate it implies.
@@ -881,8 +853,8 @@ def _parse_column(raw: list[str], linenos: list[int], column: str, file: str) ->
                 raise RecordError(f"{shown} is not a number (expected a finite number)",
                                   file=file, line=linenos[k], column=column) from None
         raise  # pragma: no cover - the loop above always finds the culprit
-    _finite(values, _csv_locator(linenos, column, file), raw)
-    return values
+    return finite_signal(values, column, locate=_csv_locator(linenos, column, file), raw=raw,
+                         error=RecordError)
 
 
 # --------------------------------------------------------------------------- array formats
@@ -955,8 +927,7 @@ def _as_vector(values: Any, src: _Arrays, role: str) -> np.ndarray:
     if vector.ndim != 1:
         raise RecordError(f"{src.kind} {label!r} has shape {array.shape} (expected a vector)",
                           file=src.file)
-    _finite(vector, _array_locator(src, role))
-    return vector
+    return finite_signal(vector, label, locate=_array_locator(src, role), error=RecordError)
 
 
 def _stored_fs(value: Any, where: str) -> float:

@@ -50,6 +50,7 @@ from numba import njit
 from ..model import DuhemSandwich
 from ..pi import play
 from ..poly import roots_inside
+from ..signals import finite_signal
 from .duhem_inverse import check_bound, duhem_forward, plan_step
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -497,13 +498,7 @@ def _pad_hold(y: np.ndarray, n: int) -> np.ndarray:
 
 
 def _as_reference(y_ref, name: str = "y_ref") -> np.ndarray:
-    y = np.asarray(y_ref, dtype=float)
-    if y.ndim != 1 or y.size == 0:
-        raise ValueError(f"{name}: expected a non-empty 1-D array of samples, got shape {y.shape}")
-    if not np.all(np.isfinite(y)):
-        k = int(np.flatnonzero(~np.isfinite(y))[0])
-        raise ValueError(f"{name}: non-finite value at sample {k}")
-    return np.ascontiguousarray(y)
+    return finite_signal(y_ref, name, min_size=1)
 
 
 # =========================================================================== python-control

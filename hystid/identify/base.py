@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..signals import finite_signal
 from .result import IdentificationResult
 
 __all__ = ["Estimator", "as_sample", "finite_signal", "record_signals"]
@@ -54,32 +55,6 @@ def as_sample(value: Any, argname: str) -> float:
     if arr.size != 1:
         raise ValueError(f"{argname}: expected one sample (a scalar), got shape {arr.shape}")
     return float(arr.reshape(()))
-
-
-def finite_signal(values: Any, argname: str) -> np.ndarray:
-    """A 1-D float signal with every sample finite, or a ``ValueError`` naming the first bad one.
-
-    Parameters
-    ----------
-    values : array_like
-        The samples.
-    argname : str
-        Name used in the error message (for example ``"u"`` or ``"record 'x': u"``).
-
-    Returns
-    -------
-    ndarray
-        The samples as a contiguous float64 array.
-    """
-    arr = np.ascontiguousarray(values, dtype=float)
-    if arr.ndim != 1:
-        raise ValueError(f"{argname}: expected a 1-D signal, got shape {arr.shape}")
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        k = int(bad[0])
-        raise ValueError(f"{argname}: non-finite value {arr[k]!r} at sample {k} "
-                         "(expected finite numbers)")
-    return arr
 
 
 def record_signals(record: Any, fs: float) -> tuple[np.ndarray, np.ndarray, str]:
