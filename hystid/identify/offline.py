@@ -15,7 +15,7 @@ from ..kernels import sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
 from ..operating import Envelope
 from ..records import Record
-from .constraints import ALPHA_MIN, K_MAX, poly_to_reflection, polynomial_groups, reflection_to_poly
+from .constraints import Reflections, polynomial_groups
 from .prepare import Prepared, prepare
 from .result import IdentificationResult
 
@@ -114,38 +114,16 @@ def _split_roots(roots: np.ndarray, n_first: int):
     return p1, p2
 
 
-class _Reparam:
-    """theta <-> z where the polynomial groups are replaced by reflection coefficients."""
+class _Reparam(Reflections):
+    """theta <-> z for the Duhem sandwich: its polynomial groups as reflection coefficients,
+    alpha kept positive."""
 
     def __init__(self, structure: Structure):
-        self.groups = polynomial_groups(structure)
         self.ialpha = structure.names.index("alpha")
-        self.n = len(structure.names)
+        super().__init__(polynomial_groups(structure), len(structure.names), (self.ialpha,))
         #: entries of z that the envelope bound depends on (alpha, L1's polynomials)
         self.l1_and_alpha = [self.ialpha] + [
             structure.names.index(n) for n in structure.names if n[:2] in ("a1", "b1")]
-
-    def to_z(self, theta: np.ndarray) -> np.ndarray:
-        z = np.array(theta, float)
-        for g in self.groups:
-            z[g] = np.clip(poly_to_reflection(theta[g]), -K_MAX, K_MAX)
-        z[self.ialpha] = max(z[self.ialpha], ALPHA_MIN)
-        return z
-
-    def to_theta(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        theta = np.array(z, float)
-        dtheta = np.eye(self.n)
-        for g in self.groups:
-            theta[g], dtheta[np.ix_(g, g)] = reflection_to_poly(z[g])
-        return theta, dtheta
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = np.full(self.n, -np.inf)
-        hi = np.full(self.n, np.inf)
-        for g in self.groups:
-            lo[g], hi[g] = -K_MAX, K_MAX
-        lo[self.ialpha] = ALPHA_MIN
-        return lo, hi
 
 
 #: Fits keep ``alpha max |L1| min(2 A sin(w/2), slew)`` (condition 8 over every sine inside the
