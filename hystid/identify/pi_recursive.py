@@ -941,9 +941,14 @@ class PIRecursiveIdentifier(Estimator):
         self._place(u)
         w, done = self._warmup_take(u)
         if self.warming_up and (not done or w >= len(u)):
+            if done or self.warmup != "sweep":
+                takes = w if done else self.warmup
+                need = f"{takes + 1} samples: the warm-up takes {takes}"
+            else:
+                need = (f"{self.min_warmup + 1} samples, and an input that sweeps the range "
+                        "of the thresholds: the warm-up lasts until it has")
             raise ValueError(f"record {name!r}: {len(u)} samples are too few for the PI "
-                             "recursion (expected more samples than the warm-up takes: "
-                             f"{'warmup=' + str(self.warmup) if not done else w})")
+                             f"recursion (expected at least {need})")
         return self.partial_fit(record, progress=progress)
 
     def _place(self, u: np.ndarray) -> None:
