@@ -294,6 +294,37 @@ def test_csv_wrong_number_of_fields(tmp_path):
            load_record, write_lines(tmp_path / "rows.csv", lines))
 
 
+@pytest.mark.parametrize(
+    ("sep", "name"), [(";", "semicolon"), ("\t", "tab"), (" ", "space"), ("   ", "blanks")]
+)
+def test_csv_other_delimiters_are_detected(tmp_path, sep, name):
+    rows = [f"{k / 100!r}{sep}{float(np.sin(k))!r}{sep}{float(np.cos(k))!r}" for k in range(20)]
+    rec = load_record(write_lines(tmp_path / f"{name}.txt", ["# x", f"t{sep}u{sep}y", *rows]))
+    np.testing.assert_array_equal(rec.u, np.sin(np.arange(20)))
+    np.testing.assert_array_equal(rec.y, np.cos(np.arange(20)))
+    assert rec.fs == pytest.approx(100.0)
+    # a bad cell is located by line and column whatever the delimiter
+    rows[6] = rows[6].replace(f"{sep}{float(np.cos(6))!r}", f"{sep}oops")
+    raises([f"{name}.txt", "line 10", "column 'y'", "'oops'"], load_record,
+           write_lines(tmp_path / f"{name}.txt", ["# x", "", f"t{sep}u{sep}y", *rows]))
+
+
+def test_csv_quoted_numbers_and_names(tmp_path):
+    lines = ['"t";"u";"y"', *[f'"{k / 10!r}";"{k}";{2 * k}' for k in range(6)]]
+    rec = load_record(write_lines(tmp_path / "quoted.csv", lines))
+    np.testing.assert_array_equal(rec.u, np.arange(6.0))
+    np.testing.assert_array_equal(rec.y, 2 * np.arange(6.0))
+    lines = ["u,y,note", '1,2,"a, quoted, note"', '3,4,"b"']  # commas inside quotes
+    rec = load_record(write_lines(tmp_path / "note.csv", lines), fs=1)
+    np.testing.assert_array_equal(rec.u, [1, 3])
+    lines[1] = '1,"2,3'  # a quote left open
+    raises(["note.csv", "line 2", "quote"], load_record,
+           write_lines(tmp_path / "note.csv", lines), fs=1)
+    lines = ["u,y", '"1,5",2']  # a decimal comma is not a number
+    raises(["dec.csv", "line 2", "column 'u'", "'1,5'", "not a number"], load_record,
+           write_lines(tmp_path / "dec.csv", lines), fs=1)
+
+
 def test_csv_decreasing_and_repeated_t(tmp_path):
     lines = csv_lines(20, fs=100.0)
     bad = line_of(lines, csv_row(8))
