@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..kernels import sensitivities_into, simulate_into
+from ..kernels import jacobian_into, sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
 from ..operating import Envelope
 from ..records import Record
@@ -137,6 +137,11 @@ BOUND_MAX = 1.95
 WIPE_OUT = 1.0
 #: Evaluations given to each start before the best ones are polished.
 SCREEN_NFEV = 25
+#: Samples of sensitivities held at once while the Jacobian is formed (memory independent of N).
+SENS_WINDOW = 4096
+#: Residuals beyond which the trust-region subproblem is solved by LSMR (an SVD of the scaled
+#: Jacobian would hold two more copies of it: 128 bytes per sample with 8 columns).
+LSMR_ROWS = 2_000_000
 
 
 def to_physical(theta_n: np.ndarray, structure: Structure, u_scale: float,
@@ -199,9 +204,15 @@ class _OutputError:
     ``z`` holds the reparametrised model (:class:`_Reparam`), then the normalised sensor offset
     ``y0`` and the hysteresis state at the start ``e0`` (``w2`` off its rest value: a stage at
     rest still remembers how it got there; fitted for records that start at rest, its
-    derivative by a finite difference). The signal and sensitivity arrays are allocated once
-    and reused by every evaluation. One extra residual keeps the model admissible over the
+    derivative by a finite difference). One extra residual keeps the model admissible over the
     training envelope: it is ``weight * max(0, bound - BOUND_MAX)``.
+
+    Memory grows by about 100 bytes per sample: the signal arrays and the Jacobian are
+    allocated once and reused by every evaluation; the residual is a simulation alone, and the
+    Jacobian (:meth:`jac`, called by the solver at accepted points only) is filled in place from
+    sensitivity windows of :data:`SENS_WINDOW` samples (:func:`hystid.kernels.jacobian_into`).
+    Beyond :data:`LSMR_ROWS` residuals the trust-region steps are solved by LSMR instead of an
+    SVD of a scaled copy of the Jacobian.
     """
 
     def __init__(self, prep: Prepared, structure: Structure, x0: InitialCondition,
@@ -216,15 +227,18 @@ class _OutputError:
             np.concatenate([x0.window(k, P), np.zeros(n)]) for k in ("u", "w1", "w2", "y"))
         self.past = [a[:P].copy() for a in (self.W1, self.W2, self.Y)]
         self.U[P:] = prep.un
-        self.S1, self.S2, self.SY = (np.zeros((P + n, npar)) for _ in range(3))
-        self.idx = np.flatnonzero(prep.weight)
+        self.S1, self.S2, self.SY = (np.zeros((P + SENS_WINDOW, npar)) for _ in range(3))
+        every = bool(np.all(prep.weight))
+        self.rows = np.zeros(0, np.int64) if every else np.flatnonzero(prep.weight)
+        self.idx = slice(None) if every else self.rows
         self.target = prep.yn[self.idx]
+        self.m = len(self.target)
         self.ceiling = 1e6 * (np.max(np.abs(self.target)) + 1.0)
-        self.pen_weight = 10.0 * np.sqrt(len(self.idx))
+        self.pen_weight = 10.0 * np.sqrt(self.m)
+        self.J = np.zeros((self.m + 1, npar + 2))
         un = prep.un[prep.skip:]
         self.env_n = Envelope.of(un)
         self.npar = npar
-        self._cache: dict = {}
 
     def bound(self, theta_n: np.ndarray) -> float:
         """Condition (8) over the training envelope (scale-free)."""
@@ -245,40 +259,57 @@ class _OutputError:
             grad[i] = (self.bound(self.rp.to_theta(z[:n] + dz[:n])[0]) - b) / dz[i]
         return self.pen_weight * (b - BOUND_MAX), self.pen_weight * grad
 
-    def evaluate(self, z: np.ndarray) -> None:
-        if "z" in self._cache and np.array_equal(self._cache["z"], z):
-            return
+    def _split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
         n = self.npar
         theta, dtheta = self.rp.to_theta(z[:n])
-        y0 = z[n] if self.fit_offset else 0.0
-        e0 = z[n + 1] if self.fit_state else 0.0
+        return (theta, dtheta, z[n] if self.fit_offset else 0.0,
+                z[n + 1] if self.fit_state else 0.0)
+
+    def fun(self, z: np.ndarray) -> np.ndarray:
+        """Residuals at ``z``: the simulation error, then the admissibility penalty."""
+        theta, _, y0, e0 = self._split(z)
+        m = self.m
         with np.errstate(over="ignore", invalid="ignore"):
-            yhat, S = self._run(theta, e0, sensitivities=True)
-            if self.fit_state:
-                h = 1e-6 * max(abs(e0), 1.0)
-                de0 = (self._run(theta, e0 + h) - yhat) / h
-            blown = not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(S)))
+            yhat = self._run(theta, e0)
+            blown = not np.all(np.isfinite(yhat))
             blown = blown or float(np.max(np.abs(yhat))) > self.ceiling
-        m = len(self.idx)
-        pen, dpen = self._penalty(z)
         if blown:
             # the Duhem recursion left condition (8): a large, flat residual steers back
-            r = np.full(m + 1, 1e6)
-            J = np.zeros((m + 1, len(z)))
-        else:
-            r = np.empty(m + 1)
-            r[:m] = yhat + y0 - self.target
-            r[m] = pen
-            J = np.zeros((m + 1, len(z)))
-            J[:m, :n] = S @ dtheta
-            J[:m, n] = 1.0 if self.fit_offset else 0.0
-            if self.fit_state:
-                J[:m, n + 1] = de0
-            J[m] = dpen
-        self._cache = {"z": z.copy(), "r": r, "J": J}
+            return np.full(m + 1, 1e6)
+        r = np.empty(m + 1)
+        np.subtract(yhat + y0, self.target, out=r[:m])
+        r[m] = self._penalty(z)[0]
+        return r
 
-    def _run(self, theta: np.ndarray, e0: float, sensitivities: bool = False):
-        """Simulate from the past with the Duhem state ``e0`` off rest (and L2 settled on it)."""
+    def jac(self, z: np.ndarray) -> np.ndarray:
+        """Jacobian at ``z``, written into the one array :attr:`J` (the solver asks for it at
+        accepted points only, after their residuals)."""
+        theta, dtheta, _, e0 = self._split(z)
+        n, m, J = self.npar, self.m, self.J
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._set_past(theta, e0)
+            for S in (self.S1, self.S2, self.SY):
+                S[: self.P] = 0.0
+            finite = jacobian_into(theta, self.structure.layout, self.U, self.W1, self.W2,
+                                   self.Y, self.S1, self.S2, self.SY, self.P, self.rows,
+                                   dtheta, J[:m, :n])
+            if finite and self.fit_state:
+                h = 1e-6 * max(abs(e0), 1.0)
+                yhat = self._run(theta, e0)
+                np.subtract(self._run(theta, e0 + h), yhat, out=J[:m, n + 1])
+                J[:m, n + 1] /= h
+                finite = bool(np.all(np.isfinite(J[:m, n + 1])))
+        if not finite:
+            J[:] = 0.0
+            return J
+        J[:m, n] = 1.0 if self.fit_offset else 0.0
+        if not self.fit_state:
+            J[:m, n + 1] = 0.0
+        J[m] = self._penalty(z)[1]
+        return J
+
+    def _set_past(self, theta: np.ndarray, e0: float) -> None:
+        """The past of the signals, with the Duhem state ``e0`` off rest (L2 settled on it)."""
         P = self.P
         for a, past in zip((self.W1, self.W2, self.Y), self.past, strict=True):
             a[:P] = past
@@ -288,21 +319,13 @@ class _OutputError:
             b2 = theta[[s.names.index(f"b2{i}") for i in range(1, s.n2b + 1)]]
             self.W2[:P] += e0
             self.Y[:P] += e0 * (1.0 + np.sum(b2)) / (1.0 + np.sum(a2))
-        if not sensitivities:
-            simulate_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y, P)
-            return self.Y[P:][self.idx].copy()
-        self.S1[:P] = self.S2[:P] = self.SY[:P] = 0.0
-        sensitivities_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y,
-                           self.S1, self.S2, self.SY, P)
-        return self.Y[P:][self.idx].copy(), self.SY[P:][self.idx]
 
-    def fun(self, z: np.ndarray) -> np.ndarray:
-        self.evaluate(z)
-        return self._cache["r"]
-
-    def jac(self, z: np.ndarray) -> np.ndarray:
-        self.evaluate(z)
-        return self._cache["J"]
+    def _run(self, theta: np.ndarray, e0: float) -> np.ndarray:
+        """Simulated output at the samples in the cost (a copy), from the past of ``e0``."""
+        P = self.P
+        self._set_past(theta, e0)
+        simulate_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y, P)
+        return self.Y[P:][self.idx].copy()
 
     def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
         lo, hi = self.rp.bounds()
@@ -312,7 +335,8 @@ class _OutputError:
         with np.errstate(over="ignore", invalid="ignore"):
             return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
                                  bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
-                                 max_nfev=max_nfev, x_scale="jac")
+                                 max_nfev=max_nfev, x_scale="jac",
+                                 tr_solver="exact" if self.m <= LSMR_ROWS else "lsmr")
 
 
 def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndarray,
@@ -465,7 +489,7 @@ def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, la
     model = DuhemSandwich(theta, structure, fs=rec.fs, name=name, u_rest=prep.u_rest,
                           offset=prep.offset(y0n), envelope=prep.envelope, units=rec.units,
                           rest_memory=e0n * prep.y_scale)
-    m = len(problem.idx)
+    m = problem.m
     bound = problem.bound(theta_n)
     notes = list(prep.notes)
     if bound >= 2.0:
