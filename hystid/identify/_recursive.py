@@ -17,7 +17,7 @@ from numba import njit
 from ..model import DuhemSandwich, Structure
 from ..poly import schur_cohn_into
 from ..records import Record
-from .base import Estimator, as_sample, record_signals
+from .base import Estimator, record_signals, sample_arrays
 from .offline import initial_theta
 from .result import HistoryRecorder, IdentificationResult
 
@@ -144,10 +144,7 @@ class RecursiveIdentifier(Estimator):
         ndarray
             The estimate theta(k), a copy.
         """
-        u = np.array([as_sample(u_k, "u_k")])
-        y = np.array([as_sample(y_k, "y_k")])
-        if not np.isfinite(u[0]):
-            raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+        u, y = sample_arrays(u_k, y_k)
         self._process(u, y, np.empty((1, len(self.theta))),
                       np.empty((1, self.n_diagnostics)))
         return self.theta.copy()

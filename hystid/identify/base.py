@@ -31,7 +31,7 @@ import numpy as np
 from ..signals import finite_signal
 from .result import IdentificationResult
 
-__all__ = ["Estimator", "as_sample", "finite_signal", "record_signals"]
+__all__ = ["Estimator", "as_sample", "finite_signal", "record_signals", "sample_arrays"]
 
 
 def as_sample(value: Any, argname: str) -> float:
@@ -55,6 +55,27 @@ def as_sample(value: Any, argname: str) -> float:
     if arr.size != 1:
         raise ValueError(f"{argname}: expected one sample (a scalar), got shape {arr.shape}")
     return float(arr.reshape(()))
+
+
+def sample_arrays(u_k: Any, y_k: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One sample pair as two one-element arrays, for ``update(u_k, y_k)``.
+
+    Parameters
+    ----------
+    u_k, y_k : float
+        Input and output of the sample; the input must be finite (the output may not be: the
+        estimators skip it).
+
+    Returns
+    -------
+    u, y : ndarray
+        One-element float64 arrays.
+    """
+    u = np.array([as_sample(u_k, "u_k")])
+    y = np.array([as_sample(y_k, "y_k")])
+    if not np.isfinite(u[0]):
+        raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+    return u, y
 
 
 def record_signals(record: Any, fs: float) -> tuple[np.ndarray, np.ndarray, str]:

@@ -333,10 +333,12 @@ class _OutputError:
         if self.admissible:
             lo[self.rp.ialpha] = WIPE_OUT / max(self.env_n.u_max - self.env_n.u_min, 1e-12)
         with np.errstate(over="ignore", invalid="ignore"):
-            return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
-                                 bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
-                                 max_nfev=max_nfev, x_scale="jac",
-                                 tr_solver="exact" if self.m <= LSMR_ROWS else "lsmr")
+            sol = least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
+                                bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
+                                max_nfev=max_nfev, x_scale="jac",
+                                tr_solver="exact" if self.m <= LSMR_ROWS else "lsmr")
+        sol.jac = None  # the solver's copy of the Jacobian: not kept with the screened starts
+        return sol
 
 
 def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndarray,

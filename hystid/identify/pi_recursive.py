@@ -56,7 +56,7 @@ from ..model import InitialCondition
 from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds, play
 from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
-from .base import Estimator, as_sample, record_signals
+from .base import Estimator, record_signals, sample_arrays
 from .constraints import Reflections
 from .result import IdentificationResult, converged_at
 
@@ -872,10 +872,7 @@ class PIRecursiveIdentifier(Estimator):
         ndarray
             The estimate theta(k) in the model's parameters (:attr:`names`), a copy.
         """
-        u = np.array([as_sample(u_k, "u_k")])
-        y = np.array([as_sample(y_k, "y_k")])
-        if not np.isfinite(u[0]):
-            raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+        u, y = sample_arrays(u_k, y_k)
         self._require_start()
         history = np.empty((1, len(self.names)))
         errors, yhats = np.zeros(1), np.zeros(1)
