@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["jacobian_into", "offsets", "simulate_into", "sensitivities_into", "step", "step_sens",
+__all__ = ["jacobian_block", "offsets", "simulate_into", "sensitivities_into", "step", "step_sens",
            "step_sens_row"]
 
 
@@ -154,45 +154,37 @@ def sensitivities_into(theta, layout, U, W1, W2, Y, S1, S2, SY, start):
 
 
 @njit(cache=True)
-def jacobian_into(theta, layout, U, W1, W2, Y, S1, S2, SY, start, rows, dtheta, J):
-    """Output Jacobian over a whole record with sensitivity windows of fixed length.
+def jacobian_block(theta, layout, U, W1, W2, Y, S1, S2, SY, P, k0, dtheta, J):
+    """Output sensitivities of one block of samples, in windows of fixed length.
 
-    Runs :func:`step_sens_row` for every index from ``start`` to the end of ``U`` (the signals
-    ``U, W1, W2, Y`` are extended arrays, as for :func:`sensitivities_into`) but keeps the
-    sensitivities in the windows ``S1, S2, SY`` of ``start + B`` rows: the first ``start`` rows
-    hold the past (zero at the start), and when the ``B`` rows after them are full the last
-    ``start`` rows move to the head. Memory is therefore independent of the record's length.
+    Runs :func:`step_sens_row` for the ``len(J)`` indices from ``k0`` of the extended signal
+    arrays ``U, W1, W2, Y`` (which must be simulated up to ``k0`` already). The sensitivity
+    windows ``S1, S2, SY`` hold, in their first ``P`` rows, those of the ``P`` samples before
+    ``k0`` (zero before the first block) and room for at least ``len(J)`` more; afterwards the
+    last ``P`` of them are moved to the head, ready for the next block. Memory is therefore
+    independent of the record's length.
 
-    Row ``r`` of ``J`` receives ``SY(k) @ dtheta`` for the ``r``-th sample ``k - start`` in
-    ``rows`` (every sample when ``rows`` is empty); ``dtheta`` maps the search coordinates to
-    theta. Returns False as soon as a sensitivity is not finite (``J`` is then incomplete).
+    Row ``i`` of ``J`` receives ``SY(k0 + i) @ dtheta`` (``dtheta`` maps search coordinates to
+    theta). Returns False as soon as a sensitivity is not finite.
     """
-    P = start
-    B = S1.shape[0] - P
     npar = theta.shape[0]
     nz = dtheta.shape[1]
-    every = rows.shape[0] == 0
-    r = 0
-    base = start
-    for k in range(start, U.shape[0]):
-        if k - base == B:  # the window is full: its last P rows become the past
-            for i in range(P):
-                for p in range(npar):
-                    S1[i, p] = S1[B + i, p]
-                    S2[i, p] = S2[B + i, p]
-                    SY[i, p] = SY[B + i, p]
-            base = k
-        ks = P + k - base
-        step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks)
-        if every or (r < rows.shape[0] and rows[r] == k - start):
-            for c in range(nz):
-                acc = 0.0
-                for p in range(npar):
-                    acc += SY[ks, p] * dtheta[p, c]
-                if not np.isfinite(acc):
-                    return False
-                J[r, c] = acc
-            r += 1
+    nb = J.shape[0]
+    for i in range(nb):
+        ks = P + i
+        step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k0 + i, ks)
+        for c in range(nz):
+            acc = 0.0
+            for p in range(npar):
+                acc += SY[ks, p] * dtheta[p, c]
+            if not np.isfinite(acc):
+                return False
+            J[i, c] = acc
+    for i in range(P):
+        for p in range(npar):
+            S1[i, p] = S1[nb + i, p]
+            S2[i, p] = S2[nb + i, p]
+            SY[i, p] = SY[nb + i, p]
     return True
 
 

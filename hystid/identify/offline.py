@@ -8,10 +8,12 @@ stable and minimum phase, and alpha stays positive (Assumption 1).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..kernels import jacobian_into, sensitivities_into, simulate_into
+from ..kernels import jacobian_block, sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
 from ..operating import Envelope
 from ..records import Record
@@ -74,11 +76,15 @@ def linear_start(
     lag = max(na, q + nb, 1)
     if len(y) <= lag + na + nb + 2:
         return None
-    rows = np.arange(lag, len(y))
-    phi = [-y[rows - i] for i in range(1, na + 1)] + [u[rows - q - j] for j in range(nb + 1)]
+    n = len(y)
+    phi = np.empty((n - lag, na + nb + 1 + int(with_offset)))  # one regression matrix, no copies
+    for i in range(1, na + 1):
+        np.negative(y[lag - i: n - i], out=phi[:, i - 1])
+    for j in range(nb + 1):
+        phi[:, na + j] = u[lag - q - j: n - q - j]
     if with_offset:
-        phi.append(np.ones(len(rows)))
-    coef = np.linalg.lstsq(np.column_stack(phi), y[rows], rcond=None)[0]
+        phi[:, -1] = 1.0
+    coef = np.linalg.lstsq(phi, y[lag:], rcond=None)[0]
     constant = coef[-1] if with_offset else 0.0
     coef = coef[:na + nb + 1]
     den, num = np.r_[1.0, coef[:na]], coef[na:]
@@ -137,11 +143,8 @@ BOUND_MAX = 1.95
 WIPE_OUT = 1.0
 #: Evaluations given to each start before the best ones are polished.
 SCREEN_NFEV = 25
-#: Samples of sensitivities held at once while the Jacobian is formed (memory independent of N).
+#: Samples of sensitivities held at once while the Jacobian rows are formed and reduced.
 SENS_WINDOW = 4096
-#: Residuals beyond which the trust-region subproblem is solved by LSMR (an SVD of the scaled
-#: Jacobian would hold two more copies of it: 128 bytes per sample with 8 columns).
-LSMR_ROWS = 2_000_000
 
 
 def to_physical(theta_n: np.ndarray, structure: Structure, u_scale: float,
@@ -207,12 +210,14 @@ class _OutputError:
     derivative by a finite difference). One extra residual keeps the model admissible over the
     training envelope: it is ``weight * max(0, bound - BOUND_MAX)``.
 
-    Memory grows by about 100 bytes per sample: the signal arrays and the Jacobian are
-    allocated once and reused by every evaluation; the residual is a simulation alone, and the
-    Jacobian (:meth:`jac`, called by the solver at accepted points only) is filled in place from
-    sensitivity windows of :data:`SENS_WINDOW` samples (:func:`hystid.kernels.jacobian_into`).
-    Beyond :data:`LSMR_ROWS` residuals the trust-region steps are solved by LSMR instead of an
-    SVD of a scaled copy of the Jacobian.
+    Memory does not grow with anything but the signals (see ``benchmarks/bench_memory.py``):
+    the solver sees the problem compressed to ``len(z) + 1`` rows. At each ``z`` the rows
+    ``[J | r]`` of the Jacobian and the residuals are formed block by block from sensitivity
+    windows of :data:`SENS_WINDOW` samples (:func:`hystid.kernels.jacobian_block`) and reduced
+    by a running QR factorisation to the triangle ``[R | c; 0 | rho]``; the solver gets the
+    residuals ``[c, rho]`` and the Jacobian ``[R; 0]``. Their cost, gradient ``J'r`` and
+    Gauss-Newton matrix ``J'J`` are those of the full problem, so the trust-region iterates
+    are the same; :meth:`residuals` gives the residuals themselves.
     """
 
     def __init__(self, prep: Prepared, structure: Structure, x0: InitialCondition,
@@ -228,14 +233,15 @@ class _OutputError:
         self.past = [a[:P].copy() for a in (self.W1, self.W2, self.Y)]
         self.U[P:] = prep.un
         self.S1, self.S2, self.SY = (np.zeros((P + SENS_WINDOW, npar)) for _ in range(3))
+        self.block = np.zeros((SENS_WINDOW, npar))
         every = bool(np.all(prep.weight))
-        self.rows = np.zeros(0, np.int64) if every else np.flatnonzero(prep.weight)
+        self.rows = None if every else np.flatnonzero(prep.weight)
         self.idx = slice(None) if every else self.rows
         self.target = prep.yn[self.idx]
         self.m = len(self.target)
         self.ceiling = 1e6 * (np.max(np.abs(self.target)) + 1.0)
         self.pen_weight = 10.0 * np.sqrt(self.m)
-        self.J = np.zeros((self.m + 1, npar + 2))
+        self._cache: dict[str, Any] = {}
         un = prep.un[prep.skip:]
         self.env_n = Envelope.of(un)
         self.npar = npar
@@ -265,48 +271,76 @@ class _OutputError:
         return (theta, dtheta, z[n] if self.fit_offset else 0.0,
                 z[n + 1] if self.fit_state else 0.0)
 
-    def fun(self, z: np.ndarray) -> np.ndarray:
-        """Residuals at ``z``: the simulation error, then the admissibility penalty."""
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        """The simulation error at the samples in the cost (normalised units)."""
         theta, _, y0, e0 = self._split(z)
-        m = self.m
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._run(theta, e0) + y0 - self.target
+
+    def evaluate(self, z: np.ndarray) -> dict[str, Any]:
+        """The compressed residuals and Jacobian at ``z`` (cached for the last ``z``)."""
+        if "z" in self._cache and np.array_equal(self._cache["z"], z):
+            return self._cache
+        theta, dtheta, y0, e0 = self._split(z)
+        nz, m = len(z), self.m
         with np.errstate(over="ignore", invalid="ignore"):
             yhat = self._run(theta, e0)
             blown = not np.all(np.isfinite(yhat))
             blown = blown or float(np.max(np.abs(yhat))) > self.ceiling
-        if blown:
+            de0 = None
+            if not blown and self.fit_state:
+                h = 1e-6 * max(abs(e0), 1.0)
+                de0 = (self._run(theta, e0 + h) - yhat) / h
+            tri = None if blown else self._triangle(theta, dtheta, yhat + y0 - self.target,
+                                                    de0, z)
+        if tri is None:
             # the Duhem recursion left condition (8): a large, flat residual steers back
-            return np.full(m + 1, 1e6)
-        r = np.empty(m + 1)
-        np.subtract(yhat + y0, self.target, out=r[:m])
-        r[m] = self._penalty(z)[0]
-        return r
+            # (the norm of 1e6 at every residual, as the full problem would have)
+            tri = np.zeros((nz + 1, nz + 1))
+            tri[nz, nz] = 1e6 * np.sqrt(m + 1)
+        self._cache = {"z": z.copy(), "r": tri[:, nz].copy(), "J": tri[:, :nz].copy()}
+        return self._cache
+
+    def _triangle(self, theta: np.ndarray, dtheta: np.ndarray, r: np.ndarray,
+                  de0: np.ndarray | None, z: np.ndarray) -> np.ndarray | None:
+        """``[R | c; 0 | rho]`` of the rows ``[J | r]``, block by block (None if not finite)."""
+        n, nz, P = self.npar, len(z), self.P
+        self._set_past(theta, z[n + 1] if self.fit_state else 0.0)
+        for S in (self.S1, self.S2, self.SY):
+            S[:P] = 0.0
+        tri = np.zeros((0, nz + 1))
+        total = len(self.U) - P
+        for a in range(0, total, SENS_WINDOW):
+            b = min(total, a + SENS_WINDOW)
+            block = self.block[: b - a]
+            if not jacobian_block(theta, self.structure.layout, self.U, self.W1, self.W2,
+                                  self.Y, self.S1, self.S2, self.SY, P, P + a, dtheta, block):
+                return None
+            if self.rows is None:
+                lo, hi, take = a, b, block
+            else:
+                lo, hi = np.searchsorted(self.rows, (a, b))
+                take = block[self.rows[lo:hi] - a]
+            rows = np.zeros((hi - lo, nz + 1))
+            rows[:, :n] = take
+            rows[:, n] = 1.0 if self.fit_offset else 0.0
+            if de0 is not None:
+                rows[:, n + 1] = de0[lo:hi]
+            rows[:, nz] = r[lo:hi]
+            tri = np.linalg.qr(np.vstack([tri, rows]), mode="r")
+        pen, dpen = self._penalty(z)
+        tri = np.linalg.qr(np.vstack([tri, np.r_[dpen, pen]]), mode="r")
+        if not np.all(np.isfinite(tri)):
+            return None
+        return np.vstack([tri, np.zeros((nz + 1 - len(tri), nz + 1))])
+
+    def fun(self, z: np.ndarray) -> np.ndarray:
+        """Compressed residuals ``[c, rho]`` at ``z`` (norm: that of the full residuals)."""
+        return self.evaluate(z)["r"]
 
     def jac(self, z: np.ndarray) -> np.ndarray:
-        """Jacobian at ``z``, written into the one array :attr:`J` (the solver asks for it at
-        accepted points only, after their residuals)."""
-        theta, dtheta, _, e0 = self._split(z)
-        n, m, J = self.npar, self.m, self.J
-        with np.errstate(over="ignore", invalid="ignore"):
-            self._set_past(theta, e0)
-            for S in (self.S1, self.S2, self.SY):
-                S[: self.P] = 0.0
-            finite = jacobian_into(theta, self.structure.layout, self.U, self.W1, self.W2,
-                                   self.Y, self.S1, self.S2, self.SY, self.P, self.rows,
-                                   dtheta, J[:m, :n])
-            if finite and self.fit_state:
-                h = 1e-6 * max(abs(e0), 1.0)
-                yhat = self._run(theta, e0)
-                np.subtract(self._run(theta, e0 + h), yhat, out=J[:m, n + 1])
-                J[:m, n + 1] /= h
-                finite = bool(np.all(np.isfinite(J[:m, n + 1])))
-        if not finite:
-            J[:] = 0.0
-            return J
-        J[:m, n] = 1.0 if self.fit_offset else 0.0
-        if not self.fit_state:
-            J[:m, n + 1] = 0.0
-        J[m] = self._penalty(z)[1]
-        return J
+        """Compressed Jacobian ``[R; 0]`` at ``z``."""
+        return self.evaluate(z)["J"]
 
     def _set_past(self, theta: np.ndarray, e0: float) -> None:
         """The past of the signals, with the Duhem state ``e0`` off rest (L2 settled on it)."""
@@ -333,12 +367,9 @@ class _OutputError:
         if self.admissible:
             lo[self.rp.ialpha] = WIPE_OUT / max(self.env_n.u_max - self.env_n.u_min, 1e-12)
         with np.errstate(over="ignore", invalid="ignore"):
-            sol = least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
-                                bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
-                                max_nfev=max_nfev, x_scale="jac",
-                                tr_solver="exact" if self.m <= LSMR_ROWS else "lsmr")
-        sol.jac = None  # the solver's copy of the Jacobian: not kept with the screened starts
-        return sol
+            return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
+                                 bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
+                                 max_nfev=max_nfev, x_scale="jac")
 
 
 def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndarray,
@@ -491,7 +522,6 @@ def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, la
     model = DuhemSandwich(theta, structure, fs=rec.fs, name=name, u_rest=prep.u_rest,
                           offset=prep.offset(y0n), envelope=prep.envelope, units=rec.units,
                           rest_memory=e0n * prep.y_scale)
-    m = problem.m
     bound = problem.bound(theta_n)
     notes = list(prep.notes)
     if bound >= 2.0:
@@ -502,7 +532,7 @@ def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, la
                     or "diverged" in w]
     notes += [f"on the training record: {w}" for w in train_issues]
     info = {
-        "rms_residual": float(np.sqrt(np.mean(sol.fun[:m] ** 2)) * prep.y_scale),
+        "rms_residual": float(np.sqrt(np.mean(problem.residuals(sol.x) ** 2)) * prep.y_scale),
         "nfev": int(sol.nfev),
         "status": int(sol.status),
         "message": str(sol.message),
