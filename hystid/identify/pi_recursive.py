@@ -719,6 +719,7 @@ class PIRecursiveIdentifier(Estimator):
         self.lam = np.array([self.lambda0])
         self._H = max(s.history, s.q2 + s.n2b - 1)
         self._windows = self._arrays(self._H + 1)
+        self._buffers = self._arrays(self._H + self.chunk)
         self._p = np.zeros(s.n_operators)
         self._SP = np.zeros((s.n_operators, _n_full(s)))
         self._buffer: list[tuple[np.ndarray, np.ndarray]] = []
@@ -885,26 +886,29 @@ class PIRecursiveIdentifier(Estimator):
         self.n_skipped += int(np.count_nonzero(~np.isfinite(y)))
         w = self._collect(u, y, history)
         errors[:w], yhats[:w] = np.nan, np.nan
+        if w == n:
+            return w
         H = self._H
-        arrays = self._arrays(H + n - w)
-        for dst, src in zip(arrays, self._windows, strict=True):
-            if len(src) > 1:
-                dst[:H] = src[1:]
-        arrays[0][H:] = u[w:]
-        raw = np.empty((n, len(self._theta)))
+        buffers = self._buffers  # one chunk long, allocated once
+        same = self.form == "output-error"  # the recursion's coordinates are the model's
+        raw = history if same else np.empty((n, len(self._theta)))
         for a in range(w, n, self.chunk):
             b = min(n, a + self.chunk)
-            self._run([x[: H + b - w] for x in arrays], H + a - w, self.k, y[a:b], raw[a:b],
-                      errors[a:b], yhats[a:b])
+            arrays = [x[: H + b - a] for x in buffers]
+            for dst, src in zip(arrays, self._windows, strict=True):
+                if len(src) > 1:
+                    dst[:H] = src[1:]
+            arrays[0][H:] = u[a:b]
+            self._run(arrays, H, self.k, y[a:b], raw[a:b], errors[a:b], yhats[a:b])
             self.k += b - a
-            if progress is not None:
-                progress(b, n)
-        if w < n:
-            history[w:] = self._model_theta(raw[w:])
-            self.e, self.yhat = float(errors[-1]), float(yhats[-1])
             for dst, src in zip(self._windows, arrays, strict=True):
                 if len(dst) > 1:
                     dst[:] = src[-len(dst):]
+            if progress is not None:
+                progress(b, n)
+        if not same:
+            history[w:] = self._model_theta(raw[w:])
+        self.e, self.yhat = float(errors[-1]), float(yhats[-1])
         return w
 
     def _run(self, arrays, start, k0, y, history, errors, yhats) -> None:
