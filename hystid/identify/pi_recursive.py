@@ -691,6 +691,7 @@ class PIRecursiveIdentifier(Estimator):
         self.k = 0
         self.n_skipped = 0
         self.warm_result_: IdentificationResult | None = None
+        self.warmup_seconds_ = 0.0
         self.warmed_up = False
         if self.thresholds is not None:
             self._start(self.thresholds)
@@ -820,7 +821,9 @@ class PIRecursiveIdentifier(Estimator):
         if done:
             bu, by = (np.concatenate(part) for part in zip(*self._buffer, strict=True))
             self._buffer = []
+            t0 = time.perf_counter()
             self._warm_start(bu, by)
+            self.warmup_seconds_ = time.perf_counter() - t0
             self.warmed_up = True
             history[w - 1] = self.theta
         return w
@@ -984,7 +987,7 @@ class PIRecursiveIdentifier(Estimator):
         n, before = len(u), self.n_skipped
         history = np.empty((n, len(self.names)))
         errors, yhats = np.zeros(n), np.zeros(n)
-        t0 = time.perf_counter()
+        t0, warm_before = time.perf_counter(), self.warmup_seconds_
         w = self._process(u, y, history, errors, yhats, progress)
         self._warn_skipped(before)
         tail = errors[w:][-max(1, (n - w) // 10):]
@@ -997,6 +1000,7 @@ class PIRecursiveIdentifier(Estimator):
             "prediction_errors": errors,
             "stable": bool(self.model.is_stable()),
             "seconds": time.perf_counter() - t0,
+            "warmup_seconds": self.warmup_seconds_ - warm_before,
             "warmup_samples": w,
             "warm_fit": None if self.warm_result_ is None else self.warm_result_.info,
         }
