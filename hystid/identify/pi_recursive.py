@@ -867,14 +867,14 @@ class PIRecursiveIdentifier(Estimator):
         Parameters
         ----------
         u_k : float
-            Input sample; a non-finite one is an error (the model cannot be propagated).
+            Input u(k), finite (the operators cannot be propagated otherwise).
         y_k : float
-            Output sample; a non-finite one is skipped (counted in :attr:`n_skipped`).
+            Measured y(k); when not finite the model runs on and nothing is learned.
 
         Returns
         -------
         ndarray
-            The estimate theta(k) in the model's parameters (:attr:`names`), a copy.
+            A copy of theta(k), in the order of :attr:`names`.
         """
         u, y = sample_arrays(u_k, y_k)
         self._require_start()
