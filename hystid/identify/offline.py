@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from ..kernels import jacobian_block, sensitivities_into, simulate_into
@@ -234,6 +235,7 @@ class _OutputError:
         self.U[P:] = prep.un
         self.S1, self.S2, self.SY = (np.zeros((P + SENS_WINDOW, npar)) for _ in range(3))
         self.block = np.zeros((SENS_WINDOW, npar))
+        self.stack = np.zeros((SENS_WINDOW + npar + 3, npar + 3), order="F")
         every = bool(np.all(prep.weight))
         self.rows = None if every else np.flatnonzero(prep.weight)
         self.idx = slice(None) if every else self.rows
@@ -308,7 +310,8 @@ class _OutputError:
         self._set_past(theta, z[n + 1] if self.fit_state else 0.0)
         for S in (self.S1, self.S2, self.SY):
             S[:P] = 0.0
-        tri = np.zeros((0, nz + 1))
+        stack = self.stack  # [triangle so far; rows of this block], Fortran order for LAPACK
+        t = 0
         total = len(self.U) - P
         for a in range(0, total, SENS_WINDOW):
             b = min(total, a + SENS_WINDOW)
@@ -321,18 +324,26 @@ class _OutputError:
             else:
                 lo, hi = np.searchsorted(self.rows, (a, b))
                 take = block[self.rows[lo:hi] - a]
-            rows = np.zeros((hi - lo, nz + 1))
+            rows = stack[t: t + hi - lo]
             rows[:, :n] = take
             rows[:, n] = 1.0 if self.fit_offset else 0.0
-            if de0 is not None:
-                rows[:, n + 1] = de0[lo:hi]
+            rows[:, n + 1] = de0[lo:hi] if de0 is not None else 0.0
             rows[:, nz] = r[lo:hi]
-            tri = np.linalg.qr(np.vstack([tri, rows]), mode="r")
+            t = self._reduce(t + hi - lo)
         pen, dpen = self._penalty(z)
-        tri = np.linalg.qr(np.vstack([tri, np.r_[dpen, pen]]), mode="r")
-        if not np.all(np.isfinite(tri)):
-            return None
-        return np.vstack([tri, np.zeros((nz + 1 - len(tri), nz + 1))])
+        stack[t] = np.r_[dpen, pen]
+        t = self._reduce(t + 1)
+        tri = np.zeros((nz + 1, nz + 1))
+        tri[:t] = stack[:t]
+        return tri if np.all(np.isfinite(tri)) else None
+
+    def _reduce(self, rows: int) -> int:
+        """QR-reduce the first ``rows`` rows of :attr:`stack` to their triangle, kept on top;
+        returns its number of rows."""
+        R = qr(self.stack[:rows], mode="r", check_finite=False)[0]
+        keep = min(rows, self.stack.shape[1])
+        self.stack[:keep] = R[:keep]
+        return keep
 
     def fun(self, z: np.ndarray) -> np.ndarray:
         """Compressed residuals ``[c, rho]`` at ``z`` (norm: that of the full residuals)."""
