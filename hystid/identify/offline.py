@@ -77,15 +77,20 @@ def linear_start(
     lag = max(na, q + nb, 1)
     if len(y) <= lag + na + nb + 2:
         return None
-    n = len(y)
-    phi = np.empty((n - lag, na + nb + 1 + int(with_offset)))  # one regression matrix, no copies
-    for i in range(1, na + 1):
-        np.negative(y[lag - i: n - i], out=phi[:, i - 1])
-    for j in range(nb + 1):
-        phi[:, na + j] = u[lag - q - j: n - q - j]
-    if with_offset:
-        phi[:, -1] = 1.0
-    coef = np.linalg.lstsq(phi, y[lag:], rcond=None)[0]
+    width = na + nb + 1 + int(with_offset)
+    qr_rows = _RunningQR(width + 1)  # [phi | y] reduced block by block: memory of one block
+    for a in range(lag, len(y), SENS_WINDOW):
+        b = min(len(y), a + SENS_WINDOW)
+        phi = qr_rows.rows(b - a)
+        for i in range(1, na + 1):
+            np.negative(y[a - i: b - i], out=phi[:, i - 1])
+        for j in range(nb + 1):
+            phi[:, na + j] = u[a - q - j: b - q - j]
+        if with_offset:
+            phi[:, width - 1] = 1.0
+        phi[:, width] = y[a:b]
+    tri = qr_rows.triangle()
+    coef = np.linalg.lstsq(tri[:width, :width], tri[:width, width], rcond=None)[0]
     constant = coef[-1] if with_offset else 0.0
     coef = coef[:na + nb + 1]
     den, num = np.r_[1.0, coef[:na]], coef[na:]
@@ -202,6 +207,42 @@ def _rescale(theta, structure, su, sy, inverse):
     return out
 
 
+class _RunningQR:
+    """The triangle ``R`` (``R'R = A'A``) of a tall matrix ``A`` given block by block.
+
+    Rows are written into :meth:`rows` views of one Fortran-ordered stack below the triangle
+    so far and reduced with ``scipy.linalg.qr``: memory is one block, whatever the height of
+    ``A``.
+    """
+
+    def __init__(self, width: int, block: int = SENS_WINDOW) -> None:
+        self.stack = np.zeros((block + width, width), order="F")
+        self.t = 0  # rows of the triangle so far
+        self.pending = 0  # rows written below it, not reduced yet
+
+    def rows(self, k: int) -> np.ndarray:
+        """A view of the next ``k`` rows (at most one block) to fill; reduced at the next call
+        or by :meth:`triangle`."""
+        self._reduce()
+        self.pending = k
+        return self.stack[self.t: self.t + k]
+
+    def _reduce(self) -> None:
+        rows, self.pending = self.t + self.pending, 0
+        if rows > self.t:
+            R = qr(self.stack[:rows], mode="r", check_finite=False)[0]
+            self.t = min(rows, self.stack.shape[1])
+            self.stack[: self.t] = R[: self.t]
+
+    def triangle(self) -> np.ndarray:
+        """The square triangle (zero rows below when ``A`` has fewer rows than columns)."""
+        self._reduce()
+        width = self.stack.shape[1]
+        tri = np.zeros((width, width))
+        tri[: self.t] = self.stack[: self.t]
+        return tri
+
+
 class _OutputError:
     """The output-error problem on a prepared record: residuals and Jacobian in ``z``.
 
@@ -235,7 +276,6 @@ class _OutputError:
         self.U[P:] = prep.un
         self.S1, self.S2, self.SY = (np.zeros((P + SENS_WINDOW, npar)) for _ in range(3))
         self.block = np.zeros((SENS_WINDOW, npar))
-        self.stack = np.zeros((SENS_WINDOW + npar + 3, npar + 3), order="F")
         every = bool(np.all(prep.weight))
         self.rows = None if every else np.flatnonzero(prep.weight)
         self.idx = slice(None) if every else self.rows
@@ -310,8 +350,7 @@ class _OutputError:
         self._set_past(theta, z[n + 1] if self.fit_state else 0.0)
         for S in (self.S1, self.S2, self.SY):
             S[:P] = 0.0
-        stack = self.stack  # [triangle so far; rows of this block], Fortran order for LAPACK
-        t = 0
+        qr_rows = _RunningQR(nz + 1)
         total = len(self.U) - P
         for a in range(0, total, SENS_WINDOW):
             b = min(total, a + SENS_WINDOW)
@@ -324,26 +363,15 @@ class _OutputError:
             else:
                 lo, hi = np.searchsorted(self.rows, (a, b))
                 take = block[self.rows[lo:hi] - a]
-            rows = stack[t: t + hi - lo]
+            rows = qr_rows.rows(hi - lo)
             rows[:, :n] = take
             rows[:, n] = 1.0 if self.fit_offset else 0.0
             rows[:, n + 1] = de0[lo:hi] if de0 is not None else 0.0
             rows[:, nz] = r[lo:hi]
-            t = self._reduce(t + hi - lo)
         pen, dpen = self._penalty(z)
-        stack[t] = np.r_[dpen, pen]
-        t = self._reduce(t + 1)
-        tri = np.zeros((nz + 1, nz + 1))
-        tri[:t] = stack[:t]
+        qr_rows.rows(1)[0] = np.r_[dpen, pen]
+        tri = qr_rows.triangle()
         return tri if np.all(np.isfinite(tri)) else None
-
-    def _reduce(self, rows: int) -> int:
-        """QR-reduce the first ``rows`` rows of :attr:`stack` to their triangle, kept on top;
-        returns its number of rows."""
-        R = qr(self.stack[:rows], mode="r", check_finite=False)[0]
-        keep = min(rows, self.stack.shape[1])
-        self.stack[:keep] = R[:keep]
-        return keep
 
     def fun(self, z: np.ndarray) -> np.ndarray:
         """Compressed residuals ``[c, rho]`` at ``z`` (norm: that of the full residuals)."""
