@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Literal
 import control as ct
 import numpy as np
 from numba import njit
+from numba.core.dispatcher import Dispatcher
 
 from ..kernels import step as stage_step
 from ..model import DuhemSandwich
@@ -49,6 +50,7 @@ from .compensator import (
     _build,
     _pad_hold,
     chain_step,
+    source_stamp,
 )
 from .feedback import FeedbackDesign
 from .tracking import TrackingMetrics, tracking_metrics
@@ -310,41 +312,50 @@ def closed_loop_response(
 
 
 # =========================================================================== compiled twin
-@njit(cache=False)  # calls into other modules: a cached copy would not see their edits
-def _run_loop(x_ff, rs, chain_args, Ac, Bc, Cc, Dc, theta, layout, U, W1, W2, Y, P0,
-              noise, umin, umax, hold, y, u, u_ff, u_fb, yd, e, status):
-    nc = Ac.shape[0]
-    xc = np.zeros(nc)
-    xc_new = np.zeros(nc)
-    (ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv) = chain_args
-    for k in range(rs.shape[0]):
-        stage_step(theta, layout, U, W1, W2, Y, P0 + k)  # y(k) from u(k-1) and before
-        y[k] = Y[P0 + k]
-        x_ff, uf, ydk, st = chain_step(x_ff, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM,
-                                       DM, r_pi, mu_pi, r_inv, mu_inv)
-        ek = ydk - (y[k] + noise[k])
-        if hold and (st & 8):
-            ek = 0.0
-        ub = Dc[0] * ek
-        for i in range(nc):
-            ub += Cc[i] * xc[i]
-        uc = uf + ub
-        ua = min(max(uc, umin), umax)
-        du = ua - uc
-        for i in range(nc):
-            acc = Bc[i, 0] * ek + Bc[i, 1] * du
-            for j in range(nc):
-                acc += Ac[i, j] * xc[j]
-            xc_new[i] = acc
-        for i in range(nc):
-            xc[i] = xc_new[i]
-        U[P0 + k] = ua
-        u[k] = ua
-        u_ff[k] = uf
-        u_fb[k] = ub
-        yd[k] = ydk
-        e[k] = ek
-        status[k] = st
+def _stamped_run_loop(stamp: int) -> Dispatcher:
+    """:func:`_run_loop` compiled with the source ``stamp`` of the kernels it calls."""
+
+    @njit(cache=True)
+    def _run_loop(x_ff, rs, chain_args, Ac, Bc, Cc, Dc, theta, layout, U, W1, W2, Y, P0,
+                  noise, umin, umax, hold, y, u, u_ff, u_fb, yd, e, status):
+        _ = stamp  # in numba's cache key: see compensator.source_stamp
+        nc = Ac.shape[0]
+        xc = np.zeros(nc)
+        xc_new = np.zeros(nc)
+        (ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv) = chain_args
+        for k in range(rs.shape[0]):
+            stage_step(theta, layout, U, W1, W2, Y, P0 + k)  # y(k) from u(k-1) and before
+            y[k] = Y[P0 + k]
+            x_ff, uf, ydk, st = chain_step(x_ff, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM,
+                                           DM, r_pi, mu_pi, r_inv, mu_inv)
+            ek = ydk - (y[k] + noise[k])
+            if hold and (st & 8):
+                ek = 0.0
+            ub = Dc[0] * ek
+            for i in range(nc):
+                ub += Cc[i] * xc[i]
+            uc = uf + ub
+            ua = min(max(uc, umin), umax)
+            du = ua - uc
+            for i in range(nc):
+                acc = Bc[i, 0] * ek + Bc[i, 1] * du
+                for j in range(nc):
+                    acc += Ac[i, j] * xc[j]
+                xc_new[i] = acc
+            for i in range(nc):
+                xc[i] = xc_new[i]
+            U[P0 + k] = ua
+            u[k] = ua
+            u_ff[k] = uf
+            u_fb[k] = ub
+            yd[k] = ydk
+            e[k] = ek
+            status[k] = st
+
+    return _run_loop
+
+
+_run_loop = _stamped_run_loop(source_stamp(stage_step, chain_step))
 
 
 def simulate_closed_loop(
