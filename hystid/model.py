@@ -2,18 +2,18 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .kernels import as_layout, simulate_into
 from .operating import Envelope, Placed, warn_admissibility
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
-    from matplotlib.axes import Axes
+
+    from .response import SandwichResponse
 
 __all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure", "params_vector"]
 
@@ -71,6 +71,8 @@ class Structure:
     @property
     def layout(self) -> np.ndarray:
         """Integer layout passed to the compiled kernels."""
+        from .kernels import as_layout  # numba loads on first use, not on import hystid
+
         return as_layout(self.n1a, self.n1b, self.n2a, self.n2b, self.q1, self.q2, self.f0)
 
     @property
@@ -98,55 +100,6 @@ class InitialCondition:
             raise ValueError(f"InitialCondition.{name} contains non-finite values")
         v = v[-length:] if length else v[:0]
         return np.concatenate([np.zeros(length - len(v)), v])
-
-
-@dataclass
-class SandwichResponse:
-    """Simulated signals of the sandwich. Unpacks as ``t, y`` like python-control responses.
-
-    Attributes
-    ----------
-    t, u, w1, w2, y : ndarray
-        Time (s), input, internal signals and output. ``u`` and ``y`` are in the record's units
-        (the sensor offset included); ``w1`` and ``w2`` are relative to the model's rest.
-    name : str
-        Name of the simulated model.
-    warnings : list of str
-        Why the response may not be trustworthy: the input left the model's envelope, or
-        condition (8) failed (empty when neither).
-    """
-
-    t: np.ndarray
-    u: np.ndarray
-    w1: np.ndarray
-    w2: np.ndarray
-    y: np.ndarray
-    name: str = "sandwich"
-    warnings: list[str] = field(default_factory=list)
-
-    def __iter__(self) -> Iterator[np.ndarray]:
-        yield self.t
-        yield self.y
-
-    @property
-    def duhem_margin(self) -> float:
-        """max_k |dw1(k)|: condition (8) asks ``alpha * duhem_margin < 2``."""
-        return float(np.max(np.abs(np.diff(self.w1)))) if len(self.w1) > 1 else 0.0
-
-    def plot(self, ax: Sequence[Axes] | np.ndarray | None = None) -> Sequence[Axes] | np.ndarray:
-        """Plot u, w1, w2 and y against time; returns the axes."""
-        import matplotlib.pyplot as plt
-
-        if ax is None:
-            _, ax = plt.subplots(4, 1, sharex=True, figsize=(7, 6))
-        for a, sig, label in zip(
-            ax, (self.u, self.w1, self.w2, self.y), ("u", "w1", "w2", "y"), strict=False
-        ):
-            a.plot(self.t, sig, lw=0.8)
-            a.set_ylabel(label)
-        ax[-1].set_xlabel("time [s]")
-        ax[0].set_title(self.name)
-        return ax
 
 
 class DuhemSandwich(Placed):
@@ -423,8 +376,12 @@ class DuhemSandwich(Placed):
         Returns
         -------
         SandwichResponse
-            Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
+            A :class:`control.TimeResponseData`: input ``u``, output ``y``, states ``w1``,
+            ``w2`` (each also an attribute); unpacks as ``t, y``.
         """
+        from .kernels import simulate_into
+        from .response import SandwichResponse
+
         u = _as_signal(u, "u")
         x0 = x0 or InitialCondition()
         P = self.structure.history
@@ -435,7 +392,8 @@ class DuhemSandwich(Placed):
         with np.errstate(over="ignore", invalid="ignore"):
             simulate_into(self.theta, self.structure.layout, U, W1, W2, Y, P)
         t = np.arange(len(u)) / self.fs
-        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name)
+        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name,
+                                units=self.units)
         if check:
             resp.warnings = self.admissibility(u, resp)
             warn_admissibility(resp.warnings, self.name)
@@ -561,3 +519,12 @@ def _as_signal(u, argname: str) -> np.ndarray:
         k = int(np.flatnonzero(~np.isfinite(arr))[0])
         raise ValueError(f"{argname}: non-finite value at sample {k}")
     return np.ascontiguousarray(arr)
+
+
+def __getattr__(name: str):
+    # SandwichResponse subclasses control.TimeResponseData: python-control loads on first use
+    if name == "SandwichResponse":
+        from .response import SandwichResponse
+
+        return SandwichResponse
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -38,8 +38,9 @@ import numpy as np
 from numba import njit
 
 from . import blocks
-from .model import InitialCondition, SandwichResponse, params_vector
+from .model import InitialCondition, params_vector
 from .operating import Envelope, Placed, warn_admissibility
+from .response import SandwichResponse
 
 __all__ = [
     "PISandwich",
@@ -719,7 +720,8 @@ class PISandwich(Placed):
         Returns
         -------
         SandwichResponse
-            Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
+            A :class:`control.TimeResponseData`: input ``u``, output ``y``, states ``w1``,
+            ``w2`` (each also an attribute); unpacks as ``t, y``.
         """
         u = _signal(u, "u")
         x0 = x0 or InitialCondition()
@@ -733,7 +735,8 @@ class PISandwich(Placed):
         pi_simulate_into(self.a1, self.b1, s.q1, self.mu, self.thresholds, self.a2, self.b2,
                          s.q2, U, W1, W2, Y, p, P)
         t = np.arange(len(u)) / self.fs
-        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name)
+        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name,
+                                units=self.units)
         if check and self.envelope is not None:
             resp.warnings = self.envelope.violations(u)
             warn_admissibility(resp.warnings, self.name)

@@ -314,3 +314,18 @@ def test_compensator_kernels_are_cached():
     for kernel in (compensator.chain_step, compensator.chain_run, closedloop._run_loop):
         assert kernel._cache.__class__.__name__ == "FunctionCache", kernel
         assert kernel.py_func.__closure__, "the source stamp is not in the cache key"
+
+
+def test_closed_loop_response_is_a_labelled_control_response(stage):
+    ref = hc.scan_reference("triangle", 200, periods=1)
+    out = hc.simulate_closed_loop(stage, ref.y, None)
+    assert isinstance(out, ct.TimeResponseData)
+    assert out.input_labels == ["y_ref"]
+    assert out.output_labels == ["y", "u", "yd", "e", "u_ff", "u_fb", "status"]
+    np.testing.assert_array_equal(out.y_ref, ref.y)  # the input, not the output u
+    frame = out.to_pandas()
+    np.testing.assert_array_equal(frame["u"], out.u)
+    np.testing.assert_array_equal(frame["y"], out.y)
+    assert out.status.dtype == np.int64 and out.outputs.shape == (7, len(ref.y))
+    t, y = out
+    np.testing.assert_array_equal(y[0], out.y)  # python-control's layout: signal, time

@@ -30,8 +30,7 @@ times faster (``benchmarks/bench_compensate.py``), for long runs.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
 
 import control as ct
@@ -41,6 +40,7 @@ from numba.core.dispatcher import Dispatcher
 
 from ..kernels import step as stage_step
 from ..model import DuhemSandwich
+from ..response import LabelledResponse
 from .compensator import (
     COMPENSATIONS,
     DUHEM_BOUND,
@@ -70,11 +70,13 @@ __all__ = [
 OUTPUTS = ["y", "u", "yd", "e", "u_ff", "u_fb", "du", "ff_status"]
 
 
-@dataclass
-class ClosedLoopResponse:
-    """Signals of a closed-loop run. Unpacks as ``t, y``.
+class ClosedLoopResponse(LabelledResponse):
+    """Signals of a closed-loop run, as a :class:`control.TimeResponseData`. Unpacks as ``t, y``.
 
-    Attributes
+    Input ``y_ref``; outputs ``y, u, yd, e, u_ff, u_fb, status`` (each also an attribute), so
+    ``.plot()`` and ``.to_pandas()`` work as for any python-control response.
+
+    Parameters
     ----------
     t : ndarray
         Time in seconds.
@@ -88,41 +90,71 @@ class ClosedLoopResponse:
         Error seen by the controller: ``yd - (y + noise)``, or 0 while it holds.
     status : ndarray
         Compensator status flags (see :class:`~hystid.compensate.compensator.Feedforward`).
+    name : str
+        Name of the loop.
     """
 
-    t: np.ndarray
-    y_ref: np.ndarray
-    yd: np.ndarray
-    y: np.ndarray
-    u: np.ndarray
-    u_ff: np.ndarray
-    u_fb: np.ndarray
-    e: np.ndarray
-    status: np.ndarray
+    def __init__(self, t: np.ndarray, y_ref: np.ndarray, yd: np.ndarray, y: np.ndarray,
+                 u: np.ndarray, u_ff: np.ndarray, u_fb: np.ndarray, e: np.ndarray,
+                 status: np.ndarray, name: str = "closed loop") -> None:
+        outputs = {"y": y, "u": u, "yd": yd, "e": e, "u_ff": u_ff, "u_fb": u_fb,
+                   "status": status}
+        super().__init__(t, {"y_ref": y_ref}, outputs, name=name)
 
-    def __iter__(self) -> Iterator[np.ndarray]:
-        yield self.t
-        yield self.y
+    @property
+    def status(self) -> np.ndarray:
+        """Compensator status flags, as integers."""
+        return self._find("status").astype(np.int64)
 
     def metrics(self, skip: int = 0, *, against: str = "y_ref") -> TrackingMetrics:
-        """Tracking figures of ``y`` against ``y_ref`` (or ``"yd"``) after ``skip`` samples."""
+        """Tracking figures of ``y`` against ``y_ref`` (or ``"yd"``) after ``skip`` samples.
+
+        Parameters
+        ----------
+        skip : int
+            Leading samples left out.
+        against : {"y_ref", "yd"}
+            The reference, or the desired output the compensator aims at.
+
+        Returns
+        -------
+        TrackingMetrics
+            Maximum and RMS error and the loop width left.
+        """
         if against not in ("y_ref", "yd"):
             raise ValueError(f"against: expected 'y_ref' or 'yd', got {against!r}")
         return tracking_metrics(getattr(self, against), self.y, skip=skip)
 
-    def plot(
-        self, ax: Sequence[Axes] | np.ndarray | None = None, label: str | None = None
+    def plot_tracking(
+        self, ax: Sequence[Axes] | np.ndarray | None = None, label: str | None = None,
+        *, unit: str = "um",
     ) -> Sequence[Axes] | np.ndarray:
-        """Output against reference, and the error; returns the axes."""
-        import matplotlib.pyplot as plt
+        """Output against reference, and the error in nm; returns the two axes.
 
+        Parameters
+        ----------
+        ax : two matplotlib axes, optional
+            Where to draw; a new figure (not registered with pyplot) by default.
+        label : str, optional
+            Legend label of the lines.
+        unit : str
+            Unit of ``y`` (the error is drawn in nm when it is ``"um"``).
+
+        Returns
+        -------
+        sequence of matplotlib.axes.Axes
+            The output axis and the error axis.
+        """
         if ax is None:
-            _, ax = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
+            from matplotlib.figure import Figure
+
+            ax = Figure(figsize=(7, 5), layout="constrained").subplots(2, 1, sharex=True)
+        scale, e_unit = (1e3, "nm") if unit == "um" else (1.0, unit)
         ax[0].plot(self.t, self.y_ref, color="0.6", lw=0.8)
         ax[0].plot(self.t, self.y, lw=0.9, label=label)
-        ax[0].set_ylabel("y [um]")
-        ax[1].plot(self.t, self.y - self.y_ref, lw=0.9, label=label)
-        ax[1].set_ylabel("y - y_ref [um]")
+        ax[0].set_ylabel(f"y [{unit}]")
+        ax[1].plot(self.t, scale * (self.y - self.y_ref), lw=0.9, label=label)
+        ax[1].set_ylabel(f"y - y_ref [{e_unit}]")
         ax[1].set_xlabel("time [s]")
         return ax
 
@@ -307,7 +339,7 @@ def closed_loop_response(
     out = {label: resp.outputs[i] for i, label in enumerate(sys.output_labels)}
     return ClosedLoopResponse(
         t, y_ref, out["yd"], out["y"], out["u"], out["u_ff"], out["u_fb"], out["e"],
-        out["ff_status"].astype(np.int64),
+        out["ff_status"].astype(np.int64), name=sys.name,
     )
 
 
