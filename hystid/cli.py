@@ -482,8 +482,21 @@ _seconds = number(0.0, MAX_SECONDS, strict_minimum=True)
 _seed = integer(0, 2**63 - 1)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``hystid`` command."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser of the ``hystid`` command.
+
+    Parameters
+    ----------
+    only : str, optional
+        Give the options of ``diagnose`` and ``fleet`` only when this is that command (the
+        others keep their one-line help), so that ``hystid --help`` does not load their
+        modules; every command in full by default.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser; each command sets ``func``.
+    """
     parser = argparse.ArgumentParser(
         prog="hystid",
         description="Identify piezo-driven positioning stages (L1-Duhem-L2 sandwich).",
@@ -563,30 +576,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_identify)
 
-    try:
+    p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap",
+                       description="Localise the model error, screen unmodelled effects and "
+                       "measure how far each closes the gap on held-out data.")
+    if only in (None, "diagnose"):
         from .diagnose import command as diagnose_command
-    except ImportError:
-        diagnose_command = None
-    if diagnose_command is not None:
-        p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap",
-                           description="Localise the model error, screen unmodelled effects and "
-                           "measure how far each closes the gap on held-out data.")
+
         diagnose_command.configure_parser(p)
         p.set_defaults(func=diagnose_command.run)
-
-    from . import fleet_command
 
     p = sub.add_parser("fleet", help="identify or diagnose many records on Dask",
                        description="Identify or diagnose many records as Dask tasks; one result "
                        "row per record (CSV and Parquet), resumable.")
-    fleet_command.configure_parser(p)
-    p.set_defaults(func=fleet_command.run)
+    if only in (None, "fleet"):
+        from . import fleet_command
+
+        fleet_command.configure_parser(p)
+        p.set_defaults(func=fleet_command.run)
     return parser
 
 
+def _command_word(argv: list[str]) -> str:
+    """The command named on a command line (the first word not an option), or ``""``."""
+    return next((a for a in argv if not a.startswith("-")), "")
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``hystid`` command; returns the exit status."""
-    parser = build_parser()
+    """Entry point of the ``hystid`` command; returns the exit status.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (``sys.argv[1:]`` by default).
+
+    Returns
+    -------
+    int
+        0 on success, 2 on bad input or a failed write, 130 when interrupted.
+    """
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    parser = build_parser(only=_command_word(argv))
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
