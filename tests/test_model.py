@@ -78,7 +78,7 @@ def test_simulate_returns_a_labelled_control_response(model):
     assert len(lines) == 2  # y and u
     np.testing.assert_array_equal(lines[0].get_ydata(), r.y)
     with pytest.raises(AttributeError, match="signals: u, y, w1, w2"):
-        r.w3
+        _ = r.w3
 
 
 def _past(model, seed=5):
