@@ -216,10 +216,9 @@ class SandwichResponse(LabelledResponse):
 
 
 def _stack(signals: dict[str, np.ndarray]) -> np.ndarray:
-    """Signals as rows of one float array, checked to share one length."""
-    rows = [np.asarray(v, float).ravel() for v in signals.values()]
-    lengths = {len(r) for r in rows}
-    if len(lengths) > 1:
+    """Signals as rows of one float array (a view for a single signal), of one length."""
+    rows = [np.asarray(v, dtype=float).reshape(-1) for v in signals.values()]
+    if len({len(r) for r in rows}) > 1:
         sizes = ", ".join(f"{k}: {len(r)}" for k, r in zip(signals, rows, strict=True))
         raise ValueError(f"signals must share one length, got {sizes}")
-    return np.vstack(rows)
+    return rows[0][np.newaxis] if len(rows) == 1 else np.stack(rows)
