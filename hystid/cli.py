@@ -25,7 +25,15 @@ class CommandError(Exception):
 
 
 class Progress:
-    """Periodic progress lines on stderr (silent when ``quiet``)."""
+    """Periodic progress lines on stderr (silent when ``quiet``).
+
+    Parameters
+    ----------
+    quiet : bool
+        Print nothing.
+    every : float
+        Least seconds between two periodic lines.
+    """
 
     def __init__(self, quiet: bool = False, every: float = 1.0):
         self.quiet = quiet
@@ -34,7 +42,13 @@ class Progress:
         self._t0 = time.perf_counter()
 
     def say(self, message: str) -> None:
-        """Print one line now."""
+        """Print one line now.
+
+        Parameters
+        ----------
+        message : str
+            The line, printed after the seconds elapsed.
+        """
         if not self.quiet:
             print(f"[{time.perf_counter() - self._t0:6.1f} s] {message}", file=sys.stderr)
 
@@ -258,7 +272,18 @@ def _write_history(path: str, result) -> None:
 
 # --------------------------------------------------------------------------- commands
 def cmd_simulate(args: argparse.Namespace) -> int:
-    """``hystid simulate``: a record from the built-in reference stage or from a saved model."""
+    """``hystid simulate``: a record from the built-in reference stage or from a saved model.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        The exit status (0).
+    """
     progress = Progress(args.quiet)
     inputs = tuple(p for p in (args.model, args.input) if p)
     out = _check_file(args.out, "--out", args, inputs)
@@ -334,7 +359,18 @@ def _model_record(args: argparse.Namespace, progress: Progress):
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
-    """``hystid identify``: identify a record, validate, print or write JSON."""
+    """``hystid identify``: identify a record, validate, print or write JSON.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        The exit status (0).
+    """
     from .safeio import dumps_strict
 
     progress = Progress(args.quiet or args.json)
@@ -417,7 +453,18 @@ def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """``hystid demo``: the main job on the built-in reference stage."""
+    """``hystid demo``: the main job on the built-in reference stage.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        The exit status (0).
+    """
     from .identify import METHODS, identify
     from .metrics import validate
     from .reference import PAPER_PARAMS, reference_model, reference_record

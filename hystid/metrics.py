@@ -48,7 +48,13 @@ class Validation:
         yield from (self.err_min, self.err_max, self.rms, self.fit_percent)
 
     def to_dict(self) -> dict[str, float]:
-        """The figures as a plain dict (JSON-ready)."""
+        """The figures as a plain dict (JSON-ready).
+
+        Returns
+        -------
+        dict
+            The fields by name.
+        """
         return asdict(self)
 
 
@@ -65,6 +71,11 @@ def validate(
         Sampling rate in Hz.
     transient : float
         Seconds dropped at the start (the paper's 0.0017 s by default).
+
+    Returns
+    -------
+    Validation
+        Error range, RMS and fit after the transient.
     """
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     if y.shape != yhat.shape or y.ndim != 1:

@@ -86,6 +86,11 @@ class InitialCondition:
     """Past values of the sandwich's signals, most recent last (``u(k-1), w1(k-1), ...``).
 
     Shorter arrays are padded with zeros at the old end; missing ones are zero (at rest).
+
+    Parameters
+    ----------
+    u, w1, w2, y : ndarray
+        Past input, internal signals and output, oldest first.
     """
 
     u: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -94,7 +99,20 @@ class InitialCondition:
     y: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def window(self, name: str, length: int) -> np.ndarray:
-        """The last ``length`` values of signal ``name``, zero-padded at the old end."""
+        """The last ``length`` values of signal ``name``, zero-padded at the old end.
+
+        Parameters
+        ----------
+        name : {"u", "w1", "w2", "y"}
+            The signal.
+        length : int
+            Number of past samples wanted.
+
+        Returns
+        -------
+        ndarray
+            ``length`` values, oldest first.
+        """
         v = np.asarray(getattr(self, name), dtype=float).ravel()
         if not np.all(np.isfinite(v)):
             raise ValueError(f"InitialCondition.{name} contains non-finite values")
@@ -184,7 +202,13 @@ class DuhemSandwich(Placed):
         return self._group("b2", self.structure.n2b)
 
     def is_stable(self) -> bool:
-        """True when L1 and L2 are stable and minimum phase (Assumption 1) and alpha > 0."""
+        """True when L1 and L2 are stable and minimum phase (Assumption 1) and alpha > 0.
+
+        Returns
+        -------
+        bool
+            Whether Assumption 1 holds and ``alpha > 0``.
+        """
         polys = [self.a1, self.b1, self.a2, self.b2]
         radius = max(
             (np.max(np.abs(np.roots(np.r_[1.0, p]))) if len(p) else 0.0) for p in polys
@@ -284,7 +308,18 @@ class DuhemSandwich(Placed):
         )
 
     def control_state(self, x0: InitialCondition | None = None) -> np.ndarray:
-        """State vector of :meth:`to_control` that continues from the past ``x0``."""
+        """State vector of :meth:`to_control` that continues from the past ``x0``.
+
+        Parameters
+        ----------
+        x0 : InitialCondition, optional
+            Past signal values; at rest by default.
+
+        Returns
+        -------
+        ndarray
+            The states of ``L1``, ``H`` and ``L2`` in the order of :meth:`to_control`.
+        """
         import control as ct
 
         from . import blocks
@@ -319,6 +354,11 @@ class DuhemSandwich(Placed):
             Keep the ``f0 sgn`` term; by default only when ``H.params['f0']`` is non-zero.
         name : str
             Name of the returned model.
+
+        Returns
+        -------
+        DuhemSandwich
+            The model, with the rest level and offset of ``U0`` / ``Y0`` blocks if present.
         """
         import control as ct
 
@@ -477,7 +517,22 @@ def params_vector(
 ) -> np.ndarray:
     """Parameters as a vector in the order of ``names``, from a mapping or a sequence.
 
-    Raises ``ValueError`` naming the missing, unknown or non-finite parameters.
+    Parameters
+    ----------
+    params : mapping or sequence of float
+        Values by name, or a vector already in the order of ``names``.
+    names : sequence of str
+        Parameter names in the wanted order.
+
+    Returns
+    -------
+    ndarray
+        The values in the order of ``names``.
+
+    Raises
+    ------
+    ValueError
+        Naming the missing, unknown or non-finite parameters.
     """
     if isinstance(params, Mapping):
         missing = [n for n in names if n not in params]

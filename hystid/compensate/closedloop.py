@@ -317,6 +317,11 @@ def closed_loop_response(
         Desired output, one value per sample, starting at rest.
     noise : ndarray, optional
         Sensor noise added to ``y`` (needs ``noise_input=True``).
+
+    Returns
+    -------
+    ClosedLoopResponse
+        Input ``y_ref``; outputs ``y, u, yd, e, u_ff, u_fb, status``.
     """
     subs = {s.name: s for s in sys.syslist}
     ff = subs.get("ff")
@@ -433,6 +438,11 @@ def simulate_closed_loop(
         As for :func:`~hystid.compensate.compensator.inverse`.
     hold_while_turning : bool
         As for :func:`closed_loop`.
+
+    Returns
+    -------
+    ClosedLoopResponse
+        Input ``y_ref``; outputs ``y, u, yd, e, u_ff, u_fb, status``.
     """
     stage = model if plant is None else plant
     if not isinstance(stage, DuhemSandwich):

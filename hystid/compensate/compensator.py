@@ -467,6 +467,16 @@ def hysteresis_gain(model: DuhemSandwich | PISandwich) -> float:
     ``f1`` for the Duhem block (its ascending and descending branches are
     ``w2 = f1 w1 -+ (f1 - g0) / alpha``); for a PI block the secant of the loading curve over the
     largest threshold.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified stage.
+
+    Returns
+    -------
+    float
+        The slope ``dw2/dw1`` of the central line.
     """
     if isinstance(model, DuhemSandwich):
         return float(model.params["f1"])
@@ -601,6 +611,19 @@ class HysteresisInverse(ct.NonlinearIOSystem):
         Samples of reference the reversal planner looks ahead.
     advance : int
         ``delay + preview``: how far ahead of ``y`` the input reference runs.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model inverted.
+    chain : _Chain
+        The compiled chain's arrays (made by :func:`inverse`).
+    inputs : str
+        Name of the reference input.
+    outputs : sequence of str
+        Names of the command, desired-output and status outputs.
+    name : str
+        System name.
     """
 
     def __init__(self, model, chain: _Chain, *, inputs, outputs, name):
@@ -626,7 +649,18 @@ class HysteresisInverse(ct.NonlinearIOSystem):
         return self._chain.advance
 
     def reference_input(self, y_ref: np.ndarray | Sequence[float]) -> np.ndarray:
-        """The input signal ``r(k) = y_ref(k + advance)`` (the last value held at the end)."""
+        """The input signal ``r(k) = y_ref(k + advance)`` (the last value held at the end).
+
+        Parameters
+        ----------
+        y_ref : array_like
+            Desired output, one value per sample.
+
+        Returns
+        -------
+        ndarray
+            The advanced reference, as long as ``y_ref``.
+        """
         y = _as_reference(y_ref)
         return _pad_hold(y, self.advance)[self.advance:]
 
@@ -636,6 +670,16 @@ class HysteresisInverse(ct.NonlinearIOSystem):
         Pass it as ``X0`` to :func:`control.input_output_response` together with
         :meth:`reference_input`; without ``y_ref``, the reference is taken as zero before
         sample ``advance``.
+
+        Parameters
+        ----------
+        y_ref : array_like, optional
+            Desired output, one value per sample.
+
+        Returns
+        -------
+        ndarray
+            The compensator's state vector.
         """
         return self._chain.initial_state(None if y_ref is None else _as_reference(y_ref))
 
@@ -805,6 +849,22 @@ def linear_feedforward(
 
     L1 and L2 are inverted exactly as in :func:`feedforward`, so the difference between the two
     tracking errors is the error hysteresis causes.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified stage.
+    y_ref : array_like
+        Desired output, one value per sample.
+    u_limits, reference_model, reference_lead
+        As for :func:`inverse`.
+    full_output : bool
+        Return a :class:`Feedforward` instead of the command alone.
+
+    Returns
+    -------
+    ndarray or Feedforward
+        The command ``u``.
     """
     chain = _build(model, kind=KIND_LINEAR, u_limits=u_limits, reference_model=reference_model,
                    preview=0, duhem_bound=DUHEM_BOUND, reference_lead=reference_lead)

@@ -134,7 +134,20 @@ def summary_text(result: DiagnosisResult) -> str:
 
 
 def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> list[Path]:
-    """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths."""
+    """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        The diagnosis.
+    out_dir : path-like
+        Folder of the PNG files.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
     import matplotlib.pyplot as plt
 
     out = Path(out_dir)

@@ -455,7 +455,22 @@ def _n_full(s: PIStructure) -> int:
 def pi_output_sensitivities(
     model: PISandwich, u: np.ndarray, x0: InitialCondition | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Simulated output and its Jacobian ``d yhat / d theta`` (``N x n_params``) from rest/x0."""
+    """Simulated output and its Jacobian ``d yhat / d theta`` (``N x n_params``) from rest/x0.
+
+    Parameters
+    ----------
+    model : PISandwich
+        The model at the current parameters.
+    u : ndarray
+        Input samples.
+    x0 : InitialCondition, optional
+        Past signal values; at rest by default.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``yhat`` (N) and its Jacobian (N x n_params).
+    """
     s = model.structure
     x0 = x0 or InitialCondition()
     P = s.history
@@ -503,6 +518,18 @@ def keyterm_to_model(theta_kt: np.ndarray, structure: PIStructure) -> np.ndarray
     ``p_i(k-2)`` are nearly collinear and the difference of the rows of ``beta`` is poorly
     determined), and ``b2`` is the least-squares factor ``beta mu / |mu|^2`` (whose sum is then
     ``A2(1)``).
+
+    Parameters
+    ----------
+    theta_kt : ndarray
+        Key-term parameters (a vector, or one per row).
+    structure : PIStructure
+        Orders and delays.
+
+    Returns
+    -------
+    ndarray
+        Model parameters, same leading shape as ``theta_kt``.
     """
     s = structure
     th = np.atleast_2d(np.asarray(theta_kt, dtype=float))
@@ -678,7 +705,18 @@ class PIRecursiveIdentifier:
         return PIStructure(n_operators=n)
 
     def reset(self, thresholds: np.ndarray | None = None) -> PIRecursiveIdentifier:
-        """Start over from ``theta0``, ``P0`` at rest (optionally with new thresholds)."""
+        """Start over from ``theta0``, ``P0`` at rest (optionally with new thresholds).
+
+        Parameters
+        ----------
+        thresholds : ndarray, optional
+            New play-operator thresholds.
+
+        Returns
+        -------
+        PIRecursiveIdentifier
+            The identifier itself.
+        """
         if thresholds is not None:
             self.thresholds = thresholds
         if self.thresholds is None:
@@ -815,6 +853,16 @@ class PIRecursiveIdentifier:
 
         During the warm-up the sample is stored and ``e(k) = 0`` is returned; the sample that
         completes it triggers the off-line fit.
+
+        Parameters
+        ----------
+        u_k, y_k : float
+            Input and measured output at sample ``k``.
+
+        Returns
+        -------
+        float
+            The prediction error ``e(k)``.
         """
         if not self._ready:
             self.reset()
@@ -985,6 +1033,8 @@ def fit_pi_output_error(
         Maximum number of residual evaluations.
     tol : float
         Stop when the relative decrease of the cost or the relative step falls below it.
+    name : str
+        Name of the identified model.
 
     Returns
     -------
@@ -1113,6 +1163,11 @@ def identify_pi(
         ``progress(k, n)`` during the recursive run.
     **settings
         Passed to the identifier's constructor or to :func:`fit_pi_output_error`.
+
+    Returns
+    -------
+    IdentificationResult
+        The model, its parameter history (recursive) and the run's information.
     """
     if method == "recursive":
         return PIRecursiveIdentifier(**settings).fit(record, progress=progress)
