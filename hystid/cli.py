@@ -18,6 +18,10 @@ EXIT_BAD_INPUT = 2
 #: Files ``identify --out`` and ``demo --out`` write into their folder.
 REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png")
 _RECORD_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
+#: Compiled kernels every ``hystid demo`` runs, as (module, name): while one of them is not in
+#: numba's cache yet, the demo says that it compiles them.
+DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensitivities_into"),
+                ("hystid.identify.online", "rpem_run"), ("hystid.identify.eria", "eria_run"))
 
 
 class CommandError(Exception):
@@ -429,27 +433,62 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 
 def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
-                   provenance: dict | None = None) -> None:
+                   provenance: dict | None = None, seed: int | None = None) -> None:
     """Write report.json, model.json and the figures into ``out`` (each file atomically)."""
-    from .metrics import plot_validation
+    from .metrics import plot_convergence, plot_validation
     from .modelfile import save_model
     from .safeio import atomic_path, write_json
 
+    model = result.model
+    units = {"u": target.units.get("u", ""), "y": target.units.get("y", "")}
+    report = {
+        **report,
+        "units": {**units, "validation": units["y"], "u_rest": units["u"],
+                  "offset": units["y"], "time": "s", "fs": "Hz"},
+        "provenance": {**(provenance or {}), "fs": model.fs,
+                       "structure": dict(vars(model.structure)), "seed": seed},
+    }
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "report.json", report)
-    save_model(result.model, out / "model.json", provenance=provenance, force=True)
+    save_model(model, out / "model.json", provenance=provenance, force=True)
     with atomic_path(out / "validation.png") as tmp:
-        plot_validation(target.t, target.y, yhat, tmp,
-                        title=f"{report['model']} sandwich, {report['method']}: validation",
-                        unit=target.units.get("y", ""), skip=report["validation"]["skip"])
+        plot_validation(target.t, target.y, yhat, tmp, u=target.u,
+                        title=f"{report['model']} sandwich, {report['method']}: validation on "
+                        f"{target.name}", unit=units["y"], u_unit=units["u"],
+                        skip=(report["validation"] or {}).get("skip", 0))
     if result.history is not None:
-        import matplotlib.pyplot as plt
-
-        axes = result.plot(truth=truth)
-        axes[0].figure.tight_layout()
         with atomic_path(out / "convergence.png") as tmp:
-            axes[0].figure.savefig(tmp, dpi=110)
-        plt.close(axes[0].figure)
+            plot_convergence(result.history, result.names, truth, tmp,
+                             samples=result.history_index,
+                             title=f"{report['model']} sandwich, {report['method']}: "
+                             "parameter convergence")
+
+
+def kernels_cached(kernels: tuple[tuple[str, str], ...] = DEMO_KERNELS) -> bool:
+    """Whether numba's cache holds every kernel named (True when it cannot tell).
+
+    Parameters
+    ----------
+    kernels : tuple of (str, str)
+        Module and name of each compiled kernel.
+
+    Returns
+    -------
+    bool
+        False when one of them has no cache index yet: it compiles on first use.
+    """
+    import importlib
+    import os
+
+    for modname, name in kernels:
+        kernel = getattr(importlib.import_module(modname), name, None)
+        try:
+            index = kernel._cache._cache_file._index_path  # numba's index file of the kernel
+        except AttributeError:  # not a cached kernel, or numba keeps its cache otherwise
+            continue
+        if not os.path.exists(index):
+            return False
+    return True
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -476,6 +515,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     val = reference_record(args.seconds, seed=args.seed + 1, noise=args.noise, name="demo val")
     progress.say(f"reference stage: {train.n} samples at {train.fs:g} Hz, "
                  f"noise {args.noise * 1e3:g} nm; identifying")
+    if not kernels_cached():
+        progress.say("compiling the numba kernels: once, about a minute; later runs load them "
+                     "from numba's cache")
     methods = [m for m in ("batch", "online", "eria") if m in METHODS]
     rows, results, report = [], {}, {"truth": PAPER_PARAMS, "methods": {}}
     out = Path(args.out)
@@ -515,10 +557,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
                                                                - val.y) ** 2)))
     from .modelfile import make_provenance
 
+    report["noise_um"] = args.noise
     _write_outputs(out, {"model": "duhem", "method": result.method,
                          "validation": report["methods"][result.method]["validation"],
                          **report}, val, yhat, result, truth=PAPER_PARAMS,
-                   provenance=make_provenance(result.method, settings=result.settings))
+                   provenance=make_provenance(result.method, settings=result.settings),
+                   seed=args.seed)
     print(f"\nreport written to {out}/report.json, model to {out}/model.json (figures: "
           "validation.png"
           f"{', convergence.png' if result.history is not None else ''})")
