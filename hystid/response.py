@@ -68,7 +68,10 @@ class LabelledResponse(ct.TimeResponseData):
 
     @y.setter
     def y(self, value: np.ndarray) -> None:
-        self._all_outputs = value
+        if self.__dict__.get("_labelled"):
+            self._replace("y", value)
+        else:
+            self._all_outputs = value
 
     @property
     def u(self) -> np.ndarray:
@@ -77,7 +80,26 @@ class LabelledResponse(ct.TimeResponseData):
 
     @u.setter
     def u(self, value: np.ndarray | None) -> None:
-        self._all_inputs = value
+        if self.__dict__.get("_labelled"):
+            self._replace("u", value)
+        else:
+            self._all_inputs = value
+
+    def _replace(self, label: str, value: np.ndarray) -> None:
+        """Give the signal ``label`` new samples (the arrays are copied, not written into)."""
+        for labels_key, data_key in (("input_labels", "_all_inputs"),
+                                     ("output_labels", "_all_outputs")):
+            labels = self.__dict__.get(labels_key) or []
+            if label in labels:
+                data = np.array(self.__dict__[data_key], dtype=float)
+                row = np.asarray(value, dtype=float).reshape(-1)
+                if row.shape != data.shape[1:]:
+                    raise ValueError(f"{label}: expected {data.shape[1]} samples, got shape "
+                                     f"{np.shape(value)}")
+                data[labels.index(label)] = row
+                self.__dict__[data_key] = data
+                return
+        raise AttributeError(f"{type(self).__name__} has no signal {label!r} to replace")
 
     @property
     def outputs(self) -> ct.NamedSignal:

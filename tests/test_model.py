@@ -188,3 +188,14 @@ def test_stability_check():
     assert reference_model().is_stable()
     assert not DuhemSandwich({**PAPER_PARAMS, "a22": 1.2}).is_stable()
     assert not DuhemSandwich({**PAPER_PARAMS, "alpha": -0.1}).is_stable()
+
+
+def test_response_signals_can_be_replaced_without_touching_the_simulation(model):
+    u = _input(100)
+    r = model.simulate(u)
+    y0 = r.y.copy()
+    r.y = r.y + 1.0  # e.g. sensor noise added afterwards
+    np.testing.assert_array_equal(r.y, y0 + 1.0)
+    np.testing.assert_array_equal(r.to_pandas()["y"], y0 + 1.0)
+    with pytest.raises(ValueError, match="expected 100 samples"):
+        r.y = np.zeros(3)
