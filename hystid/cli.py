@@ -408,7 +408,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         from .modelfile import make_provenance
 
         provenance = make_provenance(result.method, args.record, result.settings)
-        _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance)
+        _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance,
+                       scored_from=scored_from or 0)
     if args.json:
         print(dumps_strict(report))
     else:
@@ -433,8 +434,13 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 
 def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
-                   provenance: dict | None = None, seed: int | None = None) -> None:
-    """Write report.json, model.json and the figures into ``out`` (each file atomically)."""
+                   provenance: dict | None = None, seed: int | None = None,
+                   scored_from: int = 0) -> None:
+    """Write report.json, model.json and the figures into ``out`` (each file atomically).
+
+    The validation figure shows the samples the validation figures were computed on: from
+    ``scored_from`` (a held-out end of the record) less the transient.
+    """
     from .metrics import plot_convergence, plot_validation
     from .modelfile import save_model
     from .safeio import atomic_path, write_json
@@ -455,7 +461,7 @@ def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
         plot_validation(target.t, target.y, yhat, tmp, u=target.u,
                         title=f"{report['model']} sandwich, {report['method']}: validation on "
                         f"{target.name}", unit=units["y"], u_unit=units["u"],
-                        skip=(report["validation"] or {}).get("skip", 0))
+                        skip=scored_from + (report["validation"] or {}).get("skip", 0))
     if result.history is not None:
         with atomic_path(out / "convergence.png") as tmp:
             plot_convergence(result.history, result.names, truth, tmp,
