@@ -177,12 +177,13 @@ def make_cross_form(effect: str, form: str, scale: float, seed: int, n: int,
             "params": {"strength": strength}, "truth": truth, "form": f"{effect}/{form}"}
 
 
-def run_case(case: dict, source: str, strength: str, seed: int) -> dict:
+def run_case(case: dict, source: str, strength: str, seed: int, **settings) -> dict:
+    """Diagnose one case blind (``settings`` go to :func:`hystid.diagnose.diagnose`)."""
     t0 = time.perf_counter()
     if case["val"] is None:
-        res = diagnose(case["train"], holdout=0.5, progress=False)
+        res = diagnose(case["train"], holdout=0.5, progress=False, **settings)
     else:
-        res = diagnose(case["train"], [case["val"]], progress=False)
+        res = diagnose(case["train"], [case["val"]], progress=False, **settings)
     elapsed = time.perf_counter() - t0
     truth = case["truth"]
     return {
