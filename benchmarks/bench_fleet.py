@@ -57,22 +57,20 @@ def make_records(folder: Path, count: int, seconds: float) -> list[Job]:
     return jobs
 
 
-def withheld_jobs(count: int, seed: int = 2024) -> list[tuple[str, int, int]]:
-    """The first ``count`` cases of the withheld-effect draw: (effect, strength, seed)."""
+def withheld_jobs(count: int, seed: int = 2024) -> list[tuple]:
+    """The first ``count`` cross-form cases of the withheld-effect check (its own draw)."""
     import numpy as np
-    from bench_withheld_effects import EFFECT_NAMES
+    from bench_withheld_effects import jobs_cross_form
 
-    rng = np.random.default_rng(seed)
-    draws = rng.permutation(np.resize(np.array(EFFECT_NAMES), count))
-    seeds = rng.integers(1 << 30, size=count)
-    return [(str(e), i % 3, int(s)) for i, (e, s) in enumerate(zip(draws, seeds, strict=True))]
+    jobs = jobs_cross_form(1, 4, np.random.default_rng(seed))
+    return [jobs[i] for i in np.random.default_rng(seed).permutation(len(jobs))[:count]]
 
 
-def withheld_case(job: tuple[str, int, int], n: int) -> dict:
-    """One withheld-effect diagnosis (``bench_withheld_effects.run_case``)."""
+def withheld_case(job: tuple, n: int) -> dict:
+    """One withheld-effect diagnosis (``bench_withheld_effects.diagnose_job``)."""
     import bench_withheld_effects
 
-    return bench_withheld_effects.run_case(*job, n)
+    return bench_withheld_effects.diagnose_job(job, n)
 
 
 def time_withheld(jobs: list[tuple[str, int, int]], n: int, clusters: dict) -> dict:
@@ -81,8 +79,8 @@ def time_withheld(jobs: list[tuple[str, int, int]], n: int, clusters: dict) -> d
     import cloudpickle
 
     cloudpickle.register_pickle_by_value(bench_withheld_effects)  # workers need not import it
-    keys = ("diagnosis", "accepted", "top1", "rms_val_final")
-    warm = (jobs[0][0], jobs[0][1], jobs[0][2] + 1)  # another case: kernels loaded everywhere
+    keys = ("accepted", "top1_form", "rms_val_final")
+    warm = (*jobs[0][:3], jobs[0][3] + 1)  # another case: kernels loaded everywhere
     withheld_case(warm, n // 3)
     for client, _ in clusters.values():
         client.run(withheld_case, warm, n // 3)

@@ -21,7 +21,10 @@ clean records, and per form. Goals: cross-form top-1 >= 90 %, false acceptance o
 candidates, as a ratio to the nominal identification alone in the same process. Usage:
 
     python benchmarks/bench_withheld_effects.py [--quick] [--draws N] [--clean N] [--seconds S]
-        [--only in-form|cross-form] [--no-budget]
+        [--only in-form|cross-form] [--no-budget] [--workers N | --scheduler tcp://HOST:PORT]
+
+With ``--workers`` or ``--scheduler`` every case is a Dask task (:func:`hystid.fleet.map_seeds`);
+the cases and their results are the same as in the serial loop.
 """
 
 from __future__ import annotations
@@ -262,6 +265,44 @@ def make(job: tuple, n: int) -> dict:
     return make_cross_form(effect, form, CROSS_SCALE[strength], seed, n)
 
 
+def diagnose_job(job: tuple, n: int) -> dict:
+    """One case of the check, made and diagnosed blind: the unit of work, in a loop or on Dask."""
+    source, what, strength, seed = job
+    label = STRENGTHS[strength] if what != "none" else "-"
+    return run_case(make(job, n), source, label, seed)
+
+
+def run_jobs(jobs: list[tuple], n: int, workers: int | None, scheduler: str | None) -> list[dict]:
+    """Every case, serially or as Dask tasks (:func:`hystid.fleet.map_seeds`), in job order."""
+    t_start = time.perf_counter()
+
+    def say(count: int, job: tuple, r: dict) -> None:
+        source, what, strength, _ = job
+        label = STRENGTHS[strength] if what != "none" else "-"
+        print(f"[{time.perf_counter() - t_start:6.0f} s] {count}/{len(jobs)} {source:10s} "
+              f"{what:20s} {label:6s} -> accepted {','.join(r['accepted']) or 'none':24s} "
+              f"top-1 {r['top1_form']:12s} ({r['seconds']:.1f} s)", flush=True)
+
+    if workers is None and scheduler is None:
+        rows = []
+        for count, job in enumerate(jobs, 1):
+            rows.append(diagnose_job(job, n))
+            say(count, job, rows[-1])
+        return rows
+    import sys
+
+    import cloudpickle
+
+    from hystid.fleet import map_seeds
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers need not import it
+    rows = map_seeds(diagnose_job, jobs, n, workers=workers, scheduler=scheduler,
+                     progress=True)
+    for count, (job, r) in enumerate(zip(jobs, rows, strict=True), 1):
+        say(count, job, r)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -277,6 +318,10 @@ def main() -> None:
     parser.add_argument("--only", choices=("in-form", "cross-form"), default=None)
     parser.add_argument("--no-budget", action="store_true", help="skip the 45 000-sample budget")
     parser.add_argument("--seed", type=int, default=2024, help="seed of the draws")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="run the cases on a local Dask cluster of N workers")
+    parser.add_argument("--scheduler", default=None,
+                        help="run the cases on a running Dask scheduler (tcp://HOST:PORT)")
     args = parser.parse_args()
     draws = args.draws or 1
     n_clean = args.clean if args.clean is not None else (4 if args.quick else 20)
@@ -288,18 +333,8 @@ def main() -> None:
         jobs += jobs_in_form(draws, n_clean, rng)
     if args.only in (None, "cross-form"):
         jobs += jobs_cross_form(draws, n_clean, rng)
-    order = rng.permutation(len(jobs))
-    rows = []
-    t_start = time.perf_counter()
-    for count, j in enumerate(order, 1):
-        source, what, strength, seed = jobs[j]
-        case = make(jobs[j], n)
-        label = STRENGTHS[strength] if what != "none" else "-"
-        r = run_case(case, source, label, seed)
-        rows.append(r)
-        print(f"[{time.perf_counter() - t_start:6.0f} s] {count}/{len(jobs)} {source:10s} "
-              f"{what:20s} {label:6s} -> accepted {','.join(r['accepted']) or 'none':24s} "
-              f"top-1 {r['top1_form']:12s} ({r['seconds']:.1f} s)", flush=True)
+    jobs = [jobs[j] for j in rng.permutation(len(jobs))]
+    rows = run_jobs(jobs, n, args.workers, args.scheduler)
     summary = {src: summarise([r for r in rows if r["source"] == src])
                for src in ("in-form", "cross-form") if any(r["source"] == src for r in rows)}
     for src, s in summary.items():

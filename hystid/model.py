@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .kernels import as_layout, simulate_into
-from .operating import Envelope, Placed, warn_admissibility
+from .operating import Envelope, Placed, _finite, warn_admissibility
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
@@ -171,6 +171,11 @@ class DuhemSandwich(Placed):
         Inputs the model was identified on; simulating outside it warns.
     units : dict, optional
         Units of ``u`` and ``y`` (``{"u": "V", "y": "um"}`` by default).
+    rest_memory : float
+        Duhem state ``w2`` of the stage at rest (output units before L2): a stage at rest still
+        remembers how it got there, and eq. (7) keeps that value until the input moves. The
+        batch identification fits it on records that start at rest; simulations start from it
+        by default (:meth:`at_rest`).
 
     Attributes
     ----------
@@ -191,6 +196,7 @@ class DuhemSandwich(Placed):
         offset: float = 0.0,
         envelope: Envelope | None = None,
         units: Mapping[str, str] | None = None,
+        rest_memory: float = 0.0,
     ) -> None:
         self.structure = structure or Structure()
         if not (np.isfinite(fs) and fs > 0):
@@ -199,6 +205,7 @@ class DuhemSandwich(Placed):
         self.name = name
         self.theta = params_vector(params, self.structure.names)
         self._place(u_rest, offset, envelope, units)
+        self.rest_memory = _finite(rest_memory, "rest_memory")
 
     # ----------------------------------------------------------------- parameters
     @property
@@ -336,7 +343,7 @@ class DuhemSandwich(Placed):
 
         from . import blocks
 
-        x0 = x0 or InitialCondition()
+        x0 = x0 or self.at_rest()
         n = self.structure.history + 1
         l1 = ct.tf2ss(self.L1, method="scipy")
         l2 = ct.tf2ss(self.L2, method="scipy")
@@ -414,7 +421,7 @@ class DuhemSandwich(Placed):
             Input samples u(0) .. u(N-1), in the record's units.
         x0 : InitialCondition, optional
             Past signal values relative to the rest (``u - u_rest``, ``y - offset``); at rest
-            by default.
+            with the model's :attr:`rest_memory` by default (:meth:`at_rest`).
         check : bool
             Warn (:class:`~hystid.operating.AdmissibilityWarning`) when the input leaves the
             model's envelope or condition (8) fails; the reasons are also in
@@ -426,7 +433,7 @@ class DuhemSandwich(Placed):
             Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
         """
         u = _as_signal(u, "u")
-        x0 = x0 or InitialCondition()
+        x0 = x0 or self.at_rest()
         P = self.structure.history
         U, W1, W2, Y = (
             np.concatenate([x0.window(k, P), np.zeros(len(u))]) for k in ("u", "w1", "w2", "y")
@@ -440,6 +447,23 @@ class DuhemSandwich(Placed):
             resp.warnings = self.admissibility(u, resp)
             warn_admissibility(resp.warnings, self.name)
         return resp
+
+    def at_rest(self) -> InitialCondition:
+        """The past of the stage at rest: ``w1 = 0``, the Duhem state at :attr:`rest_memory`.
+
+        Returns
+        -------
+        InitialCondition
+            L2 settled on the remembered ``w2`` (relative to the model's rest).
+        """
+        P = self.structure.history + 1
+        if not self.rest_memory:
+            return InitialCondition()
+        y = self.rest_memory * self._l2_gain()
+        return InitialCondition(w2=np.full(P, self.rest_memory), y=np.full(P, y))
+
+    def _l2_gain(self) -> float:
+        return float((1.0 + np.sum(self.b2)) / (1.0 + np.sum(self.a2)))
 
     def rest_state(self, u0: float, steps: int = 400) -> InitialCondition:
         """The past of a stage brought slowly from its rest to input ``u0`` and held there.
@@ -466,12 +490,12 @@ class DuhemSandwich(Placed):
         w1 = v * (1.0 + np.sum(self.b1)) / (1.0 + np.sum(self.a1))
         p = self.params
         f0 = p.get("f0", 0.0)
-        w2, prev = 0.0, 0.0
+        w2, prev = self.rest_memory, 0.0
         for x in np.linspace(0.0, w1, steps + 1)[1:]:
             d = x - prev
             w2 += p["alpha"] * (f0 * np.sign(prev) + p["f1"] * prev - w2) * abs(d) + p["g0"] * d
             prev = x
-        y = w2 * (1.0 + np.sum(self.b2)) / (1.0 + np.sum(self.a2))
+        y = w2 * self._l2_gain()
         return InitialCondition(*(np.full(P, x) for x in (v, w1, w2, y)))
 
     def admissibility(

@@ -155,6 +155,8 @@ def model_document(
     }
     if kind == "pi":
         doc["thresholds"] = [float(r) for r in model.thresholds]
+    else:
+        doc["rest_memory"] = float(model.rest_memory)
     doc.update({
         "fs": float(model.fs),
         "u_rest": float(model.u_rest),
@@ -257,7 +259,8 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
     try:
         if kind == "duhem":
             structure = Structure(**_structure(doc, _DUHEM_KEYS, where))
-            model = DuhemSandwich(params, structure, **common)
+            model = DuhemSandwich(params, structure, **common,
+                                  rest_memory=_number(doc, "rest_memory", where, default=0.0))
         else:
             from .pi import PISandwich, PIStructure
 

@@ -60,6 +60,7 @@ def _round_trip(model, path, u):
     assert (loaded.fs, loaded.u_rest, loaded.offset, loaded.units) == \
         (model.fs, model.u_rest, model.offset, model.units)
     assert loaded.envelope == model.envelope
+    assert getattr(loaded, "rest_memory", 0.0) == getattr(model, "rest_memory", 0.0)
     a, b = _simulate(model, u), _simulate(loaded, u)
     assert np.array_equal(a.y, b.y) and np.array_equal(a.w2, b.w2)
     return loaded

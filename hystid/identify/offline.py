@@ -481,11 +481,12 @@ def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, la
     n = problem.npar
     theta_n = problem.rp.to_theta(sol.x[:n])[0]
     y0n = float(sol.x[n]) if problem.fit_offset else 0.0
+    e0n = float(sol.x[n + 1]) if problem.fit_state else 0.0
     theta = to_physical(theta_n, structure, prep.u_scale, prep.y_scale)
     rec = prep.record
     model = DuhemSandwich(theta, structure, fs=rec.fs, name=name, u_rest=prep.u_rest,
-                          offset=prep.offset(y0n),
-                          envelope=prep.envelope, units=rec.units)
+                          offset=prep.offset(y0n), envelope=prep.envelope, units=rec.units,
+                          rest_memory=e0n * prep.y_scale)
     m = len(problem.idx)
     bound = problem.bound(theta_n)
     notes = list(prep.notes)
