@@ -265,11 +265,12 @@ def make(job: tuple, n: int) -> dict:
     return make_cross_form(effect, form, CROSS_SCALE[strength], seed, n)
 
 
-def diagnose_job(job: tuple, n: int) -> dict:
-    """One case of the check, made and diagnosed blind: the unit of work, in a loop or on Dask."""
+def diagnose_job(job: tuple, n: int, **settings) -> dict:
+    """One case of the check, made and diagnosed blind: the unit of work, in a loop or on Dask
+    (``settings`` go to :func:`hystid.diagnose.diagnose`)."""
     source, what, strength, seed = job
     label = STRENGTHS[strength] if what != "none" else "-"
-    return run_case(make(job, n), source, label, seed)
+    return run_case(make(job, n), source, label, seed, **settings)
 
 
 def run_jobs(jobs: list[tuple], n: int, workers: int | None, scheduler: str | None) -> list[dict]:

@@ -339,12 +339,8 @@ def withheld_effects(in_form: int = 3, cross_form: int = 3, clean: int = 1,
     rng = np.random.default_rng(seed)
     jobs = (_pick(bw.jobs_in_form(1, clean, rng), in_form, clean)
             + _pick(bw.jobs_cross_form(1, clean, rng), cross_form, clean))
-    rows = []
-    for job in jobs:
-        source, what, strength, case_seed = job
-        label = bw.STRENGTHS[strength] if what != "none" else "-"
-        with quiet():
-            rows.append(bw.run_case(bw.make(job, n), source, label, case_seed, time_budget=0.0))
+    with quiet():
+        rows = [bw.diagnose_job(job, n, time_budget=0.0) for job in jobs]
     out = {src: bw.summarise([r for r in rows if r["source"] == src])
            for src in ("in-form", "cross-form")}
     out["cases"] = rows

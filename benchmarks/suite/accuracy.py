@@ -125,14 +125,14 @@ class Tracking:
     """What the feed-forward inverse of an identified model cuts off the tracking error."""
 
     timeout = 600
-    params = [("triangle", 10.0), ("triangle", 50.0), ("sine", 50.0)]
+    params = ["triangle 10 Hz", "triangle 50 Hz", "sine 50 Hz"]
     param_names = ["scan"]
 
     def setup_cache(self):
-        return {p: figures.tracking_cut(*p) for p in self.params}
+        return {p: figures.tracking_cut(p.split()[0], float(p.split()[1])) for p in self.params}
 
     def track_tracking_error_cut(self, result, scan):
         """Max tracking error without / with the inverse."""
-        return result[tuple(scan)]["cut"]
+        return result[scan]["cut"]
 
     track_tracking_error_cut.unit = "ratio"
