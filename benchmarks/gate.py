@@ -44,7 +44,7 @@ GROUPS: dict[str, Callable[[], dict]] = {
                         ("online", ("offset", "units", "10kHz", "outlier", "end_glitch")))
        for c in cases},
     "wrong_basin": functools.partial(figures.wrong_basin, range(3)),
-    "withheld": functools.partial(figures.withheld_effects, in_form=3, cross_form=3, clean=1),
+    "withheld": functools.partial(figures.withheld_effects, in_form=2, cross_form=2, clean=1),
     "tracking": figures.tracking_cut,
 }
 
