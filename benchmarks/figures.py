@@ -112,6 +112,38 @@ def _identify(record, method: str, **settings):
         return identify(record, method=method, **settings)
 
 
+def fit_and_compare(train, held: Sequence, method: str, **settings) -> tuple:
+    """Identify ``train`` with ``method`` and score it and the baselines on ``held``.
+
+    Parameters
+    ----------
+    train : Record
+        The identification record.
+    held : sequence of Record or (Record, int)
+        Held-out records, as :func:`hystid.baselines.compare` takes them.
+    method : str
+        As :func:`_identify`.
+    **settings
+        Passed to the identifier.
+
+    Returns
+    -------
+    tuple
+        ``(result, comparison, seconds)``: the identification result, the
+        :class:`hystid.baselines.BaselineComparison` and the identification's time.
+    """
+    import time
+
+    from hystid.baselines import compare
+
+    t0 = time.perf_counter()
+    res = _identify(train, method, **settings)
+    seconds = time.perf_counter() - t0
+    with quiet():
+        comparison = compare(res.model, train, held)
+    return res, comparison, seconds
+
+
 def reference_identification(method: str, seed: int = 0, noise: float = 1e-3,
                              samples: int = 30_000) -> dict:
     """Identify a reference-stage record from rest and validate on a fresh one.
@@ -219,13 +251,11 @@ def as_measured(method: str, case: str, seed: int = 0, seconds: float = 0.2) -> 
         ``param_err`` (max relative parameter error, None where the truth is not known in the
         record's units), ``warnings``.
     """
-    from hystid.baselines import compare
 
     suite = _suite(seed, seconds)
     train, held = suite[case], suite[f"{case}/heldout"]
-    res = _identify(train, method)
-    with quiet():
-        row = compare(res.model, train, [held]).rows[0]
+    res, comparison, _ = fit_and_compare(train, [held], method)
+    row = comparison.rows[0]
     truth = None if method == "pi" else truth_in_units(train)
     return {"method": method, "case": case, "heldout_rms": float(row["model"]),
             "static_line": float(row["static_line"]), "linear": float(row["linear"]),
