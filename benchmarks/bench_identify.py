@@ -3,8 +3,9 @@
 For each method (off-line batch output error, the paper's ERIA, the converging on-line RPEM and
 the filterpy EKF baseline) and each noise level, over seeds: samples until the estimate stays
 within 2 % and 0.1 % of the truth, final max relative error, validation error range and RMS on a
-fresh record, samples per second, restarts. Then, for the on-line identifier: per-sample
-``update()`` against the chunked ``partial_fit()`` on the same samples (a ratio in one process,
+fresh record, samples per second, restarts. Then, for the on-line identifier and the PI
+recursion: per-sample ``update()`` against the chunked ``partial_fit()`` on the same samples
+(a ratio in one process,
 the two timed in alternation, best of several rounds), and the memory a ``fit`` keeps per sample
 (history and diagnostics, default decimated history) from 1e5 to 1e7 samples. Usage:
 
@@ -61,16 +62,22 @@ def summarise(rows: list[dict]) -> list[list[str]]:
     return out
 
 
-def throughput(method: str, seconds: float) -> dict:
-    """Steady-state samples per second of a recursive method (start-up excluded)."""
+def estimator(method: str):
+    """A fresh on-line estimator of ``method`` (the PI recursion warms up on 1 500 samples)."""
+    from hystid.identify.ekf import KalmanIdentifier
     from hystid.identify.eria import ERIA
     from hystid.identify.online import OnlineIdentifier
+    from hystid.identify.pi_recursive import PIRecursiveIdentifier
 
-    cls = {"online": OnlineIdentifier, "eria": ERIA}.get(method)
-    if cls is None:
-        from hystid.identify.ekf import KalmanIdentifier as cls
+    makers = {"online": OnlineIdentifier, "eria": ERIA, "ekf": KalmanIdentifier,
+              "pi-recursive": lambda: PIRecursiveIdentifier(warmup=1_500)}
+    return makers[method]()
+
+
+def throughput(method: str, seconds: float) -> dict:
+    """Steady-state samples per second of a recursive method (start-up excluded)."""
     rec = reference_record(seconds, seed=99)
-    est = cls()
+    est = estimator(method)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         est.fit(rec[:2_000])
@@ -82,19 +89,17 @@ def throughput(method: str, seconds: float) -> dict:
             "x_30kHz": rate / 30_000.0}
 
 
-def per_sample_ratio(samples: int = 30_000, rounds: int = 5) -> dict:
-    """Per-sample ``update()`` vs chunked ``partial_fit()`` of the on-line identifier.
+def per_sample_ratio(samples: int = 30_000, rounds: int = 5, method: str = "online") -> dict:
+    """Per-sample ``update()`` vs chunked ``partial_fit()`` of an on-line estimator.
 
     Both run from the same state (after start-up) over the same samples; the two are timed in
     alternation ``rounds`` times and the best of each is kept, so a busy machine slows both.
     """
     import copy
 
-    from hystid.identify.online import OnlineIdentifier
-
     rec = reference_record((samples + 3_000) / 30_000.0, seed=99)
     warm, rest = rec[:3_000], rec[3_000:]
-    base = OnlineIdentifier()
+    base = estimator(method)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         base.fit(warm)
@@ -112,8 +117,8 @@ def per_sample_ratio(samples: int = 30_000, rounds: int = 5) -> dict:
                 update(a, b)
             best_step = min(best_step, time.perf_counter() - t0)
     n = rest.n
-    return {"samples": n, "chunked_per_s": n / best_chunk, "update_per_s": n / best_step,
-            "ratio": best_step / best_chunk}
+    return {"method": method, "samples": n, "chunked_per_s": n / best_chunk,
+            "update_per_s": n / best_step, "ratio": best_step / best_chunk}
 
 
 def start_up_basins(seeds: int = 20, seconds: float = 1.0) -> list[dict]:
@@ -205,16 +210,19 @@ def main() -> None:
             seconds = (0.5 if args.quick else 2.0) if method == "ekf" else \
                 (2.0 if args.quick else 10.0)
             speed.append(throughput(method, seconds))
+    speed.append(throughput("pi-recursive", 1.0 if args.quick else 3.0))
     print("\nSteady-state throughput on one core (start-up excluded), baseline: a 30 kHz loop")
     print(table([[r["method"], f"{r['samples']}", f"{r['samples_per_s']:.3g}",
                   f"{r['x_30kHz']:.1f}x"] for r in speed],
                 ["method", "samples", "samples/s", "vs 30 kHz real time"]))
-    ratio = per_sample_ratio(6_000 if args.quick else 30_000)
-    print("\nOn-line identifier: per-sample update() vs chunked partial_fit(), same samples, "
-          "best of 5 alternating rounds (goal: at most 3x)")
-    print(table([[f"{ratio['samples']}", f"{ratio['chunked_per_s']:.3g}",
-                  f"{ratio['update_per_s']:.3g}", f"{ratio['ratio']:.2f}x"]],
-                ["samples", "chunked samples/s", "update() samples/s", "update / chunked"]))
+    ratios = [per_sample_ratio(6_000 if args.quick else 30_000, method=method)
+              for method in ("online", "pi-recursive")]
+    print("\nPer-sample update() vs chunked partial_fit(), same samples, best of 5 alternating "
+          "rounds (goal: at most 3x)")
+    print(table([[r["method"], f"{r['samples']}", f"{r['chunked_per_s']:.3g}",
+                  f"{r['update_per_s']:.3g}", f"{r['ratio']:.2f}x"] for r in ratios],
+                ["estimator", "samples", "chunked samples/s", "update() samples/s",
+                 "update / chunked"]))
     basins = start_up_basins(args.basins) if args.basins else []
     if basins:
         print("\nOn-line start-up over seeds, 1 s records from rest: wrong basin = final max "
@@ -241,7 +249,7 @@ def main() -> None:
                 ["samples", "kept (history + diagnostics)", "peak traced", "history rows",
                  "fit s"]))
     path = write_json("identify", {"samples": n, "rows": rows, "throughput": speed,
-                                   "per_sample": ratio, "memory": mem,
+                                   "per_sample": ratios, "memory": mem,
                                    "start_up_basins": basins})
     print(f"wrote {path}")
 

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import lfilter, lfiltic
 
+from .poly import roots_inside
 from .records import Record
 
 __all__ = ["BaselineComparison", "LinearModel", "StaticLine", "compare", "repeat_floor",
@@ -140,7 +141,7 @@ class LinearModel:
         p0 = np.r_[a[1:], b, c]
         cost0 = np.sum(residual(p0) ** 2)
         sol = least_squares(residual, p0, max_nfev=max_nfev, x_scale="jac")
-        p = sol.x if sol.cost * 2 <= cost0 and _is_stable(np.r_[1.0, sol.x[:na]]) else p0
+        p = sol.x if sol.cost * 2 <= cost0 and roots_inside(np.r_[1.0, sol.x[:na]]) else p0
         return cls(np.r_[1.0, p[:na]], p[na:na + nb + 1] * scale_y / scale_v, q, u0,
                    float(p[-1] * scale_y + y[0]))
 
@@ -166,12 +167,8 @@ def _filter(a: np.ndarray, b: np.ndarray, q: int, v: np.ndarray) -> np.ndarray:
     return lfilter(num, a, v, zi=lfiltic(num, a, []))[0] if len(v) else v
 
 
-def _is_stable(a: np.ndarray) -> bool:
-    return len(a) < 2 or bool(np.max(np.abs(np.roots(a))) < 1.0)
-
-
 def _stabilise(a: np.ndarray) -> np.ndarray:
-    if _is_stable(a):
+    if roots_inside(a):
         return a
     roots = np.roots(a)
     roots = np.where(np.abs(roots) >= 1.0, 0.99 * roots / np.abs(roots) ** 2, roots)

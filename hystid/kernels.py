@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["offsets", "simulate_into", "sensitivities_into", "step", "step_sens"]
+__all__ = ["jacobian_block", "offsets", "simulate_into", "sensitivities_into", "step", "step_sens",
+           "step_sens_row"]
 
 
 @njit(cache=True)
@@ -85,6 +86,13 @@ def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
     ``S1[k], S2[k], SY[k]`` are the gradients of w1(k), w2(k), y(k) with respect to ``theta``
     (forward-mode differentiation through the recursions; d|x|/dx = sgn(x) and d sgn/dx = 0).
     """
+    step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, k)
+
+
+@njit(cache=True)
+def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
+    """:func:`step_sens` with the sensitivities of sample ``k`` at row ``ks`` of ``S1, S2, SY``
+    (the rows before ``ks`` hold those of the samples before ``k``)."""
     n1a, n1b, n2a, n2b, q1, q2 = layout[0], layout[1], layout[2], layout[3], layout[4], layout[5]
     i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
     npar = theta.shape[0]
@@ -101,34 +109,34 @@ def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
         # L1
         s1 = 0.0
         for i in range(1, n1a + 1):
-            s1 -= theta[i_a1 + i - 1] * S1[k - i, p]
-        S1[k, p] = s1
+            s1 -= theta[i_a1 + i - 1] * S1[ks - i, p]
+        S1[ks, p] = s1
     for j in range(1, n1b + 1):
-        S1[k, i_b1 + j - 1] += U[k - q1 - j]
+        S1[ks, i_b1 + j - 1] += U[k - q1 - j]
     for i in range(1, n1a + 1):
-        S1[k, i_a1 + i - 1] -= W1[k - i]
+        S1[ks, i_a1 + i - 1] -= W1[k - i]
     sd = sgn(dw1)
     absd = abs(dw1)
     for p in range(npar):
-        ddw1 = S1[k, p] - S1[k - 1, p]
-        dG = f1 * S1[k - 1, p] - S2[k - 1, p]
-        S2[k, p] = S2[k - 1, p] + alpha * (dG * absd + G * sd * ddw1) + g0 * ddw1
-    S2[k, i_alpha] += G * absd
-    S2[k, i_f1] += alpha * w1p * absd
+        ddw1 = S1[ks, p] - S1[ks - 1, p]
+        dG = f1 * S1[ks - 1, p] - S2[ks - 1, p]
+        S2[ks, p] = S2[ks - 1, p] + alpha * (dG * absd + G * sd * ddw1) + g0 * ddw1
+    S2[ks, i_alpha] += G * absd
+    S2[ks, i_f1] += alpha * w1p * absd
     if i_f0 >= 0:
-        S2[k, i_f0] += alpha * sgn(w1p) * absd
-    S2[k, i_g0] += dw1
+        S2[ks, i_f0] += alpha * sgn(w1p) * absd
+    S2[ks, i_g0] += dw1
     for p in range(npar):
-        sy = S2[k - q2, p]
+        sy = S2[ks - q2, p]
         for j in range(1, n2b + 1):
-            sy += theta[i_b2 + j - 1] * S2[k - q2 - j, p]
+            sy += theta[i_b2 + j - 1] * S2[ks - q2 - j, p]
         for i in range(1, n2a + 1):
-            sy -= theta[i_a2 + i - 1] * SY[k - i, p]
-        SY[k, p] = sy
+            sy -= theta[i_a2 + i - 1] * SY[ks - i, p]
+        SY[ks, p] = sy
     for j in range(1, n2b + 1):
-        SY[k, i_b2 + j - 1] += W2[k - q2 - j]
+        SY[ks, i_b2 + j - 1] += W2[k - q2 - j]
     for i in range(1, n2a + 1):
-        SY[k, i_a2 + i - 1] -= Y[k - i]
+        SY[ks, i_a2 + i - 1] -= Y[k - i]
 
 
 @njit(cache=True)
@@ -143,6 +151,41 @@ def sensitivities_into(theta, layout, U, W1, W2, Y, S1, S2, SY, start):
     """Run :func:`step_sens` for every index from ``start`` to the end of ``U``."""
     for k in range(start, U.shape[0]):
         step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k)
+
+
+@njit(cache=True)
+def jacobian_block(theta, layout, U, W1, W2, Y, S1, S2, SY, P, k0, dtheta, J):
+    """Output sensitivities of one block of samples, in windows of fixed length.
+
+    Runs :func:`step_sens_row` for the ``len(J)`` indices from ``k0`` of the extended signal
+    arrays ``U, W1, W2, Y`` (which must be simulated up to ``k0`` already). The sensitivity
+    windows ``S1, S2, SY`` hold, in their first ``P`` rows, those of the ``P`` samples before
+    ``k0`` (zero before the first block) and room for at least ``len(J)`` more; afterwards the
+    last ``P`` of them are moved to the head, ready for the next block. Memory is therefore
+    independent of the record's length.
+
+    Row ``i`` of ``J`` receives ``SY(k0 + i) @ dtheta`` (``dtheta`` maps search coordinates to
+    theta). Returns False as soon as a sensitivity is not finite.
+    """
+    npar = theta.shape[0]
+    nz = dtheta.shape[1]
+    nb = J.shape[0]
+    for i in range(nb):
+        ks = P + i
+        step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k0 + i, ks)
+        for c in range(nz):
+            acc = 0.0
+            for p in range(npar):
+                acc += SY[ks, p] * dtheta[p, c]
+            if not np.isfinite(acc):
+                return False
+            J[i, c] = acc
+    for i in range(P):
+        for p in range(npar):
+            S1[i, p] = S1[nb + i, p]
+            S2[i, p] = S2[nb + i, p]
+            SY[i, p] = SY[nb + i, p]
+    return True
 
 
 def as_layout(n1a: int, n1b: int, n2a: int, n2b: int, q1: int, q2: int, f0: bool) -> np.ndarray:

@@ -8,7 +8,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .operating import Envelope, Placed, _finite, warn_admissibility
+from .operating import Envelope, Placed, warn_admissibility
+from .poly import is_stable
+from .signals import finite_number, finite_signal
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
@@ -176,7 +178,7 @@ class DuhemSandwich(Placed):
         self.name = name
         self.theta = params_vector(params, self.structure.names)
         self._place(u_rest, offset, envelope, units)
-        self.rest_memory = _finite(rest_memory, "rest_memory")
+        self.rest_memory = finite_number(rest_memory, "rest_memory")
 
     # ----------------------------------------------------------------- parameters
     @property
@@ -216,11 +218,7 @@ class DuhemSandwich(Placed):
         bool
             Whether Assumption 1 holds and ``alpha > 0``.
         """
-        polys = [self.a1, self.b1, self.a2, self.b2]
-        radius = max(
-            (np.max(np.abs(np.roots(np.r_[1.0, p]))) if len(p) else 0.0) for p in polys
-        )
-        return bool(radius < 1.0 and self.params["alpha"] > 0)
+        return is_stable(self.a1, self.b1, self.a2, self.b2) and self.params["alpha"] > 0
 
     def envelope_bound(self, envelope: Envelope | None = None) -> float:
         """Largest ``alpha |dw1|`` over every sine inside an input envelope (condition 8).
@@ -429,7 +427,7 @@ class DuhemSandwich(Placed):
         from .kernels import simulate_into
         from .response import SandwichResponse
 
-        u = _as_signal(u, "u")
+        u = finite_signal(u, "u")
         x0 = x0 or self.at_rest()
         P = self.structure.history
         U, W1, W2, Y = (
@@ -588,16 +586,6 @@ def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:
     scale = max(np.max(np.abs(den)), 1.0)
     num = np.where(np.abs(num) < 1e-12 * scale, 0.0, num)
     return ct.tf(num, den, tf.dt, inputs=tf.input_labels, outputs=tf.output_labels)
-
-
-def _as_signal(u, argname: str) -> np.ndarray:
-    arr = np.asarray(u, dtype=float)
-    if arr.ndim != 1:
-        raise ValueError(f"{argname}: expected a 1-D array of samples, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        k = int(np.flatnonzero(~np.isfinite(arr))[0])
-        raise ValueError(f"{argname}: non-finite value at sample {k}")
-    return np.ascontiguousarray(arr)
 
 
 def __getattr__(name: str):

@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from .signals import finite_number
+
 __all__ = ["AdmissibilityWarning", "Envelope", "Placed", "SLEW_QUANTILE", "warn_admissibility"]
 
 #: The envelope's slew is this quantile of |du|: a slew the input holds for at least 0.1 % of
@@ -180,7 +182,7 @@ class Placed:
 
     def _place(self, u_rest: float, offset: float, envelope: Envelope | None,
                units: Mapping[str, str] | None) -> None:
-        self.u_rest, self.offset = _finite(u_rest, "u_rest"), _finite(offset, "offset")
+        self.u_rest, self.offset = finite_number(u_rest, "u_rest"), finite_number(offset, "offset")
         self.envelope = envelope
         self.units = dict(units) if units is not None else {"u": "V", "y": "um"}
 
@@ -212,11 +214,3 @@ class Placed:
         return save_model(self, path, provenance=provenance, force=force)
 
 
-def _finite(value: float, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name}: expected a finite number, got {value!r}") from err
-    if not np.isfinite(v):
-        raise ValueError(f"{name}: expected a finite number, got {value!r}")
-    return v

@@ -40,7 +40,9 @@ from numba import njit
 from . import blocks
 from .model import InitialCondition, params_vector
 from .operating import Envelope, Placed, warn_admissibility
+from .poly import is_stable
 from .response import SandwichResponse
+from .signals import finite_signal
 
 __all__ = [
     "PISandwich",
@@ -86,9 +88,7 @@ def pi_thresholds(
     """
     if int(n_operators) != n_operators or n_operators < 1:
         raise ValueError(f"n_operators: expected a positive integer, got {n_operators!r}")
-    u = np.asarray(u, dtype=float).ravel()
-    if u.size == 0 or not np.all(np.isfinite(u)):
-        raise ValueError("u: expected finite input samples or a (min, max) pair")
+    u = finite_signal(np.ravel(u), "u (input samples or a (min, max) pair)", min_size=1)
     span = float(u.max() - u.min())
     if not span > 0:
         raise ValueError(f"u: the input range is empty (min = max = {u.min():g})")
@@ -105,8 +105,26 @@ def _check_thresholds(r, name: str = "thresholds") -> np.ndarray:
 
 # =========================================================================== compiled kernels
 @njit(cache=True, inline="always")
-def _play(v, p_prev, r):
-    # eq. (30): p(k) = max{v(k) - r, min[v(k) + r, p(k-1)]}
+def play(v, p_prev, r):
+    """One step of the play operator, eq. (30): ``p(k) = max{v(k) - r, min[v(k) + r, p(k-1)]}``.
+
+    The one play operator of hystid (the PI block, its inverse, the PI identifier and the
+    compensator call it, compiled or not).
+
+    Parameters
+    ----------
+    v : float
+        Input ``v(k)``.
+    p_prev : float
+        Operator state ``p(k-1)``.
+    r : float
+        Threshold ``r >= 0``.
+
+    Returns
+    -------
+    float
+        The state and output ``p(k)``.
+    """
     return max(v - r, min(v + r, p_prev))
 
 
@@ -115,7 +133,7 @@ def _pi_operator_into(v, r, mu, p, out):
     for k in range(v.shape[0]):
         acc = 0.0
         for i in range(r.shape[0]):
-            p[i] = _play(v[k], p[i], r[i])
+            p[i] = play(v[k], p[i], r[i])
             acc += mu[i] * p[i]
         out[k] = acc
 
@@ -124,7 +142,7 @@ def _pi_operator_into(v, r, mu, p, out):
 def _play_operator_into(v, r, p, out):
     for k in range(v.shape[0]):
         for i in range(r.shape[0]):
-            p[i] = _play(v[k], p[i], r[i])
+            p[i] = play(v[k], p[i], r[i])
             out[k, i] = p[i]
 
 
@@ -147,7 +165,7 @@ def pi_simulate_into(a1, b1, q1, mu, r, a2, b2, q2, U, W1, W2, Y, p, start):
         # eq. (30)
         w2 = 0.0
         for i in range(r.shape[0]):
-            p[i] = _play(w1, p[i], r[i])
+            p[i] = play(w1, p[i], r[i])
             w2 += mu[i] * p[i]
         W2[k] = w2
         # eq. (31)
@@ -180,7 +198,7 @@ def play_operator(
     ndarray
         Shape ``(len(v), N)``: ``p_i(k)``.
     """
-    v = _signal(v, "v")
+    v = finite_signal(v, "v")
     r = _check_thresholds(thresholds)
     p = _initial_states(p0, len(r))
     out = np.empty((len(v), len(r)))
@@ -210,7 +228,7 @@ def pi_operator(
     ndarray
         Output samples, same length as ``v``.
     """
-    v = _signal(v, "v")
+    v = finite_signal(v, "v")
     r = _check_thresholds(thresholds)
     mu = _weights(weights, len(r))
     p = _initial_states(p0, len(r))
@@ -595,7 +613,7 @@ class PISandwich(Placed):
         bool
             Whether both linear blocks are stable.
         """
-        return bool(max(_radius(self.a1), _radius(self.a2)) < 1.0)
+        return is_stable(self.a1, self.a2)
 
     def is_invertible(self) -> bool:
         """Whether the PI operator has an exact inverse (see :func:`pi_inverse_parameters`).
@@ -807,7 +825,7 @@ class PISandwich(Placed):
             A :class:`control.TimeResponseData`: input ``u``, output ``y``, states ``w1``,
             ``w2`` (each also an attribute); unpacks as ``t, y``.
         """
-        u = _signal(u, "u")
+        u = finite_signal(u, "u")
         x0 = x0 or InitialCondition()
         P = self.structure.history
         U, W1, W2, Y = (
@@ -833,10 +851,6 @@ class PISandwich(Placed):
 
 
 # =========================================================================== helpers
-def _radius(a: np.ndarray) -> float:
-    return float(np.max(np.abs(np.roots(np.r_[1.0, a])))) if len(a) else 0.0
-
-
 def _read_tf(tf, q: int, na: int, nb: int, label: str) -> tuple[np.ndarray, np.ndarray]:
     """``(a, b)`` of ``sum_j b_j z^-(q+j-1) / (1 + sum_i a_i z^-i)`` from a SISO transfer fn."""
     if not isinstance(tf, ct.TransferFunction) or tf.ninputs != 1 or tf.noutputs != 1:
@@ -859,16 +873,6 @@ def _read_tf(tf, q: int, na: int, nb: int, label: str) -> tuple[np.ndarray, np.n
             "denominator coefficients)"
         )
     return den[1 : 1 + na].copy(), num[q : q + nb].copy()
-
-
-def _signal(u, argname: str) -> np.ndarray:
-    arr = np.asarray(u, dtype=float)
-    if arr.ndim != 1:
-        raise ValueError(f"{argname}: expected a 1-D array of samples, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        k = int(np.flatnonzero(~np.isfinite(arr))[0])
-        raise ValueError(f"{argname}: non-finite value at sample {k}")
-    return np.ascontiguousarray(arr)
 
 
 def _weights(weights, n: int) -> np.ndarray:

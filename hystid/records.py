@@ -40,6 +40,8 @@ itself). :meth:`Record.save` writes atomically (see :mod:`hystid.safeio`).
 
 from __future__ import annotations
 
+import csv
+import itertools
 import json
 import math
 import operator
@@ -53,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from .safeio import atomic_open, atomic_path
+from .signals import finite_signal
 
 __all__ = [
     "EXPANSION_FLOOR",
@@ -187,8 +190,9 @@ class Record:
     def __post_init__(self) -> None:
         self.name = str(self.name)
         where = f"record {self.name!r}"
-        self.u = _as_signal(self.u, "u", where)
-        self.y = _as_signal(self.y, "y", where)
+        self.u, self.y = (finite_signal(v, f"{where}: {label}", min_size=1, copy=True,
+                                        error=RecordError)
+                          for v, label in ((self.u, "u"), (self.y, "y")))
         if self.u.size != self.y.size:
             raise RecordError(
                 f"{where}: u and y have different lengths (u: {self.u.size}, y: {self.y.size}) "
@@ -375,27 +379,6 @@ class Record:
         writers[suffix](self, path)
 
 
-def _as_signal(values: Any, label: str, where: str) -> np.ndarray:
-    if np.iscomplexobj(values):
-        raise RecordError(f"{where}: {label} is complex (expected real numbers)")
-    try:
-        array = np.array(values, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise RecordError(f"{where}: {label} is not numeric (expected real numbers)") from err
-    if array.ndim != 1:
-        raise RecordError(
-            f"{where}: {label} has shape {array.shape} (expected a 1-D array; "
-            f"use np.ravel({label}) for a single column)"
-        )
-    if array.size == 0:
-        raise RecordError(f"{where}: {label} is empty (expected at least 1 sample)")
-    bad = np.flatnonzero(~np.isfinite(array))
-    if bad.size:
-        k = int(bad[0])
-        raise RecordError(f"{where}: {label}[{k}] is {array[k]} (expected finite values)")
-    return array
-
-
 def _as_fs(fs: Any, where: str) -> float:
     try:
         value = float(fs)
@@ -518,7 +501,7 @@ def load_record(
     Parameters
     ----------
     path : str or os.PathLike
-        The file. ``.csv`` and ``.txt``: comma-separated text; ``.npz``; ``.mat``; ``.h5`` and
+        The file. ``.csv`` and ``.txt``: delimited text; ``.npz``; ``.mat``; ``.h5`` and
         ``.hdf5``, where ``file.h5:group/path`` reads the datasets of that group.
     fs : float, optional
         Sampling rate in Hz. Required when the file has neither a time vector ``t`` nor a stored
@@ -549,7 +532,10 @@ def load_record(
     Notes
     -----
     CSV rules: lines starting with ``#`` (after optional blanks) and blank lines are skipped;
-    the first remaining line is the header unless ``columns`` gives integer positions; every
+    the first remaining line is the header unless ``columns`` gives integer positions; the
+    fields are separated by ``;``, a tab or ``,`` (the first of these the header, or the first
+    row of a file without header, holds outside double quotes) or else by blanks, and may be
+    quoted with double quotes (``"1.5"``; a decimal comma is not a number); every
     row has as many fields as the header (or as the first row when there is no header); values
     of the used columns must be finite numbers, unused columns may hold anything (even nothing).
     """
@@ -670,15 +656,6 @@ def _check_columns(columns: Mapping[str, str | int] | None, file: str) -> dict[s
 
 
 # --------------------------------------------------------------------------- shared checks
-def _finite(values: np.ndarray, locate: Locator, raw: list[str] | None = None) -> None:
-    """Raise on the first non-finite value, located by ``locate(index)``."""
-    bad = np.flatnonzero(~np.isfinite(values))
-    if bad.size:
-        k = int(bad[0])
-        shown = repr(raw[k].strip()) if raw is not None else str(values[k])
-        raise RecordError(f"value {shown} is not finite (expected a finite number)", **locate(k))
-
-
 def _fs_from_time(t: np.ndarray, stated: float | None, stated_by: str, locate: Locator,
                   file: str) -> float:
     """Check that ``t`` is increasing and uniform; return the sampling rate it implies.
@@ -731,18 +708,20 @@ def _load_csv(file: str, fs: float | None, roles: dict[str, str | int],
     lines = _read_lines(file)
     data, meta = _scan_lines(lines)
     headerless = bool(roles) and all(isinstance(v, int) for v in roles.values())
+    rows = _CsvRows(file, _delimiter(data[0][1]) if data else ",")
     if headerless:
-        header_line, positions, labels = None, roles, {role: role for role in roles}
+        fields, positions, labels = None, roles, {role: role for role in roles}
     else:
         if not data:
             raise RecordError("no data rows (the file is empty; expected a header naming the "
                               "columns t, u, y, then data rows)", file=file)
         header_line, header = data.pop(0)
-        positions, labels = _header_positions(header, header_line, roles, file)
+        fields = rows.split(header, header_line)
+        positions, labels = _header_positions(fields, header_line, roles, file)
     if not data:
         raise RecordError("no data rows (expected at least one row of numbers after the header)",
                           file=file)
-    linenos, raw = _split_rows(lines, data, positions, header_line, file)
+    linenos, raw = _split_rows(rows, data, positions, fields, file)
     values = {role: _parse_column(raw[role], linenos, labels[role], file) for role in raw}
     stated = _stated_fs(fs, file)
     stated_by = "fs=" if stated is not None else ""
@@ -811,10 +790,56 @@ def _parse_meta(comment: str, lineno: int) -> dict[str, Any]:
     return meta
 
 
-def _header_positions(header: str, line_index: int, roles: dict[str, str | int],
+def _delimiter(line: str) -> str | None:
+    """The field separator of a CSV line: ``;``, tab or ``,`` (the first one the line holds
+    outside double quotes, in that order), else ``None`` for blanks (spaces and tabs)."""
+    bare = re.sub(r'"[^"]*"', "", line)
+    return next((sep for sep in (";", "\t", ",") if sep in bare), None)
+
+
+class _CsvRows:
+    """Splits the lines of one CSV file into fields with the :mod:`csv` module.
+
+    ``delimiter`` is ``;``, tab, ``,`` or ``None`` (runs of blanks); fields may be quoted with
+    double quotes (``"1.5"``), and a quote left open at the end of a line is an error located
+    at that line.
+    """
+
+    def __init__(self, file: str, delimiter: str | None) -> None:
+        self.file = file
+        self.delimiter = delimiter
+
+    def split_all(self, data: list[tuple[int, str]]) -> Iterable[tuple[int, list[str]]]:
+        """Yield ``(line index, fields)`` for each ``(line index, text)`` of ``data``."""
+        if self.delimiter is None:
+            texts = (text.strip() for _, text in data)
+            reader = csv.reader(texts, delimiter=" ", skipinitialspace=True, strict=True)
+        else:
+            reader = csv.reader((text for _, text in data), delimiter=self.delimiter,
+                                strict=True)
+        done = 0  # rows yielded; the row being read starts at data[done]
+        try:
+            for fields in reader:
+                index = data[done][0]
+                if reader.line_num != done + 1:
+                    raise RecordError("a quoted field is not closed on its line (expected a "
+                                      "closing double quote)", file=self.file, line=index + 1)
+                done += 1
+                yield index, fields
+        except csv.Error as err:
+            raise RecordError(f"unreadable row ({err}; expected delimited fields, each quote "
+                              "closed on its line)", file=self.file,
+                              line=data[done][0] + 1) from None
+
+    def split(self, text: str, index: int) -> list[str]:
+        """Fields of one line (``index`` locates errors)."""
+        return next(iter(self.split_all([(index, text)])))[1]
+
+
+def _header_positions(header: list[str], line_index: int, roles: dict[str, str | int],
                       file: str) -> tuple[dict[str, int], dict[str, str]]:
-    """Find the columns t, u, y in the header; return positions and column names by role."""
-    found = [field.strip().strip("\"'") for field in header.split(",")]
+    """Find the columns t, u, y in the header fields; return positions and names by role."""
+    found = [field.strip().strip("\"'") for field in header]
     folded = [name.casefold() for name in found]
     positions: dict[str, int] = {}
     labels: dict[str, str] = {}
@@ -846,25 +871,25 @@ def _looks_numeric(fields: list[str]) -> bool:
     return False
 
 
-def _split_rows(lines: list[str], data: list[tuple[int, str]], positions: dict[str, int],
-                header_line: int | None, file: str) -> tuple[list[int], dict[str, list[str]]]:
+def _split_rows(rows: _CsvRows, data: list[tuple[int, str]], positions: dict[str, int],
+                header: list[str] | None, file: str) -> tuple[list[int], dict[str, list[str]]]:
     """Split data lines into the raw text of the used columns; check the field counts."""
-    width = lines[header_line].count(",") + 1 if header_line is not None else None
-    if width is None:
-        width = data[0][1].count(",") + 1
+    split = rows.split_all(data)
+    first_index, first = next(split)
+    width = len(header) if header is not None else len(first)
+    if header is None:
         needed = max(positions.values()) + 1
         if needed > width:
             raise RecordError(
                 f"{width} fields but columns={positions} needs at least {needed} "
                 "(expected a column at every given position)", file=file, line=data[0][0] + 1
             )
-    expected = ("as the header" if header_line is not None
+    expected = ("as the header" if header is not None
                 else f"as the first data row (line {data[0][0] + 1})")
     raw: dict[str, list[str]] = {role: [] for role in positions}
     items = list(positions.items())
     linenos = []
-    for index, text in data:
-        fields = text.split(",")
+    for index, fields in itertools.chain([(first_index, first)], split):
         if len(fields) != width:
             raise RecordError(f"{len(fields)} fields (expected {width}, as many {expected})",
                               file=file, line=index + 1)
@@ -891,8 +916,8 @@ def _parse_column(raw: list[str], linenos: list[int], column: str, file: str) ->
                 raise RecordError(f"{shown} is not a number (expected a finite number)",
                                   file=file, line=linenos[k], column=column) from None
         raise  # pragma: no cover - the loop above always finds the culprit
-    _finite(values, _csv_locator(linenos, column, file), raw)
-    return values
+    return finite_signal(values, column, locate=_csv_locator(linenos, column, file), raw=raw,
+                         error=RecordError)
 
 
 # --------------------------------------------------------------------------- array formats
@@ -965,8 +990,7 @@ def _as_vector(values: Any, src: _Arrays, role: str) -> np.ndarray:
     if vector.ndim != 1:
         raise RecordError(f"{src.kind} {label!r} has shape {array.shape} (expected a vector)",
                           file=src.file)
-    _finite(vector, _array_locator(src, role))
-    return vector
+    return finite_signal(vector, label, locate=_array_locator(src, role), error=RecordError)
 
 
 def _stored_fs(value: Any, where: str) -> float:

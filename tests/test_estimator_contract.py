@@ -17,16 +17,20 @@ from hystid.identify.base import Estimator
 from hystid.identify.ekf import KalmanIdentifier
 from hystid.identify.eria import ERIA
 from hystid.identify.online import OnlineIdentifier
+from hystid.identify.pi_recursive import PIRecursiveIdentifier
+from hystid.pi import pi_thresholds
 from hystid.records import Record
 from hystid.reference import PAPER_PARAMS
 from hystid.testing import paper_excitation, paper_stage
 
 NEAR = {k: (1.05 if k.startswith("a2") else 1.1) * v for k, v in PAPER_PARAMS.items()}
 NEAR["a22"] = 0.9 * PAPER_PARAMS["a22"]  # a stable L2 near the truth
+PI_THRESHOLDS = pi_thresholds(paper_excitation(0.02, seed=3), 8)  # the record's input range
 ESTIMATORS = {
     "online": lambda: OnlineIdentifier(n_start=200, start_retries=(300,)),
     "eria": lambda: ERIA(),
     "ekf": lambda: KalmanIdentifier(theta0=NEAR),
+    "pi-recursive": lambda: PIRecursiveIdentifier(PI_THRESHOLDS, warmup=200),
 }
 
 

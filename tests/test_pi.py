@@ -1,5 +1,7 @@
 """The Prandtl-Ishlinskii block, its inverse, the PI sandwich and its identification."""
 
+from types import SimpleNamespace
+
 import control as ct
 import numpy as np
 import pytest
@@ -256,6 +258,7 @@ def test_recursive_recovers_known_pi_sandwich():
     idf = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=1000)
     res = idf.fit(rec)
     assert res.method == "pi-recursive" and res.history.shape == (len(u), len(model.theta))
+    assert res.info["warmup_samples"] == 1000 and res.info["warmup_seconds"] > 0
     est = res.model
     assert est.is_stable()
     rel = np.abs(est.theta - model.theta) / np.abs(model.theta)
@@ -280,11 +283,28 @@ def test_update_one_sample_matches_fit():
     batch = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=600)
     res = batch.fit(rec)
     online = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=600)
-    errors = [online.update(a, b) for a, b in zip(rec.u, rec.y, strict=True)]
-    np.testing.assert_allclose(online.theta, res.model.theta, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(errors, res.info["prediction_errors"], rtol=1e-9, atol=1e-12)
+    steps = [online.update(a, b) for a, b in zip(rec.u, rec.y, strict=True)]
+    np.testing.assert_allclose(steps, res.history, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(steps[-1], res.model.theta, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(online.e, res.info["prediction_errors"][-1], rtol=1e-9)
+    assert online.k == len(u)
     assert online.K.shape == online.theta.shape and online.P.shape == (16, 16)
     assert np.all(np.linalg.eigvalsh(online.P) > 0)
+
+
+def test_missing_outputs_in_the_warm_up_are_left_out_of_its_fit():
+    model, u = known_sandwich(u=paper_excitation(1500, FS, seed=12))
+    rec = noisy_record(model, u, 1e-3, seed=13)
+    y = rec.y.copy()
+    y[[100, 350, 900]] = np.nan  # two in the warm-up, one in the recursion
+    gappy = SimpleNamespace(u=rec.u, y=y, fs=FS, name="gappy")
+    idf = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=600)
+    with pytest.warns(RuntimeWarning, match="3 non-finite output samples skipped"):
+        res = idf.fit(gappy)
+    clean = PIRecursiveIdentifier(thresholds=model.thresholds, warmup=600).fit(rec)
+    assert idf.n_skipped == 3 and np.all(np.isfinite(res.history))
+    rel = np.abs(res.model.theta - clean.model.theta) / np.abs(clean.model.theta)
+    assert np.median(rel) < 0.05  # three samples fewer change the estimate little
 
 
 def test_paper_cold_start_is_reported_not_hidden():

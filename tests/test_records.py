@@ -87,8 +87,8 @@ def test_default_units_are_not_shared():
         ({"u": np.zeros(3), "y": np.zeros((3, 1))}, ["y", "(3, 1)", "1-D"]),
         ({"u": [], "y": []}, ["u is empty", "at least 1 sample"]),
         ({"u": [1.0, 2.0], "y": [1.0]}, ["different lengths", "u: 2", "y: 1"]),
-        ({"u": [1.0, 2.0, np.nan], "y": [1.0, 2, 3]}, ["u[2]", "nan"]),
-        ({"u": [1.0, 2.0, 3.0], "y": [1.0, np.inf, 3]}, ["y[1]", "inf"]),
+        ({"u": [1.0, 2.0, np.nan], "y": [1.0, 2, 3]}, ["u", "sample 2", "nan"]),
+        ({"u": [1.0, 2.0, 3.0], "y": [1.0, np.inf, 3]}, ["y", "sample 1", "inf"]),
         ({"u": [1.0], "y": [1.0], "fs": 0.0}, ["fs", "> 0"]),
         ({"u": [1.0], "y": [1.0], "fs": np.nan}, ["fs", "finite"]),
         ({"u": [1.0], "y": [1.0], "fs": "fast"}, ["fs must be a number"]),
@@ -292,6 +292,37 @@ def test_csv_wrong_number_of_fields(tmp_path):
     lines[9] = lines[9].rsplit(",", 1)[0]
     raises(["rows.csv", "line 10", "2 fields", "expected 3"],
            load_record, write_lines(tmp_path / "rows.csv", lines))
+
+
+@pytest.mark.parametrize(
+    ("sep", "name"), [(";", "semicolon"), ("\t", "tab"), (" ", "space"), ("   ", "blanks")]
+)
+def test_csv_other_delimiters_are_detected(tmp_path, sep, name):
+    rows = [f"{k / 100!r}{sep}{float(np.sin(k))!r}{sep}{float(np.cos(k))!r}" for k in range(20)]
+    rec = load_record(write_lines(tmp_path / f"{name}.txt", ["# x", f"t{sep}u{sep}y", *rows]))
+    np.testing.assert_array_equal(rec.u, np.sin(np.arange(20)))
+    np.testing.assert_array_equal(rec.y, np.cos(np.arange(20)))
+    assert rec.fs == pytest.approx(100.0)
+    # a bad cell is located by line and column whatever the delimiter
+    rows[6] = rows[6].replace(f"{sep}{float(np.cos(6))!r}", f"{sep}oops")
+    raises([f"{name}.txt", "line 10", "column 'y'", "'oops'"], load_record,
+           write_lines(tmp_path / f"{name}.txt", ["# x", "", f"t{sep}u{sep}y", *rows]))
+
+
+def test_csv_quoted_numbers_and_names(tmp_path):
+    lines = ['"t";"u";"y"', *[f'"{k / 10!r}";"{k}";{2 * k}' for k in range(6)]]
+    rec = load_record(write_lines(tmp_path / "quoted.csv", lines))
+    np.testing.assert_array_equal(rec.u, np.arange(6.0))
+    np.testing.assert_array_equal(rec.y, 2 * np.arange(6.0))
+    lines = ["u,y,note", '1,2,"a, quoted, note"', '3,4,"b"']  # commas inside quotes
+    rec = load_record(write_lines(tmp_path / "note.csv", lines), fs=1)
+    np.testing.assert_array_equal(rec.u, [1, 3])
+    lines[1] = '1,"2,3'  # a quote left open
+    raises(["note.csv", "line 2", "quote"], load_record,
+           write_lines(tmp_path / "note.csv", lines), fs=1)
+    lines = ["u,y", '"1,5",2']  # a decimal comma is not a number
+    raises(["dec.csv", "line 2", "column 'u'", "'1,5'", "not a number"], load_record,
+           write_lines(tmp_path / "dec.csv", lines), fs=1)
 
 
 def test_csv_decreasing_and_repeated_t(tmp_path):

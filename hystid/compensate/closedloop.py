@@ -41,6 +41,7 @@ from numba.core.dispatcher import Dispatcher
 from ..kernels import step as stage_step
 from ..model import DuhemSandwich
 from ..response import LabelledResponse
+from ..signals import finite_signal
 from .compensator import (
     COMPENSATIONS,
     DUHEM_BOUND,
@@ -460,9 +461,9 @@ def simulate_closed_loop(
             raise ValueError(f"noise: expected a non-negative standard deviation, got {noise!r}")
         noise = sigma * np.random.default_rng(seed).standard_normal(n) if sigma else np.zeros(n)
     else:
-        noise = np.asarray(noise, float)
-        if noise.shape != (n,) or not np.all(np.isfinite(noise)):
-            raise ValueError(f"noise: expected {n} finite samples, got shape {noise.shape}")
+        noise = finite_signal(noise, "noise")
+        if noise.shape != (n,):
+            raise ValueError(f"noise: expected {n} samples, got {noise.size}")
     kind = COMPENSATIONS[_compensation(feedforward)]
     chain = _build(model, kind=kind, u_limits=u_limits, reference_model=reference_model,
                    preview=preview, duhem_bound=duhem_bound, reference_lead=reference_lead)

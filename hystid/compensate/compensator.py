@@ -52,6 +52,9 @@ from numba import njit
 from numba.core.dispatcher import Dispatcher
 
 from ..model import DuhemSandwich
+from ..pi import play
+from ..poly import roots_inside
+from ..signals import finite_signal
 from .duhem_inverse import check_bound, duhem_forward, plan_step
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -101,12 +104,6 @@ COMPENSATIONS = {"inverse": KIND_DUHEM, "linear": KIND_LINEAR, "none": KIND_NONE
 
 
 # =========================================================================== compiled chain
-@njit(cache=True, inline="always")
-def _play(v, p_prev, r):
-    # eq. (30)
-    return max(v - r, min(v + r, p_prev))
-
-
 @njit(cache=True)
 def _push_reference(x, r, ispec, fpar, a2, b2t, AM, BM, CM, DM):
     """Feed one reference sample through ``M`` and ``L2^-1`` into the lines (in place)."""
@@ -221,7 +218,7 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
                 pinv[i] += cum * xn[oH + i]
             w1c = 0.0
             for i in range(n):
-                w1c += mu_inv[i] * _play(w2d, pinv[i], r_inv[i])
+                w1c += mu_inv[i] * play(w2d, pinv[i], r_inv[i])
         else:
             w1c = w2d / fpar[_KH]
         # L1^-1 (eq. 1 solved for u(k))
@@ -247,7 +244,7 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
             xn[oH] = duhem_forward(w1, w1p, xn[oH], alpha, f0, f1, g0)
         elif kind == KIND_PI:
             for i in range(ispec[_NPI]):
-                xn[oH + i] = _play(w1, xn[oH + i], r_pi[i])
+                xn[oH + i] = play(w1, xn[oH + i], r_pi[i])
         for i in range(H1 - 1):
             xn[oW1 + i] = xn[oW1 + i + 1]
         xn[oW1 + H1 - 1] = w1
@@ -260,7 +257,7 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
     return chain_step
 
 
-chain_step = _stamped_chain_step(source_stamp(plan_step, duhem_forward))
+chain_step = _stamped_chain_step(source_stamp(plan_step, duhem_forward, play))
 
 
 @njit(cache=True)
@@ -342,7 +339,7 @@ class _Chain:
 
 
 def _min_phase(poly: np.ndarray, label: str) -> None:
-    if len(poly) > 1 and np.max(np.abs(np.roots(poly))) >= 1.0:
+    if not roots_inside(poly):
         raise ValueError(
             f"model: {label} is not minimum phase (a zero on or outside the unit circle); "
             "its inverse would be unstable (Assumption 1)"
@@ -569,13 +566,7 @@ def _pad_hold(y: np.ndarray, n: int) -> np.ndarray:
 
 
 def _as_reference(y_ref, name: str = "y_ref") -> np.ndarray:
-    y = np.asarray(y_ref, dtype=float)
-    if y.ndim != 1 or y.size == 0:
-        raise ValueError(f"{name}: expected a non-empty 1-D array of samples, got shape {y.shape}")
-    if not np.all(np.isfinite(y)):
-        k = int(np.flatnonzero(~np.isfinite(y))[0])
-        raise ValueError(f"{name}: non-finite value at sample {k}")
-    return np.ascontiguousarray(y)
+    return finite_signal(y_ref, name, min_size=1)
 
 
 # =========================================================================== python-control

@@ -7,6 +7,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..signals import finite_signal
+
 __all__ = ["ScanReference", "TrackingMetrics", "scan_reference", "tracking_metrics"]
 
 
@@ -175,8 +177,8 @@ def tracking_metrics(
         raise ValueError(f"central: expected a fraction in (0, 1], got {central!r}")
     if int(bins) != bins or bins < 1:
         raise ValueError(f"bins: expected a positive integer, got {bins!r}")
-    if not (np.all(np.isfinite(y_ref)) and np.all(np.isfinite(y))):
-        raise ValueError("y_ref, y: non-finite values")
+    finite_signal(y_ref, "y_ref")
+    finite_signal(y, "y")
     slope = np.gradient(y_ref)[skip:]
     r = y_ref[skip:]
     e = y[skip:] - r

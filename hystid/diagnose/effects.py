@@ -49,6 +49,7 @@ from numba import njit
 
 from ..kernels import offsets, sgn
 from ..model import DuhemSandwich, InitialCondition, SandwichResponse
+from ..signals import finite_signal
 
 __all__ = [
     "EFFECTS",
@@ -492,9 +493,7 @@ class AugmentedSandwich:
         SandwichResponse
             ``t, u, w1, w2, y``; ``w2`` is the Duhem output before creep. Unpacks as ``t, y``.
         """
-        u = np.asarray(u, dtype=float)
-        if u.ndim != 1 or not np.all(np.isfinite(u)):
-            raise ValueError("u: expected a 1-D array of finite samples")
+        u = finite_signal(u, "u")
         m = self.model
         ws = _Workspace(u - m.u_rest, _history(m), x0)
         w1, w2, y = ws.run(m.theta, m.structure.layout, self.phi, m.dt)

@@ -15,8 +15,9 @@ import numpy as np
 from numba import njit
 
 from ..model import DuhemSandwich, Structure
+from ..poly import schur_cohn_into
 from ..records import Record
-from .base import Estimator, as_sample, record_signals
+from .base import Estimator, record_signals, sample_arrays
 from .offline import initial_theta
 from .result import HistoryRecorder, IdentificationResult
 
@@ -31,24 +32,6 @@ def extended(window: np.ndarray, n: int) -> np.ndarray:
 def keep_tail(window: np.ndarray, ext: np.ndarray) -> None:
     """Copy the last ``len(window)`` samples of an extended array back into the window."""
     window[...] = ext[len(ext) - len(window):]
-
-
-@njit(cache=True)
-def _reflection_ok(theta, start, n, kmax, work):
-    """All reflection coefficients of ``1 + c_1 z^-1 + ... + c_n z^-n`` (``c = theta[start:]``)
-    strictly inside (-kmax, kmax); step-down recursion in the scratch array ``work``."""
-    for i in range(n):
-        work[i] = theta[start + i]
-    for m in range(n, 0, -1):
-        km = work[m - 1]
-        if not (abs(km) < kmax):
-            return False
-        d = 1.0 - km * km
-        for i in range((m - 1 + 1) // 2):
-            a, b = work[i], work[m - 2 - i]
-            work[i] = (a - km * b) / d
-            work[m - 2 - i] = (b - km * a) / d
-    return True
 
 
 @njit(cache=True)
@@ -73,10 +56,10 @@ def admissible_into(theta, layout, kmax, work):
     if theta[i_alpha] <= 0.0:
         return False
     return (
-        _reflection_ok(theta, i_a1, n1a, kmax, work)
-        and _reflection_ok(theta, i_a2, n2a, kmax, work)
-        and _reflection_ok(theta, i_b1, n1b, kmax, work)
-        and _reflection_ok(theta, 0, n2b, kmax, work)
+        schur_cohn_into(theta, i_a1, n1a, kmax, work)
+        and schur_cohn_into(theta, i_a2, n2a, kmax, work)
+        and schur_cohn_into(theta, i_b1, n1b, kmax, work)
+        and schur_cohn_into(theta, 0, n2b, kmax, work)
     )
 
 
@@ -161,10 +144,7 @@ class RecursiveIdentifier(Estimator):
         ndarray
             The estimate theta(k), a copy.
         """
-        u = np.array([as_sample(u_k, "u_k")])
-        y = np.array([as_sample(y_k, "y_k")])
-        if not np.isfinite(u[0]):
-            raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+        u, y = sample_arrays(u_k, y_k)
         self._process(u, y, np.empty((1, len(self.theta))),
                       np.empty((1, self.n_diagnostics)))
         return self.theta.copy()

@@ -28,9 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from ..signals import finite_signal
 from .result import IdentificationResult
 
-__all__ = ["Estimator", "as_sample", "finite_signal", "record_signals"]
+__all__ = ["Estimator", "as_sample", "finite_signal", "record_signals", "sample_arrays"]
 
 
 def as_sample(value: Any, argname: str) -> float:
@@ -56,30 +57,25 @@ def as_sample(value: Any, argname: str) -> float:
     return float(arr.reshape(()))
 
 
-def finite_signal(values: Any, argname: str) -> np.ndarray:
-    """A 1-D float signal with every sample finite, or a ``ValueError`` naming the first bad one.
+def sample_arrays(u_k: Any, y_k: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One sample pair as two one-element arrays, for ``update(u_k, y_k)``.
 
     Parameters
     ----------
-    values : array_like
-        The samples.
-    argname : str
-        Name used in the error message (for example ``"u"`` or ``"record 'x': u"``).
+    u_k, y_k : float
+        Input and output of the sample; the input must be finite (the output may not be: the
+        estimators skip it).
 
     Returns
     -------
-    ndarray
-        The samples as a contiguous float64 array.
+    u, y : ndarray
+        One-element float64 arrays.
     """
-    arr = np.ascontiguousarray(values, dtype=float)
-    if arr.ndim != 1:
-        raise ValueError(f"{argname}: expected a 1-D signal, got shape {arr.shape}")
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        k = int(bad[0])
-        raise ValueError(f"{argname}: non-finite value {arr[k]!r} at sample {k} "
-                         "(expected finite numbers)")
-    return arr
+    u = np.array([as_sample(u_k, "u_k")])
+    y = np.array([as_sample(y_k, "y_k")])
+    if not np.isfinite(u[0]):
+        raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+    return u, y
 
 
 def record_signals(record: Any, fs: float) -> tuple[np.ndarray, np.ndarray, str]:

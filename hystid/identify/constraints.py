@@ -10,10 +10,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Structure
+from ..poly import STABILITY_MARGIN, schur_stable
 
 __all__ = [
     "K_MAX",
     "ALPHA_MIN",
+    "Reflections",
     "is_admissible",
     "poly_to_reflection",
     "project_admissible",
@@ -83,6 +85,89 @@ def poly_to_reflection(c: np.ndarray) -> np.ndarray:
     return k
 
 
+class Reflections:
+    """theta <-> z: the monic polynomial groups of theta replaced by their reflection coefficients.
+
+    The search space of every output-error fit (the Duhem sandwich's in
+    :mod:`hystid.identify.offline`, the PI sandwich's in :mod:`hystid.identify.pi_recursive`):
+    each group's reflection coefficients are boxed in ``[-K_MAX, K_MAX]``, so every iterate is
+    stable (and minimum phase for numerator groups); entries listed in ``positive`` are kept at
+    or above :data:`ALPHA_MIN`.
+
+    Parameters
+    ----------
+    groups : list of ndarray
+        Indices into theta of each monic polynomial ``1 + c_1 z^-1 + ...`` (``c_1`` first).
+    n : int
+        Length of theta.
+    positive : sequence of int
+        Indices kept positive.
+    """
+
+    def __init__(self, groups: list[np.ndarray], n: int, positive: tuple[int, ...] = ()) -> None:
+        self.groups = [np.asarray(g, dtype=int) for g in groups if len(g)]
+        self.n = int(n)
+        self.positive = tuple(positive)
+
+    def to_z(self, theta: np.ndarray) -> np.ndarray:
+        """Search coordinates of ``theta`` (reflection coefficients clipped into the box).
+
+        Parameters
+        ----------
+        theta : ndarray
+            Parameter vector.
+
+        Returns
+        -------
+        ndarray
+            ``z``, inside :meth:`bounds`.
+        """
+        z = np.array(theta, float)
+        for g in self.groups:
+            z[g] = np.clip(poly_to_reflection(theta[g]), -K_MAX, K_MAX)
+        for i in self.positive:
+            z[i] = max(z[i], ALPHA_MIN)
+        return z
+
+    def to_theta(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Parameters of ``z`` and the Jacobian ``d theta / d z``.
+
+        Parameters
+        ----------
+        z : ndarray
+            Search coordinates.
+
+        Returns
+        -------
+        theta : ndarray
+            Parameter vector.
+        dtheta : ndarray
+            ``n x n`` Jacobian (block diagonal: identity outside the groups).
+        """
+        theta = np.array(z, float)
+        dtheta = np.eye(self.n)
+        for g in self.groups:
+            theta[g], dtheta[np.ix_(g, g)] = reflection_to_poly(z[g])
+        return theta, dtheta
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of ``z``.
+
+        Returns
+        -------
+        lo, hi : ndarray
+            ``[-K_MAX, K_MAX]`` on the groups, ``ALPHA_MIN`` below the positive entries,
+            unbounded elsewhere.
+        """
+        lo = np.full(self.n, -np.inf)
+        hi = np.full(self.n, np.inf)
+        for g in self.groups:
+            lo[g], hi[g] = -K_MAX, K_MAX
+        for i in self.positive:
+            lo[i] = ALPHA_MIN
+        return lo, hi
+
+
 def polynomial_groups(structure: Structure) -> list[np.ndarray]:
     """Indices into theta of the monic polynomials a1, b1, a2, b2 (empty groups dropped).
 
@@ -105,7 +190,9 @@ def polynomial_groups(structure: Structure) -> list[np.ndarray]:
     return groups
 
 
-def is_admissible(theta: np.ndarray, structure: Structure, margin: float = 0.0) -> bool:
+def is_admissible(
+    theta: np.ndarray, structure: Structure, margin: float = STABILITY_MARGIN
+) -> bool:
     """True when alpha > 0 and every polynomial's reflection coefficients are below 1 - margin.
 
     Parameters
@@ -126,10 +213,8 @@ def is_admissible(theta: np.ndarray, structure: Structure, margin: float = 0.0) 
         return False
     if theta[structure.names.index("alpha")] <= 0:
         return False
-    return all(
-        np.all(np.abs(poly_to_reflection(theta[g])) < 1.0 - margin)
-        for g in polynomial_groups(structure)
-    )
+    return all(schur_stable(np.ascontiguousarray(theta[g]), 1.0 - margin)
+               for g in polynomial_groups(structure))
 
 
 def project_admissible(theta: np.ndarray, structure: Structure, kmax: float = 0.999) -> np.ndarray:

@@ -8,14 +8,17 @@ stable and minimum phase, and alpha stays positive (Assumption 1).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 
-from ..kernels import sensitivities_into, simulate_into
+from ..kernels import jacobian_block, sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
 from ..operating import Envelope
 from ..records import Record
-from .constraints import ALPHA_MIN, K_MAX, poly_to_reflection, polynomial_groups, reflection_to_poly
+from .constraints import Reflections, polynomial_groups
 from .prepare import Prepared, prepare
 from .result import IdentificationResult
 
@@ -120,11 +123,15 @@ def linear_start(
     lag = max(na, q + nb, 1)
     if len(y) <= lag + na + nb + 2:
         return None
-    rows = np.arange(lag, len(y))
-    phi = [-y[rows - i] for i in range(1, na + 1)] + [u[rows - q - j] for j in range(nb + 1)]
+    n = len(y)
+    phi = np.empty((n - lag, na + nb + 1 + int(with_offset)))  # one regression matrix, no copies
+    for i in range(1, na + 1):
+        np.negative(y[lag - i: n - i], out=phi[:, i - 1])
+    for j in range(nb + 1):
+        phi[:, na + j] = u[lag - q - j: n - q - j]
     if with_offset:
-        phi.append(np.ones(len(rows)))
-    coef = np.linalg.lstsq(np.column_stack(phi), y[rows], rcond=None)[0]
+        phi[:, -1] = 1.0
+    coef = np.linalg.lstsq(phi, y[lag:], rcond=None)[0]
     constant = coef[-1] if with_offset else 0.0
     coef = coef[:na + nb + 1]
     den, num = np.r_[1.0, coef[:na]], coef[na:]
@@ -160,38 +167,16 @@ def _split_roots(roots: np.ndarray, n_first: int):
     return p1, p2
 
 
-class _Reparam:
-    """theta <-> z where the polynomial groups are replaced by reflection coefficients."""
+class _Reparam(Reflections):
+    """theta <-> z for the Duhem sandwich: its polynomial groups as reflection coefficients,
+    alpha kept positive."""
 
     def __init__(self, structure: Structure):
-        self.groups = polynomial_groups(structure)
         self.ialpha = structure.names.index("alpha")
-        self.n = len(structure.names)
+        super().__init__(polynomial_groups(structure), len(structure.names), (self.ialpha,))
         #: entries of z that the envelope bound depends on (alpha, L1's polynomials)
         self.l1_and_alpha = [self.ialpha] + [
             structure.names.index(n) for n in structure.names if n[:2] in ("a1", "b1")]
-
-    def to_z(self, theta: np.ndarray) -> np.ndarray:
-        z = np.array(theta, float)
-        for g in self.groups:
-            z[g] = np.clip(poly_to_reflection(theta[g]), -K_MAX, K_MAX)
-        z[self.ialpha] = max(z[self.ialpha], ALPHA_MIN)
-        return z
-
-    def to_theta(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        theta = np.array(z, float)
-        dtheta = np.eye(self.n)
-        for g in self.groups:
-            theta[g], dtheta[np.ix_(g, g)] = reflection_to_poly(z[g])
-        return theta, dtheta
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = np.full(self.n, -np.inf)
-        hi = np.full(self.n, np.inf)
-        for g in self.groups:
-            lo[g], hi[g] = -K_MAX, K_MAX
-        lo[self.ialpha] = ALPHA_MIN
-        return lo, hi
 
 
 #: Fits keep ``alpha max |L1| min(2 A sin(w/2), slew)`` (condition 8 over every sine inside the
@@ -205,6 +190,8 @@ BOUND_MAX = 1.95
 WIPE_OUT = 1.0
 #: Evaluations given to each start before the best ones are polished.
 SCREEN_NFEV = 25
+#: Samples of sensitivities held at once while the Jacobian rows are formed and reduced.
+SENS_WINDOW = 4096
 
 
 def to_physical(theta_n: np.ndarray, structure: Structure, u_scale: float,
@@ -267,9 +254,17 @@ class _OutputError:
     ``z`` holds the reparametrised model (:class:`_Reparam`), then the normalised sensor offset
     ``y0`` and the hysteresis state at the start ``e0`` (``w2`` off its rest value: a stage at
     rest still remembers how it got there; fitted for records that start at rest, its
-    derivative by a finite difference). The signal and sensitivity arrays are allocated once
-    and reused by every evaluation. One extra residual keeps the model admissible over the
+    derivative by a finite difference). One extra residual keeps the model admissible over the
     training envelope: it is ``weight * max(0, bound - BOUND_MAX)``.
+
+    Memory does not grow with anything but the signals (see ``benchmarks/bench_memory.py``):
+    the solver sees the problem compressed to ``len(z) + 1`` rows. At each ``z`` the rows
+    ``[J | r]`` of the Jacobian and the residuals are formed block by block from sensitivity
+    windows of :data:`SENS_WINDOW` samples (:func:`hystid.kernels.jacobian_block`) and reduced
+    by a running QR factorisation to the triangle ``[R | c; 0 | rho]``; the solver gets the
+    residuals ``[c, rho]`` and the Jacobian ``[R; 0]``. Their cost, gradient ``J'r`` and
+    Gauss-Newton matrix ``J'J`` are those of the full problem, so the trust-region iterates
+    are the same; :meth:`residuals` gives the residuals themselves.
     """
 
     def __init__(self, prep: Prepared, structure: Structure, x0: InitialCondition,
@@ -284,15 +279,20 @@ class _OutputError:
             np.concatenate([x0.window(k, P), np.zeros(n)]) for k in ("u", "w1", "w2", "y"))
         self.past = [a[:P].copy() for a in (self.W1, self.W2, self.Y)]
         self.U[P:] = prep.un
-        self.S1, self.S2, self.SY = (np.zeros((P + n, npar)) for _ in range(3))
-        self.idx = np.flatnonzero(prep.weight)
+        self.S1, self.S2, self.SY = (np.zeros((P + SENS_WINDOW, npar)) for _ in range(3))
+        self.block = np.zeros((SENS_WINDOW, npar))
+        self.stack = np.zeros((SENS_WINDOW + npar + 3, npar + 3), order="F")
+        every = bool(np.all(prep.weight))
+        self.rows = None if every else np.flatnonzero(prep.weight)
+        self.idx = slice(None) if every else self.rows
         self.target = prep.yn[self.idx]
+        self.m = len(self.target)
         self.ceiling = 1e6 * (np.max(np.abs(self.target)) + 1.0)
-        self.pen_weight = 10.0 * np.sqrt(len(self.idx))
+        self.pen_weight = 10.0 * np.sqrt(self.m)
+        self._cache: dict[str, Any] = {}
         un = prep.un[prep.skip:]
         self.env_n = Envelope.of(un)
         self.npar = npar
-        self._cache: dict = {}
 
     def bound(self, theta_n: np.ndarray) -> float:
         """Condition (8) over the training envelope (scale-free)."""
@@ -313,40 +313,94 @@ class _OutputError:
             grad[i] = (self.bound(self.rp.to_theta(z[:n] + dz[:n])[0]) - b) / dz[i]
         return self.pen_weight * (b - BOUND_MAX), self.pen_weight * grad
 
-    def evaluate(self, z: np.ndarray) -> None:
-        if "z" in self._cache and np.array_equal(self._cache["z"], z):
-            return
+    def _split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
         n = self.npar
         theta, dtheta = self.rp.to_theta(z[:n])
-        y0 = z[n] if self.fit_offset else 0.0
-        e0 = z[n + 1] if self.fit_state else 0.0
+        return (theta, dtheta, z[n] if self.fit_offset else 0.0,
+                z[n + 1] if self.fit_state else 0.0)
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        """The simulation error at the samples in the cost (normalised units)."""
+        theta, _, y0, e0 = self._split(z)
         with np.errstate(over="ignore", invalid="ignore"):
-            yhat, S = self._run(theta, e0, sensitivities=True)
-            if self.fit_state:
+            return self._run(theta, e0) + y0 - self.target
+
+    def evaluate(self, z: np.ndarray) -> dict[str, Any]:
+        """The compressed residuals and Jacobian at ``z`` (cached for the last ``z``)."""
+        if "z" in self._cache and np.array_equal(self._cache["z"], z):
+            return self._cache
+        theta, dtheta, y0, e0 = self._split(z)
+        nz, m = len(z), self.m
+        with np.errstate(over="ignore", invalid="ignore"):
+            yhat = self._run(theta, e0)
+            blown = not np.all(np.isfinite(yhat))
+            blown = blown or float(np.max(np.abs(yhat))) > self.ceiling
+            de0 = None
+            if not blown and self.fit_state:
                 h = 1e-6 * max(abs(e0), 1.0)
                 de0 = (self._run(theta, e0 + h) - yhat) / h
-            blown = not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(S)))
-            blown = blown or float(np.max(np.abs(yhat))) > self.ceiling
-        m = len(self.idx)
-        pen, dpen = self._penalty(z)
-        if blown:
+            tri = None if blown else self._triangle(theta, dtheta, yhat + y0 - self.target,
+                                                    de0, z)
+        if tri is None:
             # the Duhem recursion left condition (8): a large, flat residual steers back
-            r = np.full(m + 1, 1e6)
-            J = np.zeros((m + 1, len(z)))
-        else:
-            r = np.empty(m + 1)
-            r[:m] = yhat + y0 - self.target
-            r[m] = pen
-            J = np.zeros((m + 1, len(z)))
-            J[:m, :n] = S @ dtheta
-            J[:m, n] = 1.0 if self.fit_offset else 0.0
-            if self.fit_state:
-                J[:m, n + 1] = de0
-            J[m] = dpen
-        self._cache = {"z": z.copy(), "r": r, "J": J}
+            # (the norm of 1e6 at every residual, as the full problem would have)
+            tri = np.zeros((nz + 1, nz + 1))
+            tri[nz, nz] = 1e6 * np.sqrt(m + 1)
+        self._cache = {"z": z.copy(), "r": tri[:, nz].copy(), "J": tri[:, :nz].copy()}
+        return self._cache
 
-    def _run(self, theta: np.ndarray, e0: float, sensitivities: bool = False):
-        """Simulate from the past with the Duhem state ``e0`` off rest (and L2 settled on it)."""
+    def _triangle(self, theta: np.ndarray, dtheta: np.ndarray, r: np.ndarray,
+                  de0: np.ndarray | None, z: np.ndarray) -> np.ndarray | None:
+        """``[R | c; 0 | rho]`` of the rows ``[J | r]``, block by block (None if not finite)."""
+        n, nz, P = self.npar, len(z), self.P
+        self._set_past(theta, z[n + 1] if self.fit_state else 0.0)
+        for S in (self.S1, self.S2, self.SY):
+            S[:P] = 0.0
+        stack = self.stack  # [triangle so far; rows of this block], Fortran order for LAPACK
+        t = 0
+        total = len(self.U) - P
+        for a in range(0, total, SENS_WINDOW):
+            b = min(total, a + SENS_WINDOW)
+            block = self.block[: b - a]
+            if not jacobian_block(theta, self.structure.layout, self.U, self.W1, self.W2,
+                                  self.Y, self.S1, self.S2, self.SY, P, P + a, dtheta, block):
+                return None
+            if self.rows is None:
+                lo, hi, take = a, b, block
+            else:
+                lo, hi = np.searchsorted(self.rows, (a, b))
+                take = block[self.rows[lo:hi] - a]
+            rows = stack[t: t + hi - lo]
+            rows[:, :n] = take
+            rows[:, n] = 1.0 if self.fit_offset else 0.0
+            rows[:, n + 1] = de0[lo:hi] if de0 is not None else 0.0
+            rows[:, nz] = r[lo:hi]
+            t = self._reduce(t + hi - lo)
+        pen, dpen = self._penalty(z)
+        stack[t] = np.r_[dpen, pen]
+        t = self._reduce(t + 1)
+        tri = np.zeros((nz + 1, nz + 1))
+        tri[:t] = stack[:t]
+        return tri if np.all(np.isfinite(tri)) else None
+
+    def _reduce(self, rows: int) -> int:
+        """QR-reduce the first ``rows`` rows of :attr:`stack` to their triangle, kept on top;
+        returns its number of rows."""
+        R = qr(self.stack[:rows], mode="r", check_finite=False)[0]
+        keep = min(rows, self.stack.shape[1])
+        self.stack[:keep] = R[:keep]
+        return keep
+
+    def fun(self, z: np.ndarray) -> np.ndarray:
+        """Compressed residuals ``[c, rho]`` at ``z`` (norm: that of the full residuals)."""
+        return self.evaluate(z)["r"]
+
+    def jac(self, z: np.ndarray) -> np.ndarray:
+        """Compressed Jacobian ``[R; 0]`` at ``z``."""
+        return self.evaluate(z)["J"]
+
+    def _set_past(self, theta: np.ndarray, e0: float) -> None:
+        """The past of the signals, with the Duhem state ``e0`` off rest (L2 settled on it)."""
         P = self.P
         for a, past in zip((self.W1, self.W2, self.Y), self.past, strict=True):
             a[:P] = past
@@ -356,21 +410,13 @@ class _OutputError:
             b2 = theta[[s.names.index(f"b2{i}") for i in range(1, s.n2b + 1)]]
             self.W2[:P] += e0
             self.Y[:P] += e0 * (1.0 + np.sum(b2)) / (1.0 + np.sum(a2))
-        if not sensitivities:
-            simulate_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y, P)
-            return self.Y[P:][self.idx].copy()
-        self.S1[:P] = self.S2[:P] = self.SY[:P] = 0.0
-        sensitivities_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y,
-                           self.S1, self.S2, self.SY, P)
-        return self.Y[P:][self.idx].copy(), self.SY[P:][self.idx]
 
-    def fun(self, z: np.ndarray) -> np.ndarray:
-        self.evaluate(z)
-        return self._cache["r"]
-
-    def jac(self, z: np.ndarray) -> np.ndarray:
-        self.evaluate(z)
-        return self._cache["J"]
+    def _run(self, theta: np.ndarray, e0: float) -> np.ndarray:
+        """Simulated output at the samples in the cost (a copy), from the past of ``e0``."""
+        P = self.P
+        self._set_past(theta, e0)
+        simulate_into(theta, self.structure.layout, self.U, self.W1, self.W2, self.Y, P)
+        return self.Y[P:][self.idx].copy()
 
     def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
         lo, hi = self.rp.bounds()
@@ -533,7 +579,6 @@ def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, la
     model = DuhemSandwich(theta, structure, fs=rec.fs, name=name, u_rest=prep.u_rest,
                           offset=prep.offset(y0n), envelope=prep.envelope, units=rec.units,
                           rest_memory=e0n * prep.y_scale)
-    m = len(problem.idx)
     bound = problem.bound(theta_n)
     notes = list(prep.notes)
     if bound >= 2.0:
@@ -544,7 +589,7 @@ def _result(prep: Prepared, structure: Structure, problem: _OutputError, sol, la
                     or "diverged" in w]
     notes += [f"on the training record: {w}" for w in train_issues]
     info = {
-        "rms_residual": float(np.sqrt(np.mean(sol.fun[:m] ** 2)) * prep.y_scale),
+        "rms_residual": float(np.sqrt(np.mean(problem.residuals(sol.x) ** 2)) * prep.y_scale),
         "nfev": int(sol.nfev),
         "status": int(sol.status),
         "message": str(sol.message),

@@ -36,7 +36,8 @@ After every update the estimate is kept stable (poles of L1 and L2 inside the un
 step that would leave that set is halved until it does not (at most 30 times, then dropped).
 
 :func:`fit_pi_output_error` is the off-line reference: output-error least squares
-(Levenberg-Marquardt, exact Jacobian, poles kept inside the circle by reflection coefficients)
+(``scipy.optimize.least_squares``, exact Jacobian, poles kept inside the circle by reflection
+coefficients, as in the off-line Duhem fit)
 started from a linear fit of the weights. :func:`identify_pi` is the entry point of
 ``hystid identify REC --model pi``.
 """
@@ -45,16 +46,18 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numba import njit
+from scipy.optimize import least_squares
 
 from ..model import InitialCondition
-from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds
+from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds, play
+from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
-from .constraints import K_MAX, poly_to_reflection, reflection_to_poly
+from .base import Estimator, record_signals, sample_arrays
+from .constraints import Reflections
 from .result import IdentificationResult, converged_at
 
 __all__ = [
@@ -69,9 +72,37 @@ FORMS = ("key-term", "output-error")
 
 
 # =========================================================================== compiled kernels
-@njit(cache=True, inline="always")
-def _play(v, p_prev, r):
-    return max(v - r, min(v + r, p_prev))
+@njit(cache=True)
+def _l1_step(c, n1a, n1b, q1, U, W1, S1, k):
+    # eq. (29) at index k and d w1 / d (a1, b1) with c = [a1 (n1a), b1 (n1b), ...]; returns w1
+    w1 = 0.0
+    for j in range(n1b):
+        w1 += c[n1a + j] * U[k - q1 - j]
+    for i in range(n1a):
+        w1 -= c[i] * W1[k - 1 - i]
+    W1[k] = w1
+    for m in range(n1a + n1b):
+        s = 0.0
+        for i in range(n1a):
+            s -= c[i] * S1[k - 1 - i, m]
+        S1[k, m] = s
+    for i in range(n1a):
+        S1[k, i] -= W1[k - 1 - i]
+    for j in range(n1b):
+        S1[k, n1a + j] += U[k - q1 - j]
+    return w1
+
+
+@njit(cache=True)
+def _operators_step(w1, r, p, SP, S1, k, n1):
+    # eq. (30) for every operator with d p_i / d c1: an operator that moves follows w1
+    # (dp/dw1 = 1), one that holds keeps its state and its sensitivity
+    for i in range(r.shape[0]):
+        q = play(w1, p[i], r[i])
+        if q != p[i]:
+            p[i] = q
+            for m in range(n1):
+                SP[i, m] = S1[k, m]
 
 
 @njit(cache=True)
@@ -145,37 +176,12 @@ def pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k):
     ia1, ib1, imu, ia2, ib2 = _layout_offsets(layout)
     nc = c.shape[0]
     n1 = n1a + n1b
-    # eq. (29) and d w1 / d (a1, b1)
-    w1 = 0.0
-    for j in range(n1b):
-        w1 += c[ib1 + j] * U[k - q1 - j]
-    for i in range(n1a):
-        w1 -= c[ia1 + i] * W1[k - 1 - i]
-    W1[k] = w1
-    for m in range(n1):
-        s = 0.0
-        for i in range(n1a):
-            s -= c[ia1 + i] * S1[k - 1 - i, m]
-        S1[k, m] = s
-    for i in range(n1a):
-        S1[k, ia1 + i] -= W1[k - 1 - i]
-    for j in range(n1b):
-        S1[k, ib1 + j] += U[k - q1 - j]
-    # eq. (30): an operator that moves follows w1 (dp/dw1 = 1), one that holds keeps its state
+    w1 = _l1_step(c, n1a, n1b, q1, U, W1, S1, k)       # eq. (29)
+    _operators_step(w1, r, p, SP, S1, k, n1)            # eq. (30)
     w2 = 0.0
     for m in range(nc):
         SW2[k, m] = 0.0
     for i in range(n):
-        lo = w1 - r[i]
-        hi = w1 + r[i]
-        if lo > p[i]:
-            p[i] = lo
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
-        elif hi < p[i]:
-            p[i] = hi
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
         w2 += c[imu + i] * p[i]
         SW2[k, imu + i] = p[i]
         for m in range(n1):
@@ -209,28 +215,11 @@ def pi_sensitivities_into(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start)
 
 
 @njit(cache=True)
-def _is_stable_poly(a):
-    # Schur-Cohn step-down: 1 + a_1 z^-1 + ... stable iff every |k_m| < 1
-    n = a.shape[0]
-    c = a.copy()
-    for m in range(n, 0, -1):
-        km = c[m - 1]
-        if not abs(km) < 1.0:
-            return False
-        if m > 1:
-            d = 1.0 - km * km
-            tmp = np.empty(m - 1)
-            for i in range(m - 1):
-                tmp[i] = (c[i] - km * c[m - 2 - i]) / d
-            c[: m - 1] = tmp
-    return True
-
-
-@njit(cache=True)
 def _admissible(theta, layout, c):
     full_coefficients(theta, layout, c)
     ia1, ib1, imu, ia2, ib2 = _layout_offsets(layout)
-    return _is_stable_poly(c[ia1:ib1]) and _is_stable_poly(c[ia2:ib2])
+    return (schur_stable(c[ia1:ib1], KMAX_STABLE)
+            and schur_stable(c[ia2:ib2], KMAX_STABLE))
 
 
 @njit(cache=True)
@@ -279,7 +268,8 @@ def _eria_update(theta, U, D, lam, rho_prev, rho, psi, e, K, f, ia1, n1a, ia2, n
     for _ in range(31):                                 # (16), kept stable
         for a in range(n):
             theta[a] = old[a] + step * K[a] * e
-        if _is_stable_poly(theta[ia1 : ia1 + n1a]) and _is_stable_poly(theta[ia2 : ia2 + n2a]):
+        if (schur_stable(theta[ia1 : ia1 + n1a], KMAX_STABLE)
+                and schur_stable(theta[ia2 : ia2 + n2a], KMAX_STABLE)):
             return lam
         step *= 0.5
     theta[:] = old
@@ -298,6 +288,8 @@ def _minimal_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1,
     for m in range(nc):
         psi_c[m] = SY[k, m]
     free_gradient(psi_c, layout, psi)
+    if not np.isfinite(y_meas):                         # skipped: propagated, not learned
+        return np.nan, lam, yhat
     e = y_meas - yhat                                   # (15)
     lam = _eria_update(theta, U_, D, lam, rho_prev, rho, psi, e, K, f, 0, n1a,
                        n1a + n1b - 1 + n, n2a)
@@ -323,32 +315,9 @@ def _l1_operators(theta, layout, r, U, W1, S1, PH, SPH, p, SP, k, c1):
         c1[n1a + j] = theta[n1a + j - 1]
         gain -= theta[n1a + j - 1]
     c1[n1a] = gain
-    w1 = 0.0
-    for j in range(n1b):
-        w1 += c1[n1a + j] * U[k - q1 - j]
-    for i in range(n1a):
-        w1 -= c1[i] * W1[k - 1 - i]
-    W1[k] = w1
-    for m in range(n1):
-        s = 0.0
-        for i in range(n1a):
-            s -= c1[i] * S1[k - 1 - i, m]
-        S1[k, m] = s
-    for i in range(n1a):
-        S1[k, i] -= W1[k - 1 - i]
-    for j in range(n1b):
-        S1[k, n1a + j] += U[k - q1 - j]
+    w1 = _l1_step(c1, n1a, n1b, q1, U, W1, S1, k)
+    _operators_step(w1, r, p, SP, S1, k, n1)
     for i in range(n):
-        lo = w1 - r[i]
-        hi = w1 + r[i]
-        if lo > p[i]:
-            p[i] = lo
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
-        elif hi < p[i]:
-            p[i] = hi
-            for m in range(n1):
-                SP[i, m] = S1[k, m]
         PH[k, i] = p[i]
         for m in range(n1):
             SPH[k, i, m] = SP[i, m]
@@ -397,6 +366,9 @@ def _keyterm_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, Y, S1, PH,
         yhat -= theta[ia2 + i] * Y[k - 1 - i]
         psi[ia2 + i] = -Y[k - 1 - i]
     _l1_chain(psi1, n1a, n1b, psi)
+    if not np.isfinite(y_meas):                         # skipped: the prediction stands in
+        Y[k] = yhat
+        return np.nan, lam, yhat
     e = y_meas - yhat                                   # (15)
     lam = _eria_update(theta, U_, D, lam, rho_prev, rho, psi, e, K, f, 0, n1a, ia2, n2a)
     Y[k] = y_meas
@@ -544,11 +516,15 @@ def keyterm_to_model(theta_kt: np.ndarray, structure: PIStructure) -> np.ndarray
     return out[0] if np.ndim(theta_kt) == 1 else out
 
 
-class PIRecursiveIdentifier:
+class PIRecursiveIdentifier(Estimator):
     """On-line identification of the PI sandwich by the extended recursion (eqs. 15-19).
 
-    Configuration in the constructor, one sample per :meth:`update`, a record per :meth:`fit`;
-    the intermediates of the last update are kept as attributes (filterpy style).
+    Keeps the estimator contract (:class:`~hystid.identify.base.Estimator`): configuration in
+    the constructor, read back as :attr:`settings`; :meth:`update` takes one sample and returns
+    theta(k) in the model's parameters (:attr:`names`); :meth:`fit` restarts, and
+    :meth:`partial_fit` continues; a non-finite output is skipped (the model is propagated, the
+    estimate and ``P`` are left as they are), a non-finite input refused. The intermediates of
+    the last update (:attr:`e`, :attr:`yhat`, :attr:`K`) are kept as attributes.
 
     Parameters
     ----------
@@ -563,8 +539,8 @@ class PIRecursiveIdentifier:
         Initial covariance ``P(0) = P0 I`` (the paper's 1e6), or its diagonal. After a warm-up
         it is the prior of the warm-up fit: ``P = (J'J / s^2 + I / P0)^-1``.
     theta0 : float or array_like
-        Initial estimate in the recursion's coordinates (:attr:`names`): one value for every
-        parameter (the paper's 0.001) or a vector.
+        Initial estimate in the recursion's coordinates (:attr:`recursion_names`): one value
+        for every parameter (the paper's 0.001) or a vector.
     epsilon : float
         Stop index (1e-4): the recursion has converged once no parameter changes by more than
         ``epsilon`` relative to its value (see :func:`hystid.identify.result.converged_at`).
@@ -593,12 +569,13 @@ class PIRecursiveIdentifier:
     min_warmup, max_warmup : int
         Bounds of the ``"sweep"`` warm-up.
     fs : float
-        Sampling rate of the data in Hz (for the model); :meth:`fit` takes the record's.
+        Sampling rate of the data in Hz; records must be sampled at it
+        (:func:`identify_pi` passes the record's).
 
     Attributes
     ----------
     theta : ndarray
-        Current estimate in the recursion's coordinates (see :attr:`names`).
+        Current estimate in the model's parameters (see :attr:`names`).
     P : ndarray
         Current covariance matrix ``P(k)``.
     K : ndarray
@@ -621,6 +598,10 @@ class PIRecursiveIdentifier:
     sampling rates (the regressors ``y(k-1)``, ``y(k-2)`` and ``p_i(k-1)``, ``p_i(k-2)`` are
     nearly collinear). See ``benchmarks/bench_pi_vs_duhem.py`` for figures.
     """
+
+    method = "pi-recursive"
+    #: Samples per compiled call in :meth:`partial_fit` (between progress reports).
+    chunk = 5000
 
     def __init__(
         self,
@@ -673,21 +654,32 @@ class PIRecursiveIdentifier:
         self.min_warmup = int(min_warmup)
         self.max_warmup = int(max_warmup)
         self.fs = float(fs)
-        self._ready = False
+        self.reset()
 
     # ----------------------------------------------------------------- configuration
     @property
-    def settings(self) -> dict:
-        """The configuration, for reports."""
+    def settings(self) -> dict[str, Any]:
+        """The constructor's configuration as plain values (JSON-ready)."""
+        r = self.thresholds
         return {"P0": self.P0.tolist(), "theta0": np.asarray(self.theta0).tolist(),
                 "epsilon": self.epsilon, "gamma": self.gamma, "lambda0": self.lambda0,
                 "form": self.form, "warmup": self.warmup, "min_warmup": self.min_warmup,
-                "max_warmup": self.max_warmup,
-                "n_operators": self._structure().n_operators}
+                "max_warmup": self.max_warmup, "fs": self.fs,
+                "n_operators": self._structure().n_operators,
+                "thresholds": None if r is None else np.asarray(r, float).ravel().tolist()}
 
     @property
     def names(self) -> tuple[str, ...]:
-        """Names of the recursion's parameters (the entries of :attr:`theta`)."""
+        """Names of the model's parameters (the entries of :attr:`theta` and of the history)."""
+        return self._structure().names
+
+    @property
+    def recursion_names(self) -> tuple[str, ...]:
+        """Names of the recursion's own coordinates (``theta0`` and ``P0`` are given in them).
+
+        The model's parameters in the output-error form; ``a1.., b12.., b2j*mu_i, a2..`` in the
+        key-term form.
+        """
         s = self._structure()
         if self.form == "output-error":
             return s.names
@@ -695,6 +687,13 @@ class PIRecursiveIdentifier:
         return (tuple(f"a1{i}" for i in range(1, s.n1a + 1))
                 + tuple(f"b1{j}" for j in range(2, s.n1b + 1)) + beta
                 + tuple(f"a2{i}" for i in range(1, s.n2a + 1)))
+
+    @property
+    def theta(self) -> np.ndarray:
+        """The current estimate in the model's parameters (:attr:`names`)."""
+        if not self._ready:
+            return self._model_theta(self._theta_start(len(self.recursion_names)))
+        return self._model_theta(self._theta)
 
     def _structure(self) -> PIStructure:
         if self._ready:
@@ -704,57 +703,56 @@ class PIRecursiveIdentifier:
         n = len(np.ravel(self.thresholds)) if self.thresholds is not None else self.n_operators
         return PIStructure(n_operators=n)
 
-    def reset(self, thresholds: np.ndarray | None = None) -> PIRecursiveIdentifier:
-        """Start over from ``theta0``, ``P0`` at rest (optionally with new thresholds).
+    def reset(self) -> PIRecursiveIdentifier:
+        """Forget everything learned: back to ``theta0``, ``P0``, at rest, at sample 0.
 
-        Parameters
-        ----------
-        thresholds : ndarray, optional
-            New play-operator thresholds.
+        Thresholds placed from a record (none given to the constructor) are forgotten too: the
+        next record places them again.
 
         Returns
         -------
         PIRecursiveIdentifier
-            The identifier itself.
+            The identifier.
         """
-        if thresholds is not None:
-            self.thresholds = thresholds
-        if self.thresholds is None:
-            raise ValueError(
-                "thresholds: the identifier needs the play-operator thresholds before the first "
-                "update; pass thresholds= (see hystid.pi.pi_thresholds) or call fit(record)"
-            )
         self._ready = False
+        self.k = 0
+        self.n_skipped = 0
+        self.warm_result_: IdentificationResult | None = None
+        self.warmup_seconds_ = 0.0
+        self.warmed_up = False
+        if self.thresholds is not None:
+            self._start(self.thresholds)
+        return self
+
+    def _start(self, thresholds: Any) -> None:
+        """Allocate the recursion's state for these thresholds (theta0, P0, at rest)."""
         s = self._structure()
-        r = np.ascontiguousarray(np.asarray(self.thresholds, dtype=float).ravel())
+        r = np.ascontiguousarray(np.asarray(thresholds, dtype=float).ravel())
         if s.n_operators != len(r):
             raise ValueError(f"thresholds: expected {s.n_operators} values, got {len(r)}")
-        self.structure_ = s
-        names = self.names
+        names = self.recursion_names
         theta = self._theta_start(len(names))
         PISandwich(self._model_theta(theta), r, s)  # validates thresholds and start
         if self.P0.ndim == 1 and self.P0.shape != (len(names),):
             raise ValueError(f"P0: expected {len(names)} diagonal values, got {self.P0.shape}")
+        self.structure_ = s
         self.thresholds_ = r
         self.layout_ = _layout(s)
-        self.theta = theta
+        self._theta = theta
         self._U = np.eye(len(names))
         self._D = np.array(np.broadcast_to(self.P0, (len(names),)), dtype=float)
         self.K = np.zeros(len(names))
         self.e = 0.0
         self.yhat = 0.0
         self.lam = np.array([self.lambda0])
-        self.k = 0
         self._H = max(s.history, s.q2 + s.n2b - 1)
         self._windows = self._arrays(self._H + 1)
+        self._buffers = self._arrays(self._H + self.chunk)
         self._p = np.zeros(s.n_operators)
         self._SP = np.zeros((s.n_operators, _n_full(s)))
-        self._buffer: list[tuple[float, float]] = []
+        self._buffer: list[tuple[np.ndarray, np.ndarray]] = []
         self._umin, self._umax = np.inf, -np.inf
-        self.warm_result_: IdentificationResult | None = None
-        self.warmed_up = False
         self._ready = True
-        return self
 
     def _arrays(self, length: int) -> list[np.ndarray]:
         """Extended arrays U, W1, W2, Y, S1, SW2, SY, PH, SPH of the given length.
@@ -788,189 +786,250 @@ class PIRecursiveIdentifier:
     @property
     def P(self) -> np.ndarray:
         """Current covariance matrix ``P(k) = U diag(D) U'`` (kept factored)."""
-        if not self._ready:
-            raise ValueError("no estimate yet: call update() or fit() first")
+        self._require_start()
         return (self._U * self._D) @ self._U.T
 
     @property
     def model(self) -> PISandwich:
         """The current estimate as a :class:`~hystid.pi.PISandwich`."""
-        if not self._ready:
-            raise ValueError("no estimate yet: call update() or fit() first")
-        return PISandwich(self._model_theta(self.theta), self.thresholds_, self.structure_,
+        self._require_start()
+        return PISandwich(self.theta, self.thresholds_, self.structure_,
                           fs=self.fs, name="identified PI sandwich")
 
+    def _require_start(self) -> None:
+        if not self._ready:
+            raise ValueError(
+                "thresholds: the identifier needs the play-operator thresholds before the first "
+                "update; pass thresholds= (see hystid.pi.pi_thresholds) or call fit(record)"
+            )
+
     # ----------------------------------------------------------------- warm start
-    def _warm_due(self, n: int, swept: float) -> bool:
-        """Whether ``n`` samples whose input spans ``swept`` complete the warm-up."""
-        if self.warmup != "sweep":
-            return n >= self.warmup
-        r, N = self.thresholds_, len(self.thresholds_)
-        span = 2.0 * r[-1] * N / (N - 1) if N > 1 else 0.0
-        return n >= self.max_warmup or (n >= self.min_warmup and swept >= 0.9 * span)
+    @property
+    def warming_up(self) -> bool:
+        """True while the samples are still being collected for the warm-up fit."""
+        return bool(self.warmup) and not self.warmed_up
 
     def _warmup_length(self, u: np.ndarray) -> int:
-        """Length of the warm-up on a whole input record (see ``warmup``)."""
-        if not self.warmup:
+        """Samples of ``u`` that complete the warm-up after those buffered (``len(u)`` if not)."""
+        return self._warmup_take(u)[0]
+
+    def _warmup_take(self, u: np.ndarray) -> tuple[int, bool]:
+        """Samples of ``u`` the warm-up takes, and whether they complete it.
+
+        ``"sweep"``: at least ``min_warmup`` samples in all and the input has swept 90 % of the
+        range the thresholds were placed for, or ``max_warmup`` samples; a number: that many.
+        """
+        if not self.warming_up or len(u) == 0:
+            return 0, False
+        n = self.k + np.arange(1, len(u) + 1)
+        if self.warmup == "sweep":
+            r, N = self.thresholds_, len(self.thresholds_)
+            span = 2.0 * r[-1] * N / (N - 1) if N > 1 else 0.0
+            swept = (np.maximum(np.maximum.accumulate(u), self._umax)
+                     - np.minimum(np.minimum.accumulate(u), self._umin))
+            due = (n >= self.max_warmup) | ((n >= self.min_warmup) & (swept >= 0.9 * span))
+        else:
+            due = n >= self.warmup
+        return (int(np.argmax(due)) + 1, True) if due.any() else (len(u), False)
+
+    def _collect(self, u: np.ndarray, y: np.ndarray, history: np.ndarray) -> int:
+        """Buffer the warm-up samples at the head of ``u``; fit once they are all there.
+
+        Returns the number of samples taken (the rows of ``history`` filled with ``theta0``).
+        """
+        w, done = self._warmup_take(u)
+        if w == 0:
             return 0
-        swept = np.maximum.accumulate(u) - np.minimum.accumulate(u)
-        for n in range(1, len(u) + 1):
-            if self._warm_due(n, swept[n - 1]):
-                return n
-        return len(u)
+        self._buffer.append((u[:w].copy(), y[:w].copy()))
+        self._umin = min(self._umin, float(np.min(u[:w])))
+        self._umax = max(self._umax, float(np.max(u[:w])))
+        history[:w] = self.theta
+        self.k += w
+        if done:
+            bu, by = (np.concatenate(part) for part in zip(*self._buffer, strict=True))
+            self._buffer = []
+            t0 = time.perf_counter()
+            self._warm_start(bu, by)
+            self.warmup_seconds_ = time.perf_counter() - t0
+            self.warmed_up = True
+            history[w - 1] = self.theta
+        return w
 
     def _warm_start(self, u: np.ndarray, y: np.ndarray) -> None:
         """Fit the first samples off-line, then set the recursion's state as if it had run."""
         s = self.structure_
-        rec = Record(u=u, y=y, fs=self.fs, name="warm-up")
-        res = fit_pi_output_error(rec, self.thresholds_, s)
+        res = _fit_output_error(u, y, self.fs, self.thresholds_, s)
         self.warm_result_ = res
         theta = res.model.theta
         yhat, J = pi_output_sensitivities(res.model, u)
-        s2 = max(float(np.mean((y - yhat) ** 2)), 1e-30)
+        seen = np.isfinite(y)
+        s2 = max(float(np.mean((y[seen] - yhat[seen]) ** 2)), 1e-30)
         prior = 1.0 / np.broadcast_to(self.P0, theta.shape)
-        info = J.T @ J / s2 + np.diag(prior)
+        info = J[seen].T @ J[seen] / s2 + np.diag(prior)
         P = np.linalg.inv(info)
         self._U, self._D = _ud_factor(0.5 * (P + P.T))
         # replay the warm-up with the fitted parameters and no update (D = 0) to set the
         # signal windows, operator states and sensitivities
-        self.theta = theta.copy()
+        self._theta = theta.copy()
         arrays = self._arrays(self._H + len(u))
         arrays[0][self._H:] = u
         D, self._D = self._D, np.zeros_like(self._D)
         n = len(u)
         self._run(arrays, self._H, 0, y, np.empty((n, len(theta))), np.empty(n), np.empty(n))
         self._D = D
-        self.theta = theta.copy()
+        self._theta = theta.copy()
         self.lam = np.array([s2])
         for dst, src in zip(self._windows, arrays, strict=True):
             if len(dst) > 1:
                 dst[:] = src[-len(dst):]
 
     # ----------------------------------------------------------------- one sample
-    def update(self, u_k: float, y_k: float) -> float:
-        """Process one sample ``(u(k), y(k))``; returns the prediction error ``e(k)``.
+    def update(self, u_k: float, y_k: float) -> np.ndarray:
+        """Process one sample ``(u(k), y(k))``; returns the estimate theta(k).
 
-        During the warm-up the sample is stored and ``e(k) = 0`` is returned; the sample that
-        completes it triggers the off-line fit.
+        During the warm-up the sample is stored and ``theta0`` is returned; the sample that
+        completes it triggers the off-line fit. The prediction error and the prediction of the
+        sample are left in :attr:`e` and :attr:`yhat`.
 
         Parameters
         ----------
-        u_k, y_k : float
-            Input and measured output at sample ``k``.
+        u_k : float
+            Input u(k), finite (the operators cannot be propagated otherwise).
+        y_k : float
+            Measured y(k); when not finite the model runs on and nothing is learned.
 
         Returns
         -------
-        float
-            The prediction error ``e(k)``.
+        ndarray
+            A copy of theta(k), in the order of :attr:`names`.
         """
-        if not self._ready:
-            self.reset()
-        u_k, y_k = float(u_k), float(y_k)
-        if not (np.isfinite(u_k) and np.isfinite(y_k)):
-            raise ValueError(f"update: non-finite sample u={u_k!r}, y={y_k!r}")
-        if self.warmup and not self.warmed_up:
-            self._buffer.append((u_k, y_k))
-            self.k += 1
-            self._umin, self._umax = min(self._umin, u_k), max(self._umax, u_k)
-            if self._warm_due(self.k, self._umax - self._umin):
-                u, y = np.array(self._buffer).T
-                self._warm_start(np.ascontiguousarray(u), np.ascontiguousarray(y))
-                self.warmed_up = True
-            self.e, self.yhat = 0.0, 0.0
-            return self.e
-        for arr in self._windows:
-            if len(arr) > 1:
-                arr[:-1] = arr[1:]
-        self._windows[0][-1] = u_k
-        hist = np.empty((1, len(self.theta)))
-        err, yh = np.empty(1), np.empty(1)
-        self._run(self._windows, self._H, self.k, np.array([y_k]), hist, err, yh)
-        self.k += 1
-        self.e, self.yhat = float(err[0]), float(yh[0])
-        return self.e
+        u, y = sample_arrays(u_k, y_k)
+        self._require_start()
+        history = np.empty((1, len(self.names)))
+        errors, yhats = np.zeros(1), np.zeros(1)
+        self._process(u, y, history, errors, yhats)
+        return history[0].copy()
+
+    def _process(self, u, y, history, errors, yhats, progress=None) -> int:
+        """Warm-up and recursion over a block of samples; returns the warm-up samples taken."""
+        n = len(u)
+        self.n_skipped += int(np.count_nonzero(~np.isfinite(y)))
+        w = self._collect(u, y, history)
+        errors[:w], yhats[:w] = np.nan, np.nan
+        if w == n:
+            return w
+        H = self._H
+        buffers = self._buffers  # one chunk long, allocated once
+        same = self.form == "output-error"  # the recursion's coordinates are the model's
+        raw = history if same else np.empty((n, len(self._theta)))
+        for a in range(w, n, self.chunk):
+            b = min(n, a + self.chunk)
+            arrays = [x[: H + b - a] for x in buffers]
+            for dst, src in zip(arrays, self._windows, strict=True):
+                if len(src) > 1:
+                    dst[:H] = src[1:]
+            arrays[0][H:] = u[a:b]
+            self._run(arrays, H, self.k, y[a:b], raw[a:b], errors[a:b], yhats[a:b])
+            self.k += b - a
+            for dst, src in zip(self._windows, arrays, strict=True):
+                if len(dst) > 1:
+                    dst[:] = src[-len(dst):]
+            if progress is not None:
+                progress(b, n)
+        if not same:
+            history[w:] = self._model_theta(raw[w:])
+        self.e, self.yhat = float(errors[-1]), float(yhats[-1])
+        return w
 
     def _run(self, arrays, start, k0, y, history, errors, yhats) -> None:
         mode = FORMS.index(self.form)
         U, W1, W2, Y, S1, SW2, SY, PH, SPH = arrays
-        recursion_run(mode, self.theta, self._U, self._D, self.lam, self.gamma, k0,
-                      self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
+        recursion_run(mode, self._theta, self._U, self._D, self.lam, self.gamma,
+                      k0, self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
                       self._p, self._SP, start, y, history, errors, yhats, self.K)
 
     # ----------------------------------------------------------------- a record
     def fit(
-        self, record: Record, *, progress: Callable[[int, int], None] | None = None,
-        chunk: int = 5000,
+        self, record: Record, progress: Callable[[int, int], None] | None = None
     ) -> IdentificationResult:
-        """Run the recursion over a record (from rest), keeping the parameter history.
+        """Restart (:meth:`reset`) and run over a whole record, from rest.
 
         Parameters
         ----------
         record : Record
-            Input ``u`` and measured output ``y``.
+            Input ``u`` and measured output ``y`` at :attr:`fs`; it must hold more samples than
+            the warm-up.
         progress : callable, optional
             Called as ``progress(k, n)`` after each chunk of samples.
-        chunk : int
-            Samples per compiled call between progress reports.
+
+        Returns
+        -------
+        IdentificationResult
+            As :meth:`partial_fit`; the same for two calls on the same record.
+        """
+        u, _, name = record_signals(record, self.fs)
+        self.reset()
+        self._place(u)
+        w, done = self._warmup_take(u)
+        if self.warming_up and (not done or w >= len(u)):
+            if done or self.warmup != "sweep":
+                takes = w if done else self.warmup
+                need = f"{takes + 1} samples: the warm-up takes {takes}"
+            else:
+                need = (f"{self.min_warmup + 1} samples, and an input that sweeps the range "
+                        "of the thresholds: the warm-up lasts until it has")
+            raise ValueError(f"record {name!r}: {len(u)} samples are too few for the PI "
+                             f"recursion (expected at least {need})")
+        return self.partial_fit(record, progress=progress)
+
+    def _place(self, u: np.ndarray) -> None:
+        """Start with the given thresholds, or with thresholds placed over ``u``'s range."""
+        if not self._ready:
+            self._start(pi_thresholds(u, self._structure().n_operators))
+
+    def partial_fit(
+        self, record: Record, progress: Callable[[int, int], None] | None = None
+    ) -> IdentificationResult:
+        """Run the recursion over a record from the current state, keeping the history.
+
+        Parameters
+        ----------
+        record : Record
+            Input ``u`` and measured output ``y`` at :attr:`fs`. Without thresholds from the
+            constructor or an earlier record they are placed over this record's input range.
+        progress : callable, optional
+            Called as ``progress(k, n)`` after each chunk of samples.
 
         Returns
         -------
         IdentificationResult
             ``method="pi-recursive"``; ``history`` has one row per sample in the model's
-            parameters (:attr:`hystid.pi.PIStructure.names`; ``theta0`` during a warm-up);
-            ``converged_at`` is the first sample after which the estimate stays within
-            ``epsilon``; ``info`` holds the prediction errors and their RMS over the last 10 %.
+            parameters (:attr:`names`; ``theta0`` during a warm-up); ``converged_at`` is the
+            first sample after which the estimate stays within ``epsilon``; ``info`` holds the
+            prediction errors (NaN during the warm-up and at skipped samples) and their RMS
+            over the last 10 % of the recursion's samples.
         """
-        if not hasattr(record, "u") or not hasattr(record, "y"):
-            raise ValueError(f"record: expected a hystid Record with u and y, got {record!r}")
-        u = np.ascontiguousarray(record.u, dtype=float)
-        y = np.ascontiguousarray(record.y, dtype=float)
-        if len(u) < 2 or len(u) != len(y) or not (np.all(np.isfinite(u))
-                                                   and np.all(np.isfinite(y))):
-            raise ValueError("record: expected at least 2 finite samples of u and y")
-        self.fs = float(record.fs)
-        n_ops = self.structure.n_operators if self.structure else self.n_operators
-        self.reset(self.thresholds if self.thresholds is not None
-                   else _record_thresholds(record, n_ops))
-        n, H, w = len(u), self._H, self._warmup_length(u)
-        if w >= n:
-            raise ValueError(f"record {record.name!r}: {n} samples are too few for the PI "
-                             f"recursion (expected at least {w + 1}: the warm-up is {w})")
-        raw = np.empty((n, len(self.theta)))
-        errors = np.zeros(n)
-        yhats = np.zeros(n)
-        raw[:w] = self.theta
-        t0 = time.perf_counter()
-        if w:
-            self._warm_start(u[:w], y[:w])
-            self.warmed_up = True
-        warm_seconds = time.perf_counter() - t0
-        arrays = self._arrays(H + n - w)
-        for dst, src in zip(arrays, self._windows, strict=True):
-            if len(src) > 1:
-                dst[:H] = src[1:]
-        arrays[0][H:] = u[w:]
-        for a in range(w, n, chunk):
-            b = min(n, a + chunk)
-            self._run([x[: H + b - w] for x in arrays], H + a - w, a, y[a:b], raw[a:b],
-                      errors[a:b], yhats[a:b])
-            if progress is not None:
-                progress(b, n)
-        self.k = n
-        self.e, self.yhat = float(errors[-1]), float(yhats[-1])
-        for dst, src in zip(self._windows, arrays, strict=True):
-            if len(dst) > 1:
-                dst[:] = src[-len(dst):]
-        history = self._model_theta(raw)
-        tail = errors[-max(1, (n - w) // 10):]
+        u, y, _ = record_signals(record, self.fs)
+        self._place(u)
+        n, before = len(u), self.n_skipped
+        history = np.empty((n, len(self.names)))
+        errors, yhats = np.zeros(n), np.zeros(n)
+        t0, warm_before = time.perf_counter(), self.warmup_seconds_
+        w = self._process(u, y, history, errors, yhats, progress)
+        self._warn_skipped(before)
+        tail = errors[w:][-max(1, (n - w) // 10):]
+        tail = tail[np.isfinite(tail)]
         info = {
-            "rms_prediction_error_last10": float(np.sqrt(np.mean(tail**2))),
+            "rms_prediction_error_last10": float(np.sqrt(np.mean(tail**2))) if tail.size
+            else None,
             "lambda_inv": float(self.lam[0]),
             "thresholds": self.thresholds_.tolist(),
             "prediction_errors": errors,
             "stable": bool(self.model.is_stable()),
-            "warmup_seconds": warm_seconds,
+            "seconds": time.perf_counter() - t0,
+            "warmup_seconds": self.warmup_seconds_ - warm_before,
             "warmup_samples": w,
+            "warm_fit": None if self.warm_result_ is None else self.warm_result_.info,
         }
         settings = {**self.settings, "samples": n}
         return IdentificationResult(
@@ -989,12 +1048,15 @@ def _ud_factor(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # =========================================================================== off-line
 def _weights_by_linear_ls(model: PISandwich, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Weights minimising the output error for fixed L1, L2 (y is linear in the weights)."""
+    """Weights minimising the output error for fixed L1, L2 (y is linear in the weights).
+
+    Samples with a non-finite ``y`` are left out.
+    """
     _, J = pi_output_sensitivities(model, u)
-    sl = model.structure.slices()["mu"]
-    A = J[:, sl]
+    seen = np.isfinite(y)
+    A = J[:, model.structure.slices()["mu"]]
     # the contribution of the weights is exactly A @ mu (L1, L2 fixed, from rest)
-    mu, *_ = np.linalg.lstsq(A, y, rcond=None)
+    mu, *_ = np.linalg.lstsq(A[seen], y[seen], rcond=None)
     return mu
 
 
@@ -1011,11 +1073,12 @@ def fit_pi_output_error(
 ) -> IdentificationResult:
     """Identify the PI sandwich off-line by output-error least squares (the reference).
 
-    Minimises ``sum_k (y(k) - yhat(k | theta))^2`` of the free-run simulation from rest by
-    Levenberg-Marquardt with the exact Jacobian. The denominators of L1 and
-    L2 are searched as reflection coefficients in (-1, 1), so the model stays stable. The
-    default start is ``L1 = L2 = z^-1`` with the weights fitted by linear least squares (the
-    output is linear in the weights).
+    Minimises ``sum_k (y(k) - yhat(k | theta))^2`` of the free-run simulation from rest with
+    :func:`scipy.optimize.least_squares` (trust-region reflective, exact Jacobian), in the
+    off-line Duhem fit's search coordinates (:class:`~hystid.identify.constraints.Reflections`):
+    the denominators of L1 and L2 as reflection coefficients inside the unit interval, so the
+    model stays stable. The default start is ``L1 = L2 = z^-1`` with the weights fitted by
+    linear least squares (the output is linear in the weights).
 
     Parameters
     ----------
@@ -1032,7 +1095,7 @@ def fit_pi_output_error(
     max_nfev : int
         Maximum number of residual evaluations.
     tol : float
-        Stop when the relative decrease of the cost or the relative step falls below it.
+        ``ftol``, ``xtol`` and ``gtol`` of the solver.
     name : str
         Name of the identified model.
 
@@ -1041,105 +1104,54 @@ def fit_pi_output_error(
     IdentificationResult
         ``method="pi-batch"``; ``info`` holds the RMS residual and the solver's message.
     """
-    u = np.ascontiguousarray(record.u, dtype=float)
-    y = np.ascontiguousarray(record.y, dtype=float)
     if structure is not None:
         n_operators = structure.n_operators
-    r = np.asarray(thresholds, float) if thresholds is not None else _record_thresholds(
-        record, n_operators)
+    r = (np.asarray(thresholds, float) if thresholds is not None
+         else _record_thresholds(record, n_operators))
+    return _fit_output_error(record.u, record.y, record.fs, r, structure, theta0=theta0,
+                             max_nfev=max_nfev, tol=tol, name=name)
+
+
+def _fit_output_error(
+    u: np.ndarray, y: np.ndarray, fs: float, r: np.ndarray, structure: PIStructure | None,
+    *, theta0: np.ndarray | None = None, max_nfev: int = 200, tol: float = 1e-8,
+    name: str = "identified PI sandwich",
+) -> IdentificationResult:
+    """:func:`fit_pi_output_error` on arrays; samples with a non-finite ``y`` are left out."""
+    u = np.ascontiguousarray(u, dtype=float)
+    y = np.ascontiguousarray(y, dtype=float)
+    seen = np.isfinite(y)
     s = structure or PIStructure(n_operators=len(r))
-    names = s.names
     sl = s.slices()
     if theta0 is None:
-        theta = np.zeros(len(names))
-        start = PISandwich(theta, r, s, fs=record.fs)
-        theta[sl["mu"]] = _weights_by_linear_ls(start, u, y)
+        theta = np.zeros(len(s.names))
+        theta[sl["mu"]] = _weights_by_linear_ls(PISandwich(theta, r, s, fs=fs), u, y)
     else:
         theta = np.asarray(theta0, dtype=float).ravel()
-    model = PISandwich(theta, r, s, fs=record.fs, name=name)
-    if not model.is_stable():
+    if not PISandwich(theta, r, s, fs=fs).is_stable():
         raise ValueError("theta0: the start must have stable L1 and L2")
-    groups = [np.arange(len(names))[sl["a1"]], np.arange(len(names))[sl["a2"]]]
-    groups = [g for g in groups if len(g)]
+    index = np.arange(len(s.names))
+    rp = Reflections([index[sl["a1"]], index[sl["a2"]]], len(s.names))
+    cache: dict[str, Any] = {}
 
-    def to_theta(z):
-        theta = np.array(z, float)
-        dtheta = np.eye(len(z))
-        for g in groups:
-            theta[g], dtheta[np.ix_(g, g)] = reflection_to_poly(z[g])
-        return theta, dtheta
+    def evaluate(z: np.ndarray) -> dict[str, Any]:
+        if cache.get("z") is None or not np.array_equal(cache["z"], z):
+            theta, dtheta = rp.to_theta(z)
+            with np.errstate(over="ignore", invalid="ignore"):
+                yhat, J = pi_output_sensitivities(PISandwich(theta, r, s, fs=fs), u)
+            cache.update(z=z.copy(), r=yhat[seen] - y[seen], J=J[seen] @ dtheta)
+        return cache
 
-    z0 = model.theta.copy()
-    for g in groups:
-        z0[g] = np.clip(poly_to_reflection(model.theta[g]), -K_MAX, K_MAX)
-    lo = np.full(len(z0), -np.inf)
-    hi = np.full(len(z0), np.inf)
-    for g in groups:
-        lo[g], hi[g] = -K_MAX, K_MAX
-    def fun(z):
-        theta, dth = to_theta(z)
-        yhat, J = pi_output_sensitivities(PISandwich(theta, r, s, fs=record.fs), u)
-        if not (np.all(np.isfinite(yhat)) and np.all(np.isfinite(J))):
-            return None, None
-        return yhat - y, J @ dth
-
-    sol = _levenberg_marquardt(fun, z0, lo, hi, max_nfev, tol)
-    theta = to_theta(sol.x)[0]
-    model = PISandwich(theta, r, s, fs=record.fs, name=name)
+    lo, hi = rp.bounds()
+    with np.errstate(over="ignore", invalid="ignore"):
+        sol = least_squares(lambda z: evaluate(z)["r"], rp.to_z(theta),
+                            jac=lambda z: evaluate(z)["J"], bounds=(lo, hi), method="trf",
+                            ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev, x_scale="jac")
+    model = PISandwich(rp.to_theta(sol.x)[0], r, s, fs=fs, name=name)
     info = {"rms_residual": float(np.sqrt(np.mean(sol.fun**2))), "nfev": int(sol.nfev),
             "message": str(sol.message), "thresholds": r.tolist()}
     settings = {"n_operators": len(r), "max_nfev": max_nfev, "tol": tol, "samples": len(u)}
     return IdentificationResult(model, "pi-batch", settings, info=info)
-
-
-@dataclass
-class _Solution:
-    x: np.ndarray
-    fun: np.ndarray
-    nfev: int
-    message: str
-
-
-def _levenberg_marquardt(fun, z0, lo, hi, max_nfev: int, tol: float) -> _Solution:
-    """Box-bounded Levenberg-Marquardt on the normal equations (n_params is small).
-
-    ``fun(z) -> (residual, jacobian)`` or ``(None, None)`` where the model cannot be simulated.
-    """
-    z = np.clip(z0, lo, hi)
-    res, J = fun(z)
-    if res is None:
-        raise ValueError("theta0: the start cannot be simulated (non-finite output)")
-    cost = float(res @ res)
-    nfev, lam, message = 1, None, "maximum number of evaluations reached"
-    while nfev < max_nfev:
-        A = J.T @ J
-        g = J.T @ res
-        diag = np.maximum(np.diag(A), 1e-12 * max(np.max(np.diag(A)), 1e-300))
-        lam = 1e-3 if lam is None else lam
-        improved = False
-        while nfev < max_nfev:
-            step = np.linalg.solve(A + lam * np.diag(diag), -g)
-            z_new = np.clip(z + step, lo, hi)
-            r_new, J_new = fun(z_new)
-            nfev += 1
-            c_new = float(r_new @ r_new) if r_new is not None else np.inf
-            if c_new < cost:
-                improved = True
-                break
-            lam *= 4.0
-            if lam > 1e12:
-                break
-        if not improved:
-            message = "no further decrease of the cost"
-            break
-        gain = (cost - c_new) / max(cost, 1e-300)
-        dz = np.max(np.abs(z_new - z) / np.maximum(np.abs(z), 1e-3))
-        z, res, J, cost = z_new, r_new, J_new, c_new
-        lam = max(lam / 3.0, 1e-12)
-        if gain < tol or dz < tol:
-            message = "relative decrease of the cost or step below tol"
-            break
-    return _Solution(z, res, nfev, message)
 
 
 # =========================================================================== entry point
@@ -1170,6 +1182,7 @@ def identify_pi(
         The model, its parameter history (recursive) and the run's information.
     """
     if method == "recursive":
+        settings.setdefault("fs", record.fs)
         return PIRecursiveIdentifier(**settings).fit(record, progress=progress)
     if method == "batch":
         return fit_pi_output_error(record, **settings)

@@ -1,0 +1,119 @@
+"""Memory per sample of the batch fit and of the on-line identifier at 1e5, 1e6 (and 1e7) samples.
+
+Each case runs in a fresh process (peak RSS is a per-process figure): the record of the
+reference stage is made and every kernel compiled on a short record first, then the fit runs
+and two figures are taken for it alone: the peak of the memory numpy and Python allocate
+(``tracemalloc``) and the growth of the peak resident set over the resident set before the fit
+(the peak is reset before the fit through ``/proc/self/clear_refs``, so that making the record
+does not hide it), both divided by the number of samples. The record itself (``u``, ``y``: 16
+bytes per sample) is made before and is not counted.
+
+    python benchmarks/bench_memory.py            # 1e5 and 1e6 samples
+    python benchmarks/bench_memory.py --full     # also 1e7 (several minutes)
+
+Prints a table and writes ``benchmarks/results/bench_memory.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import table, write_json  # noqa: E402
+
+FS = 30_000.0
+CASES = ("batch", "online")
+
+
+def _rss_bytes() -> int:
+    """Current resident set size of this process in bytes."""
+    with open("/proc/self/statm") as src:
+        pages = int(src.read().split()[1])
+    return pages * resource.getpagesize()
+
+
+def _reset_peak_rss() -> None:
+    """Start a new peak of the resident set (Linux: VmHWM := VmRSS)."""
+    with open("/proc/self/clear_refs", "w") as out:
+        out.write("5")
+
+
+def _peak_rss_bytes() -> int:
+    """Peak resident set size since the last :func:`_reset_peak_rss`, in bytes."""
+    with open("/proc/self/status") as src:
+        for line in src:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    raise RuntimeError("no VmHWM in /proc/self/status")
+
+
+def _fit(case: str, record) -> None:
+    from hystid.identify import identify
+
+    identify(record, method=case)
+
+
+def measure(case: str, n: int) -> dict:
+    """Run one case in this process; the figures of the fit alone."""
+    import warnings
+
+    from hystid.reference import reference_record
+
+    warnings.simplefilter("ignore")
+    _fit(case, reference_record(3000 / FS, seed=1))  # compile every kernel first
+    record = reference_record(n / FS, seed=0)
+    rss_before = _rss_bytes()
+    _reset_peak_rss()
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    _fit(case, record)
+    seconds = time.perf_counter() - t0
+    traced_peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    peak = _peak_rss_bytes()
+    return {
+        "case": case, "samples": n, "seconds": seconds,
+        "traced_bytes_per_sample": traced_peak / n,
+        "rss_growth_bytes_per_sample": (peak - rss_before) / n,
+        "peak_rss_mb": peak / 2**20,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--full", action="store_true", help="also run 1e7 samples")
+    parser.add_argument("--case", choices=CASES, help=argparse.SUPPRESS)
+    parser.add_argument("--n", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.case:  # a child process: one case, its figures as JSON on stdout
+        print(json.dumps(measure(args.case, args.n)))
+        return
+    sizes = [100_000, 1_000_000] + ([10_000_000] if args.full else [])
+    rows = []
+    for n in sizes:
+        for case in CASES:
+            out = subprocess.run([sys.executable, __file__, "--case", case, "--n", str(n)],
+                                 capture_output=True, text=True, check=True)
+            rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+            r = rows[-1]
+            print(f"{case} {n:.0e}: {r['traced_bytes_per_sample']:.0f} B/sample traced, "
+                  f"{r['rss_growth_bytes_per_sample']:.0f} B/sample RSS, {r['seconds']:.1f} s",
+                  flush=True)
+    print()
+    print(table([[r["case"], f"{r['samples']:.0e}", f"{r['traced_bytes_per_sample']:.0f}",
+                  f"{r['rss_growth_bytes_per_sample']:.0f}", f"{r['peak_rss_mb']:.0f}",
+                  f"{r['seconds']:.1f}"] for r in rows],
+                ["fit", "samples", "traced B/sample", "RSS growth B/sample", "peak RSS MB",
+                 "seconds"]))
+    write_json("bench_memory", {"rows": rows, "full": args.full})
+
+
+if __name__ == "__main__":
+    main()
