@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .operating import Envelope, Placed, warn_admissibility
-from .poly import is_stable
 from .signals import finite_number, finite_signal
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -218,6 +217,8 @@ class DuhemSandwich(Placed):
         bool
             Whether Assumption 1 holds and ``alpha > 0``.
         """
+        from .poly import is_stable  # numba loads on first use, not on import hystid
+
         return is_stable(self.a1, self.b1, self.a2, self.b2) and self.params["alpha"] > 0
 
     def envelope_bound(self, envelope: Envelope | None = None) -> float:
