@@ -21,44 +21,15 @@ import warnings
 
 import numpy as np
 from _common import table, write_json
+from figures import reference_identification, start_up_run
 
 from hystid.identify import identify
-from hystid.metrics import validate
-from hystid.reference import PAPER_PARAMS, reference_record
-
-TRUTH = np.array(list(PAPER_PARAMS.values()))
-
-
-def samples_to(err: np.ndarray, bound: float) -> int | None:
-    """First sample count after which ``err`` stays below ``bound`` (None if never)."""
-    above = np.flatnonzero(err > bound)
-    if len(above) == 0:
-        return 1
-    k = int(above[-1]) + 2
-    return k if k <= len(err) else None
+from hystid.reference import reference_record
 
 
 def run_one(method: str, seed: int, noise: float, n: int) -> dict:
-    rec = reference_record(n / 30_000.0, seed=seed, noise=noise)
-    val = reference_record(0.5, seed=10_000 + seed, noise=noise)
-    settings = {"truth": PAPER_PARAMS} if method == "eria" else {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        t0 = time.perf_counter()
-        res = identify(rec, method=method, **settings)
-        elapsed = time.perf_counter() - t0
-    final = float(np.max(np.abs(res.model.theta - TRUTH) / np.abs(TRUTH)))
-    row = {"method": method, "seed": seed, "noise_nm": noise * 1e3, "final_err": final,
-           "samples_per_s": n / elapsed, "restarts": res.info.get("n_recoveries", 0)}
-    if res.history is not None:
-        err = np.max(np.abs(res.history - TRUTH) / np.abs(TRUTH), axis=1)
-        row.update(to_2pc=samples_to(err, 0.02), to_01pc=samples_to(err, 1e-3),
-                   err_at_1000=float(err[min(999, n - 1)]), nan=bool(np.isnan(err).any()))
-    finite = np.all(np.isfinite(res.model.theta))
-    if finite and res.model.is_stable():
-        v = validate(val.y, res.model.simulate(val.u).y, val.fs)
-        row.update(val_min=v.err_min, val_max=v.err_max, val_rms=v.rms)
-    return row
+    """One row of the table: :func:`figures.reference_identification`."""
+    return reference_identification(method, seed=seed, noise=noise, samples=n)
 
 
 def summarise(rows: list[dict]) -> list[list[str]]:
@@ -151,42 +122,13 @@ def per_sample_ratio(samples: int = 30_000, rounds: int = 5, method: str = "onli
 
 
 def start_up_basins(seeds: int = 20, seconds: float = 1.0) -> list[dict]:
-    """Wrong-basin rate of the on-line identifier's start-up, on two simulators.
-
-    ``reference``: the project's reference stage (:func:`hystid.reference.reference_record`);
-    ``stages``: the independently written paper stage and excitation of
-    :mod:`hystid.testing.stages`. Each record is 1 s from rest with white sensor noise of 0, 1
-    and 10 nm. A run ends in a wrong basin when its final max relative parameter error is above
-    20 %; it is silent when the result carries no warning (the check's figures are kept).
-    """
-    from hystid.identify.online import OnlineIdentifier
-    from hystid.records import Record
-    from hystid.testing import paper_excitation as stage_excitation
-    from hystid.testing import paper_stage
-
-    stage = paper_stage()
+    """Wrong-basin rate of the on-line identifier's start-up on two simulators
+    (:func:`figures.start_up_run`, 1 s records from rest, 0, 1 and 10 nm)."""
     rows = []
     for source in ("reference", "stages"):
         for noise in (0.0, 1e-3, 1e-2):
-            for seed in range(seeds):
-                if source == "reference":
-                    rec = reference_record(seconds, seed=seed, noise=noise)
-                else:
-                    u = stage_excitation(seconds, seed=seed)
-                    rng = np.random.default_rng(10_000 + seed)
-                    y = stage.simulate(u)["y"] + noise * rng.standard_normal(len(u))
-                    rec = Record(u, y, 30_000.0, name=f"stages seed {seed}")
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    res = OnlineIdentifier().fit(rec)
-                est = res.model.theta
-                start = res.info["start_up"]
-                err = float(np.max(np.abs(est - TRUTH) / np.abs(TRUTH)))
-                rows.append({"source": source, "noise_nm": noise * 1e3, "seed": seed,
-                             "final_err": err, "start_samples": start["samples"],
-                             "checks": start["checks"], "warned": bool(res.info["warnings"]),
-                             "wrong_basin": err > 0.2})
-            done = [r for r in rows if r["source"] == source and r["noise_nm"] == noise * 1e3]
+            done = [start_up_run(source, noise, seed, seconds) for seed in range(seeds)]
+            rows += done
             print(f"  {source} {noise * 1e3:g} nm: {sum(r['wrong_basin'] for r in done)} "
                   f"wrong of {len(done)}", flush=True)
     return rows

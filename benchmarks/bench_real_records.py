@@ -20,9 +20,8 @@ from pathlib import Path
 
 import numpy as np
 from _common import table, write_json
+from figures import fit_and_compare
 
-from hystid.baselines import compare
-from hystid.identify import identify
 from hystid.identify.offline import fit_output_error
 from hystid.records import load_record
 from hystid.testing import as_measured_suite, stage_a_like
@@ -63,21 +62,18 @@ def main() -> None:
     rows, payload = [], []
     for label, train, held in cases(args.quick):
         for method in args.methods.split(","):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                t0 = time.perf_counter()
-                try:
-                    result = identify(train, method=method)
-                except ValueError as err:
-                    rows.append([label, method, "-", "-", "-", "-", f"error: {err}"[:60]])
-                    continue
-                seconds = time.perf_counter() - t0
-                single = np.nan
-                if method == "batch":
+            try:
+                result, comparison, seconds = fit_and_compare(train, held, method)
+            except ValueError as err:
+                rows.append([label, method, "-", "-", "-", "-", f"error: {err}"[:60]])
+                continue
+            single = np.nan
+            if method == "batch":
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
                     t0 = time.perf_counter()
                     fit_output_error(train, linear_init=False, offset=False)
                     single = time.perf_counter() - t0
-                comparison = compare(result.model, train, held)
             for r in comparison.rows:
                 model = "diverged" if not np.isfinite(r["model"]) else f"{r['model']:.4g}"
                 rows.append([label, method, r["record"][:30], model, f"{r['static_line']:.4g}",

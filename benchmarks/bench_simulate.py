@@ -62,6 +62,41 @@ def main() -> None:
         "max_relative_difference": agree, "target_ratio": 1000,
     })
     print(f"wrote {path}")
+    short_inputs(model)
+
+
+def short_inputs(model, n: int = 100) -> None:
+    """Cost of ``simulate`` on a short input: the compiled kernel alone vs the whole call."""
+    from hystid.kernels import simulate_into
+
+    u = paper_excitation(n, seed=1)
+    P = model.structure.history
+    layout = model.structure.layout
+
+    def kernel_only():
+        U, W1, W2, Y = (np.zeros(P + n) for _ in range(4))
+        U[P:] = u
+        simulate_into(model.theta, layout, U, W1, W2, Y, P)
+
+    t_kernel = best_time(kernel_only, repeat=7)
+    t_plain = best_time(lambda: model.simulate(u, check=False), repeat=7)
+    t_checked = best_time(lambda: model.simulate(u), repeat=7)
+    rows = [
+        ["kernel on preallocated arrays", f"{t_kernel * 1e6:.1f}", "1"],
+        ["simulate(check=False) -> response", f"{t_plain * 1e6:.1f}",
+         f"{t_plain / t_kernel:.1f}"],
+        ["simulate() with the admissibility check", f"{t_checked * 1e6:.1f}",
+         f"{t_checked / t_kernel:.1f}"],
+    ]
+    print(f"\nShort input ({n} samples): what a call costs beyond the kernel")
+    print(table(rows, ["call", "time [us]", "ratio to the kernel"]))
+    path = write_json("simulate_short", {
+        "samples": n, "seconds": {"kernel": t_kernel, "simulate_unchecked": t_plain,
+                                  "simulate_checked": t_checked},
+        "ratio_unchecked_vs_kernel": t_plain / t_kernel,
+        "ratio_checked_vs_kernel": t_checked / t_kernel,
+    })
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

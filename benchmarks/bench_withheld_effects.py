@@ -180,12 +180,13 @@ def make_cross_form(effect: str, form: str, scale: float, seed: int, n: int,
             "params": {"strength": strength}, "truth": truth, "form": f"{effect}/{form}"}
 
 
-def run_case(case: dict, source: str, strength: str, seed: int) -> dict:
+def run_case(case: dict, source: str, strength: str, seed: int, **settings) -> dict:
+    """Diagnose one case blind (``settings`` go to :func:`hystid.diagnose.diagnose`)."""
     t0 = time.perf_counter()
     if case["val"] is None:
-        res = diagnose(case["train"], holdout=0.5, progress=False)
+        res = diagnose(case["train"], holdout=0.5, progress=False, **settings)
     else:
-        res = diagnose(case["train"], [case["val"]], progress=False)
+        res = diagnose(case["train"], [case["val"]], progress=False, **settings)
     elapsed = time.perf_counter() - t0
     truth = case["truth"]
     return {
@@ -264,11 +265,12 @@ def make(job: tuple, n: int) -> dict:
     return make_cross_form(effect, form, CROSS_SCALE[strength], seed, n)
 
 
-def diagnose_job(job: tuple, n: int) -> dict:
-    """One case of the check, made and diagnosed blind: the unit of work, in a loop or on Dask."""
+def diagnose_job(job: tuple, n: int, **settings) -> dict:
+    """One case of the check, made and diagnosed blind: the unit of work, in a loop or on Dask
+    (``settings`` go to :func:`hystid.diagnose.diagnose`)."""
     source, what, strength, seed = job
     label = STRENGTHS[strength] if what != "none" else "-"
-    return run_case(make(job, n), source, label, seed)
+    return run_case(make(job, n), source, label, seed, **settings)
 
 
 def run_jobs(jobs: list[tuple], n: int, workers: int | None, scheduler: str | None) -> list[dict]:

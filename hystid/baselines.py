@@ -251,6 +251,8 @@ class BaselineComparison:
     linear : LinearModel
     floor : float or None
         The repeat floor when repeats were given.
+    notes : list of str
+        Sentences about the comparison (printed under the table).
     """
 
     rows: list[dict[str, Any]]
@@ -265,7 +267,13 @@ class BaselineComparison:
         return all(r["beats"] for r in self.rows)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain, JSON-ready form."""
+        """Plain, JSON-ready form.
+
+        Returns
+        -------
+        dict
+            ``rows``, the baselines' parameters, ``floor`` and ``notes``.
+        """
         rows = [{k: (v if not isinstance(v, float) or np.isfinite(v) else None)
                  for k, v in r.items()} for r in self.rows]
         return {"rows": rows, "beats_baselines": self.beats_baselines,
@@ -275,7 +283,18 @@ class BaselineComparison:
                            "q": self.linear.q, "offset": self.linear.offset}}
 
     def summary(self, unit: str = "") -> str:
-        """A short table and a sentence on whether the model earns its keep."""
+        """A short table and a sentence on whether the model earns its keep.
+
+        Parameters
+        ----------
+        unit : str
+            Unit of the output, shown in the header.
+
+        Returns
+        -------
+        str
+            The table and the verdict, one line each.
+        """
         head = f"{'record':<28} {'model':>10} {'line':>10} {'linear':>10}"
         lines = [f"held-out RMS [{unit}]" if unit else "held-out RMS", head]
         for r in self.rows:

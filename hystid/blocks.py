@@ -120,7 +120,22 @@ def linear_coefficients(
 
 
 def duhem_output(x: np.ndarray, w1: float, params: dict) -> float:
-    """w2(k) of eq. (7) from the state ``x = [w1(k-1), w2(k-1)]`` and the input ``w1(k)``."""
+    """w2(k) of eq. (7) from the state ``x = [w1(k-1), w2(k-1)]`` and the input ``w1(k)``.
+
+    Parameters
+    ----------
+    x : ndarray
+        State ``[w1(k-1), w2(k-1)]``.
+    w1 : float
+        Input ``w1(k)``.
+    params : dict
+        ``alpha``, ``f1``, ``g0`` and optionally ``f0``.
+
+    Returns
+    -------
+    float
+        ``w2(k)``.
+    """
     w1p, w2p = x[0], x[1]
     dw1 = w1 - w1p
     f = params["f0"] * np.sign(w1p) + params["f1"] * w1p
@@ -224,6 +239,11 @@ def state_from_past(ss: ct.StateSpace, u_past: np.ndarray, y_past: np.ndarray) -
     u_past, y_past : ndarray
         Past inputs and outputs, most recent last, at least ``n`` long (zeros are prepended if
         shorter).
+
+    Returns
+    -------
+    ndarray
+        The state ``x(k)``, ``n`` values.
     """
     A, B, C, D = (np.asarray(m, dtype=float) for m in (ss.A, ss.B, ss.C, ss.D))
     n = A.shape[0]

@@ -18,6 +18,10 @@ EXIT_BAD_INPUT = 2
 #: Files ``identify --out`` and ``demo --out`` write into their folder.
 REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png")
 _RECORD_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
+#: Compiled kernels every ``hystid demo`` runs, as (module, name): while one of them is not in
+#: numba's cache yet, the demo says that it compiles them.
+DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensitivities_into"),
+                ("hystid.identify.online", "rpem_run"), ("hystid.identify.eria", "eria_run"))
 
 
 class CommandError(Exception):
@@ -25,7 +29,15 @@ class CommandError(Exception):
 
 
 class Progress:
-    """Periodic progress lines on stderr (silent when ``quiet``)."""
+    """Periodic progress lines on stderr (silent when ``quiet``).
+
+    Parameters
+    ----------
+    quiet : bool
+        Print nothing.
+    every : float
+        Least seconds between two periodic lines.
+    """
 
     def __init__(self, quiet: bool = False, every: float = 1.0):
         self.quiet = quiet
@@ -34,7 +46,13 @@ class Progress:
         self._t0 = time.perf_counter()
 
     def say(self, message: str) -> None:
-        """Print one line now."""
+        """Print one line now.
+
+        Parameters
+        ----------
+        message : str
+            The line, printed after the seconds elapsed.
+        """
         if not self.quiet:
             print(f"[{time.perf_counter() - self._t0:6.1f} s] {message}", file=sys.stderr)
 
@@ -258,7 +276,18 @@ def _write_history(path: str, result) -> None:
 
 # --------------------------------------------------------------------------- commands
 def cmd_simulate(args: argparse.Namespace) -> int:
-    """``hystid simulate``: a record from the built-in reference stage or from a saved model."""
+    """``hystid simulate``: a record from the built-in reference stage or from a saved model.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        The exit status (0).
+    """
     progress = Progress(args.quiet)
     inputs = tuple(p for p in (args.model, args.input) if p)
     out = _check_file(args.out, "--out", args, inputs)
@@ -334,7 +363,18 @@ def _model_record(args: argparse.Namespace, progress: Progress):
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
-    """``hystid identify``: identify a record, validate, print or write JSON."""
+    """``hystid identify``: identify a record, validate, print or write JSON.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        The exit status (0).
+    """
     from .safeio import dumps_strict
 
     progress = Progress(args.quiet or args.json)
@@ -368,7 +408,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         from .modelfile import make_provenance
 
         provenance = make_provenance(result.method, args.record, result.settings)
-        _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance)
+        _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance,
+                       scored_from=scored_from or 0)
     if args.json:
         print(dumps_strict(report))
     else:
@@ -393,31 +434,82 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 
 def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
-                   provenance: dict | None = None) -> None:
-    """Write report.json, model.json and the figures into ``out`` (each file atomically)."""
-    from .metrics import plot_validation
+                   provenance: dict | None = None, seed: int | None = None,
+                   scored_from: int = 0) -> None:
+    """Write report.json, model.json and the figures into ``out`` (each file atomically).
+
+    The validation figure shows the samples the validation figures were computed on: from
+    ``scored_from`` (a held-out end of the record) less the transient.
+    """
+    from .metrics import plot_convergence, plot_validation
     from .modelfile import save_model
     from .safeio import atomic_path, write_json
 
+    model = result.model
+    units = {"u": target.units.get("u", ""), "y": target.units.get("y", "")}
+    report = {
+        **report,
+        "units": {**units, "validation": units["y"], "u_rest": units["u"],
+                  "offset": units["y"], "time": "s", "fs": "Hz"},
+        "provenance": {**(provenance or {}), "fs": model.fs,
+                       "structure": dict(vars(model.structure)), "seed": seed},
+    }
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "report.json", report)
-    save_model(result.model, out / "model.json", provenance=provenance, force=True)
+    save_model(model, out / "model.json", provenance=provenance, force=True)
     with atomic_path(out / "validation.png") as tmp:
-        plot_validation(target.t, target.y, yhat, tmp,
-                        title=f"{report['model']} sandwich, {report['method']}: validation",
-                        unit=target.units.get("y", ""), skip=report["validation"]["skip"])
+        plot_validation(target.t, target.y, yhat, tmp, u=target.u,
+                        title=f"{report['model']} sandwich, {report['method']}: validation on "
+                        f"{target.name}", unit=units["y"], u_unit=units["u"],
+                        skip=scored_from + (report["validation"] or {}).get("skip", 0))
     if result.history is not None:
-        import matplotlib.pyplot as plt
-
-        axes = result.plot(truth=truth)
-        axes[0].figure.tight_layout()
         with atomic_path(out / "convergence.png") as tmp:
-            axes[0].figure.savefig(tmp, dpi=110)
-        plt.close(axes[0].figure)
+            plot_convergence(result.history, result.names, truth, tmp,
+                             samples=result.history_index,
+                             title=f"{report['model']} sandwich, {report['method']}: "
+                             "parameter convergence")
+
+
+def kernels_cached(kernels: tuple[tuple[str, str], ...] = DEMO_KERNELS) -> bool:
+    """Whether numba's cache holds every kernel named (True when it cannot tell).
+
+    Parameters
+    ----------
+    kernels : tuple of (str, str)
+        Module and name of each compiled kernel.
+
+    Returns
+    -------
+    bool
+        False when one of them has no cache index yet: it compiles on first use.
+    """
+    import importlib
+    import os
+
+    for modname, name in kernels:
+        kernel = getattr(importlib.import_module(modname), name, None)
+        try:
+            index = kernel._cache._cache_file._index_path  # numba's index file of the kernel
+        except AttributeError:  # not a cached kernel, or numba keeps its cache otherwise
+            continue
+        if not os.path.exists(index):
+            return False
+    return True
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """``hystid demo``: the main job on the built-in reference stage."""
+    """``hystid demo``: the main job on the built-in reference stage.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        The exit status (0).
+    """
     from .identify import METHODS, identify
     from .metrics import validate
     from .reference import PAPER_PARAMS, reference_model, reference_record
@@ -429,6 +521,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     val = reference_record(args.seconds, seed=args.seed + 1, noise=args.noise, name="demo val")
     progress.say(f"reference stage: {train.n} samples at {train.fs:g} Hz, "
                  f"noise {args.noise * 1e3:g} nm; identifying")
+    if not kernels_cached():
+        progress.say("compiling the numba kernels: once, about a minute; later runs load them "
+                     "from numba's cache")
     methods = [m for m in ("batch", "online", "eria") if m in METHODS]
     rows, results, report = [], {}, {"truth": PAPER_PARAMS, "methods": {}}
     out = Path(args.out)
@@ -468,10 +563,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
                                                                - val.y) ** 2)))
     from .modelfile import make_provenance
 
+    report["noise_um"] = args.noise
     _write_outputs(out, {"model": "duhem", "method": result.method,
                          "validation": report["methods"][result.method]["validation"],
                          **report}, val, yhat, result, truth=PAPER_PARAMS,
-                   provenance=make_provenance(result.method, settings=result.settings))
+                   provenance=make_provenance(result.method, settings=result.settings),
+                   seed=args.seed)
     print(f"\nreport written to {out}/report.json, model to {out}/model.json (figures: "
           "validation.png"
           f"{', convergence.png' if result.history is not None else ''})")
@@ -482,8 +579,21 @@ _seconds = number(0.0, MAX_SECONDS, strict_minimum=True)
 _seed = integer(0, 2**63 - 1)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``hystid`` command."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser of the ``hystid`` command.
+
+    Parameters
+    ----------
+    only : str, optional
+        Give the options of ``diagnose`` and ``fleet`` only when this is that command (the
+        others keep their one-line help), so that ``hystid --help`` does not load their
+        modules; every command in full by default.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser; each command sets ``func``.
+    """
     parser = argparse.ArgumentParser(
         prog="hystid",
         description="Identify piezo-driven positioning stages (L1-Duhem-L2 sandwich).",
@@ -563,30 +673,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_identify)
 
-    try:
+    p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap",
+                       description="Localise the model error, screen unmodelled effects and "
+                       "measure how far each closes the gap on held-out data.")
+    if only in (None, "diagnose"):
         from .diagnose import command as diagnose_command
-    except ImportError:
-        diagnose_command = None
-    if diagnose_command is not None:
-        p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap",
-                           description="Localise the model error, screen unmodelled effects and "
-                           "measure how far each closes the gap on held-out data.")
+
         diagnose_command.configure_parser(p)
         p.set_defaults(func=diagnose_command.run)
-
-    from . import fleet_command
 
     p = sub.add_parser("fleet", help="identify or diagnose many records on Dask",
                        description="Identify or diagnose many records as Dask tasks; one result "
                        "row per record (CSV and Parquet), resumable.")
-    fleet_command.configure_parser(p)
-    p.set_defaults(func=fleet_command.run)
+    if only in (None, "fleet"):
+        from . import fleet_command
+
+        fleet_command.configure_parser(p)
+        p.set_defaults(func=fleet_command.run)
     return parser
 
 
+def _command_word(argv: list[str]) -> str:
+    """The command named on a command line (the first word not an option), or ``""``."""
+    return next((a for a in argv if not a.startswith("-")), "")
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``hystid`` command; returns the exit status."""
-    parser = build_parser()
+    """Entry point of the ``hystid`` command; returns the exit status.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (``sys.argv[1:]`` by default).
+
+    Returns
+    -------
+    int
+        0 on success, 2 on bad input or a failed write, 130 when interrupted.
+    """
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    parser = build_parser(only=_command_word(argv))
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

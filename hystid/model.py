@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .kernels import as_layout, simulate_into
 from .operating import Envelope, Placed, warn_admissibility
-from .poly import is_stable
 from .signals import finite_number, finite_signal
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
-    from matplotlib.axes import Axes
+
+    from .response import SandwichResponse
 
 __all__ = ["DuhemSandwich", "InitialCondition", "SandwichResponse", "Structure", "params_vector"]
 
@@ -73,6 +72,8 @@ class Structure:
     @property
     def layout(self) -> np.ndarray:
         """Integer layout passed to the compiled kernels."""
+        from .kernels import as_layout  # numba loads on first use, not on import hystid
+
         return as_layout(self.n1a, self.n1b, self.n2a, self.n2b, self.q1, self.q2, self.f0)
 
     @property
@@ -86,6 +87,11 @@ class InitialCondition:
     """Past values of the sandwich's signals, most recent last (``u(k-1), w1(k-1), ...``).
 
     Shorter arrays are padded with zeros at the old end; missing ones are zero (at rest).
+
+    Parameters
+    ----------
+    u, w1, w2, y : ndarray
+        Past input, internal signals and output, oldest first.
     """
 
     u: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -94,61 +100,25 @@ class InitialCondition:
     y: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def window(self, name: str, length: int) -> np.ndarray:
-        """The last ``length`` values of signal ``name``, zero-padded at the old end."""
+        """The last ``length`` values of signal ``name``, zero-padded at the old end.
+
+        Parameters
+        ----------
+        name : {"u", "w1", "w2", "y"}
+            The signal.
+        length : int
+            Number of past samples wanted.
+
+        Returns
+        -------
+        ndarray
+            ``length`` values, oldest first.
+        """
         v = np.asarray(getattr(self, name), dtype=float).ravel()
         if not np.all(np.isfinite(v)):
             raise ValueError(f"InitialCondition.{name} contains non-finite values")
         v = v[-length:] if length else v[:0]
         return np.concatenate([np.zeros(length - len(v)), v])
-
-
-@dataclass
-class SandwichResponse:
-    """Simulated signals of the sandwich. Unpacks as ``t, y`` like python-control responses.
-
-    Attributes
-    ----------
-    t, u, w1, w2, y : ndarray
-        Time (s), input, internal signals and output. ``u`` and ``y`` are in the record's units
-        (the sensor offset included); ``w1`` and ``w2`` are relative to the model's rest.
-    name : str
-        Name of the simulated model.
-    warnings : list of str
-        Why the response may not be trustworthy: the input left the model's envelope, or
-        condition (8) failed (empty when neither).
-    """
-
-    t: np.ndarray
-    u: np.ndarray
-    w1: np.ndarray
-    w2: np.ndarray
-    y: np.ndarray
-    name: str = "sandwich"
-    warnings: list[str] = field(default_factory=list)
-
-    def __iter__(self) -> Iterator[np.ndarray]:
-        yield self.t
-        yield self.y
-
-    @property
-    def duhem_margin(self) -> float:
-        """max_k |dw1(k)|: condition (8) asks ``alpha * duhem_margin < 2``."""
-        return float(np.max(np.abs(np.diff(self.w1)))) if len(self.w1) > 1 else 0.0
-
-    def plot(self, ax: Sequence[Axes] | np.ndarray | None = None) -> Sequence[Axes] | np.ndarray:
-        """Plot u, w1, w2 and y against time; returns the axes."""
-        import matplotlib.pyplot as plt
-
-        if ax is None:
-            _, ax = plt.subplots(4, 1, sharex=True, figsize=(7, 6))
-        for a, sig, label in zip(
-            ax, (self.u, self.w1, self.w2, self.y), ("u", "w1", "w2", "y"), strict=False
-        ):
-            a.plot(self.t, sig, lw=0.8)
-            a.set_ylabel(label)
-        ax[-1].set_xlabel("time [s]")
-        ax[0].set_title(self.name)
-        return ax
 
 
 class DuhemSandwich(Placed):
@@ -240,7 +210,15 @@ class DuhemSandwich(Placed):
         return self._group("b2", self.structure.n2b)
 
     def is_stable(self) -> bool:
-        """True when L1 and L2 are stable and minimum phase (Assumption 1) and alpha > 0."""
+        """True when L1 and L2 are stable and minimum phase (Assumption 1) and alpha > 0.
+
+        Returns
+        -------
+        bool
+            Whether Assumption 1 holds and ``alpha > 0``.
+        """
+        from .poly import is_stable  # numba loads on first use, not on import hystid
+
         return is_stable(self.a1, self.b1, self.a2, self.b2) and self.params["alpha"] > 0
 
     def envelope_bound(self, envelope: Envelope | None = None) -> float:
@@ -336,7 +314,18 @@ class DuhemSandwich(Placed):
         )
 
     def control_state(self, x0: InitialCondition | None = None) -> np.ndarray:
-        """State vector of :meth:`to_control` that continues from the past ``x0``."""
+        """State vector of :meth:`to_control` that continues from the past ``x0``.
+
+        Parameters
+        ----------
+        x0 : InitialCondition, optional
+            Past signal values; at rest by default.
+
+        Returns
+        -------
+        ndarray
+            The states of ``L1``, ``H`` and ``L2`` in the order of :meth:`to_control`.
+        """
         import control as ct
 
         from . import blocks
@@ -371,6 +360,11 @@ class DuhemSandwich(Placed):
             Keep the ``f0 sgn`` term; by default only when ``H.params['f0']`` is non-zero.
         name : str
             Name of the returned model.
+
+        Returns
+        -------
+        DuhemSandwich
+            The model, with the rest level and offset of ``U0`` / ``Y0`` blocks if present.
         """
         import control as ct
 
@@ -428,8 +422,12 @@ class DuhemSandwich(Placed):
         Returns
         -------
         SandwichResponse
-            Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
+            A :class:`control.TimeResponseData`: input ``u``, output ``y``, states ``w1``,
+            ``w2`` (each also an attribute); unpacks as ``t, y``.
         """
+        from .kernels import simulate_into
+        from .response import SandwichResponse
+
         u = finite_signal(u, "u")
         x0 = x0 or self.at_rest()
         P = self.structure.history
@@ -440,7 +438,8 @@ class DuhemSandwich(Placed):
         with np.errstate(over="ignore", invalid="ignore"):
             simulate_into(self.theta, self.structure.layout, U, W1, W2, Y, P)
         t = np.arange(len(u)) / self.fs
-        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name)
+        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name,
+                                units=self.units)
         if check:
             resp.warnings = self.admissibility(u, resp)
             warn_admissibility(resp.warnings, self.name)
@@ -541,7 +540,22 @@ def params_vector(
 ) -> np.ndarray:
     """Parameters as a vector in the order of ``names``, from a mapping or a sequence.
 
-    Raises ``ValueError`` naming the missing, unknown or non-finite parameters.
+    Parameters
+    ----------
+    params : mapping or sequence of float
+        Values by name, or a vector already in the order of ``names``.
+    names : sequence of str
+        Parameter names in the wanted order.
+
+    Returns
+    -------
+    ndarray
+        The values in the order of ``names``.
+
+    Raises
+    ------
+    ValueError
+        Naming the missing, unknown or non-finite parameters.
     """
     if isinstance(params, Mapping):
         missing = [n for n in names if n not in params]
@@ -575,3 +589,10 @@ def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:
     return ct.tf(num, den, tf.dt, inputs=tf.input_labels, outputs=tf.output_labels)
 
 
+def __getattr__(name: str):
+    # SandwichResponse subclasses control.TimeResponseData: python-control loads on first use
+    if name == "SandwichResponse":
+        from .response import SandwichResponse
+
+        return SandwichResponse
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -116,7 +116,13 @@ class Envelope:
         return out
 
     def to_dict(self) -> dict[str, float]:
-        """The envelope as a plain dictionary (``Envelope(**d)`` rebuilds it)."""
+        """The envelope as a plain dictionary (``Envelope(**d)`` rebuilds it).
+
+        Returns
+        -------
+        dict of str to float
+            The fields by name.
+        """
         return {k: float(v) for k, v in asdict(self).items()}
 
     @classmethod

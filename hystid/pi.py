@@ -38,9 +38,10 @@ import numpy as np
 from numba import njit
 
 from . import blocks
-from .model import InitialCondition, SandwichResponse, params_vector
+from .model import InitialCondition, params_vector
 from .operating import Envelope, Placed, warn_admissibility
 from .poly import is_stable
+from .response import SandwichResponse
 from .signals import finite_signal
 
 __all__ = [
@@ -286,6 +287,18 @@ def pi_inverse_state(weights: np.ndarray | Sequence[float], p: np.ndarray) -> np
     """States of the inverse operator matching forward states ``p`` (both continue as inverses).
 
     ``p'_j = (mu_0 + ... + mu_j) p_j + sum_{i>j} mu_i p_i``.
+
+    Parameters
+    ----------
+    weights : array_like
+        Forward weights ``mu_0 .. mu_{N-1}``.
+    p : ndarray
+        Forward play-operator states.
+
+    Returns
+    -------
+    ndarray
+        States ``p'`` of the inverse operator.
     """
     mu = np.asarray(weights, dtype=float).ravel()
     p = np.asarray(p, dtype=float).ravel()
@@ -376,6 +389,24 @@ def pi_inverse_block(
     Takes the *forward* thresholds and weights (see :func:`pi_inverse_parameters` for the
     conditions) and returns a :func:`pi_block` with the inverse thresholds and weights, states
     ``p0 .. p{N-1}``. Use :func:`pi_inverse_state` to start it from a non-virgin state.
+
+    Parameters
+    ----------
+    thresholds, weights : array_like
+        Forward thresholds ``r_i`` and weights ``mu_i``.
+    dt : float
+        Sampling period in seconds.
+    inputs, outputs : str
+        Signal names (``w2`` in, ``w1`` out by default).
+    prefix : str
+        Prefix of the parameter names.
+    name : str
+        System name.
+
+    Returns
+    -------
+    control.NonlinearIOSystem
+        The inverse operator ``w2 -> w1``.
     """
     r_inv, mu_inv = pi_inverse_parameters(thresholds, weights)
     return pi_block(r_inv, mu_inv, dt=dt, inputs=inputs, outputs=outputs, prefix=prefix, name=name)
@@ -439,7 +470,13 @@ class PIStructure:
         return max(1, self.n1a, self.q1 + self.n1b - 1, self.n2a, self.q2 + self.n2b - 1)
 
     def slices(self) -> dict[str, slice]:
-        """Slices of ``theta`` by group: ``a1, b1, mu, a2, b2`` (free coefficients only)."""
+        """Slices of ``theta`` by group: ``a1, b1, mu, a2, b2`` (free coefficients only).
+
+        Returns
+        -------
+        dict of str to slice
+            Where each group sits in ``theta``.
+        """
         sizes = (("a1", self.n1a), ("b1", self.n1b - 1), ("mu", self.n_operators),
                  ("a2", self.n2a), ("b2", self.n2b - 1))
         out, start = {}, 0
@@ -450,7 +487,20 @@ class PIStructure:
 
 
 def unit_gain_numerator(a: np.ndarray, b_rest: np.ndarray) -> np.ndarray:
-    """Full numerator ``[b_1, b_2, ...]`` with ``b_1`` set for unit DC gain: sum b = 1 + sum a."""
+    """Full numerator ``[b_1, b_2, ...]`` with ``b_1`` set for unit DC gain: sum b = 1 + sum a.
+
+    Parameters
+    ----------
+    a : ndarray
+        Denominator coefficients ``a_1 ..``.
+    b_rest : ndarray
+        Numerator coefficients after the first, ``b_2 ..``.
+
+    Returns
+    -------
+    ndarray
+        ``[b_1, b_2, ...]``.
+    """
     return np.concatenate([[1.0 + np.sum(a) - np.sum(b_rest)], b_rest])
 
 
@@ -556,11 +606,24 @@ class PISandwich(Placed):
         return out
 
     def is_stable(self) -> bool:
-        """True when the poles of L1 and L2 lie inside the unit circle."""
+        """True when the poles of L1 and L2 lie inside the unit circle.
+
+        Returns
+        -------
+        bool
+            Whether both linear blocks are stable.
+        """
         return is_stable(self.a1, self.a2)
 
     def is_invertible(self) -> bool:
-        """True when the PI operator has an exact inverse (see :func:`pi_inverse_parameters`)."""
+        """Whether the PI operator has an exact inverse (see :func:`pi_inverse_parameters`).
+
+        Returns
+        -------
+        bool
+            True when ``mu_0 > 0``, every partial sum of the weights is positive and the
+            thresholds start at 0 and increase.
+        """
         W = np.cumsum(self.mu)
         r = self.thresholds
         return bool(self.mu[0] > 0 and np.all(W > 0) and r[0] == 0 and np.all(np.diff(r) > 0))
@@ -624,6 +687,18 @@ class PISandwich(Placed):
 
         ``p0`` when given; otherwise the state reached from the virgin state by a monotone move
         to ``w1(-1)``: ``p_i = max(w1 - r_i, min(w1 + r_i, 0))`` (zero at rest).
+
+        Parameters
+        ----------
+        x0 : InitialCondition, optional
+            Past signal values (at rest by default).
+        p0 : array_like, optional
+            The operator states themselves.
+
+        Returns
+        -------
+        ndarray
+            One state per play operator.
         """
         if p0 is not None:
             return _initial_states(p0, len(self.thresholds))
@@ -641,6 +716,11 @@ class PISandwich(Placed):
             Past values of ``u, w1, w2, y`` (at rest by default).
         p0 : array_like, optional
             Play-operator states; see :meth:`operator_state`.
+
+        Returns
+        -------
+        ndarray
+            The states of ``L1``, ``H`` and ``L2`` in the order of :meth:`to_control`.
         """
         x0 = x0 or InitialCondition()
         n = self.structure.history + 1
@@ -678,6 +758,11 @@ class PISandwich(Placed):
             Parameter-name prefix of ``H``.
         name : str
             Name of the returned model.
+
+        Returns
+        -------
+        PISandwich
+            The model.
         """
         if isinstance(L1, ct.InterconnectedSystem) and H is None and L2 is None:
             sys = L1
@@ -737,7 +822,8 @@ class PISandwich(Placed):
         Returns
         -------
         SandwichResponse
-            Time, input, ``w1``, ``w2`` and ``y``; unpacks as ``t, y``.
+            A :class:`control.TimeResponseData`: input ``u``, output ``y``, states ``w1``,
+            ``w2`` (each also an attribute); unpacks as ``t, y``.
         """
         u = finite_signal(u, "u")
         x0 = x0 or InitialCondition()
@@ -751,7 +837,8 @@ class PISandwich(Placed):
         pi_simulate_into(self.a1, self.b1, s.q1, self.mu, self.thresholds, self.a2, self.b2,
                          s.q2, U, W1, W2, Y, p, P)
         t = np.arange(len(u)) / self.fs
-        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name)
+        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name,
+                                units=self.units)
         if check and self.envelope is not None:
             resp.warnings = self.envelope.violations(u)
             warn_admissibility(resp.warnings, self.name)

@@ -449,6 +449,16 @@ def parse_columns(text: str) -> dict[str, str | int]:
 
     Digits give 0-based positions, anything else a column or array name; the result is the
     ``columns`` argument of :func:`load_record`. Raises ``ValueError`` on a malformed text.
+
+    Parameters
+    ----------
+    text : str
+        The map, e.g. ``t=1,u=3,y=2``.
+
+    Returns
+    -------
+    dict
+        Role (``t``, ``u``, ``y``) to a column name or a 0-based position.
     """
     out: dict[str, str | int] = {}
     for part in text.split(","):

@@ -27,7 +27,18 @@ FS = 30_000.0
 
 
 def reference_model(fs: float = FS) -> DuhemSandwich:
-    """The paper's identified sandwich (eqs. 26-28) with the experimental structure (24-25)."""
+    """The paper's identified sandwich (eqs. 26-28) with the experimental structure (24-25).
+
+    Parameters
+    ----------
+    fs : float
+        Sampling rate in Hz (the paper's 30 kHz).
+
+    Returns
+    -------
+    DuhemSandwich
+        The model, at rest at 0 V.
+    """
     return DuhemSandwich(PAPER_PARAMS, Structure(), fs=fs, name="reference stage")
 
 
@@ -61,6 +72,18 @@ def paper_excitation(
         Sampling rate in Hz.
     seed : int or None
         Seed of the PRBS (reproducible by default).
+    offset : float
+        Centre of the input in V.
+    prbs_amplitude : tuple of float
+        Range of the PRBS level's amplitude in V.
+    prbs_bit : int
+        Samples per PRBS level.
+    sine_amplitude, sine_frequency : tuple of float
+        Start and end amplitude (V) and frequency (Hz) of the decaying sine.
+    decay_time : float
+        Time constant of the decay in seconds.
+    ramp_time : float
+        Seconds of the raised-cosine ramp from rest.
 
     Returns
     -------
@@ -109,6 +132,13 @@ def reference_record(
         Stage to simulate instead of :func:`reference_model`.
     u : ndarray, optional
         Input to use instead of :func:`paper_excitation`.
+    name : str
+        Name of the record.
+
+    Returns
+    -------
+    Record
+        ``u`` in V and ``y`` in um, starting at rest.
     """
     model = model or reference_model()
     if not (np.isfinite(noise) and noise >= 0):

@@ -109,6 +109,36 @@ def test_demo_runs_end_to_end(tmp_path):
     report = json.loads((out / "report.json").read_text())
     assert report["methods"]["online"]["max_rel_error"] < 0.02
     assert (out / "validation.png").exists() and (out / "convergence.png").exists()
+    import hystid
+
+    prov = report["provenance"]
+    assert prov["hystid_version"] == hystid.__version__ and prov["seed"] == 0
+    assert prov["fs"] == 30_000.0 and prov["structure"]["n2a"] == 2
+    assert report["units"]["y"] == "um" and report["units"]["validation"] == "um"
+
+
+def test_help_loads_neither_control_matplotlib_nor_numba():
+    code = ("import sys\nfrom hystid.cli import main\ntry:\n    main(['--help'])\n"
+            "except SystemExit:\n    pass\nheavy = [m for m in ('control', 'matplotlib', 'numba')"
+            " if m in sys.modules]\nprint('heavy:', heavy)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert "diagnose" in proc.stdout and "fleet" in proc.stdout  # listed, not loaded
+    assert "heavy: []" in proc.stdout, proc.stdout + proc.stderr
+
+
+def test_kernels_cached_tells_a_cold_cache_from_a_warm_one(tmp_path, monkeypatch):
+    from hystid.cli import kernels_cached
+
+    (tmp_path / "cli_cold_kernel.py").write_text(
+        "from numba import njit\n\n@njit(cache=True)\ndef twice(x):\n    return 2.0 * x\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import cli_cold_kernel
+
+    named = (("cli_cold_kernel", "twice"),)
+    assert not kernels_cached(named)
+    assert cli_cold_kernel.twice(1.5) == 3.0  # compiles and writes the cache
+    assert kernels_cached(named)
 
 
 def test_help_for_each_command(capsys):
@@ -152,3 +182,59 @@ def test_identify_reads_columns_by_position(records, tmp_path, capsys):
     params = json.loads(out)["params"]
     assert all(abs(params[k] - v) < 0.02 * abs(v) for k, v in PAPER_PARAMS.items())
     assert exit_code(["identify", str(path), "--columns", "u2,y=0"]) == 2
+
+
+def test_figures_leave_pyplot_and_the_backend_alone():
+    # the library draws on Figure objects: the caller's backend and pyplot state are untouched
+    code = """
+import sys
+import numpy as np
+from hystid.metrics import plot_convergence, plot_validation
+t = np.arange(3000) / 30000.0
+u = 5 + np.sin(2 * np.pi * 50 * t)
+y = 2 * u + 0.01 * np.cos(2 * np.pi * 50 * t)
+fig = plot_validation(t, y, y + 1e-3 * np.sin(t), u=u, skip=51)
+fig2 = plot_convergence(np.ones((50, 2)), ["a", "b"], {"a": 1.0, "b": 2.0})
+import matplotlib
+print("pyplot" if "matplotlib.pyplot" in sys.modules else "no pyplot", len(fig.axes),
+      len(fig2.axes))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.stdout.split() == ["no", "pyplot", "4", "1"], proc.stdout + proc.stderr
+
+
+def test_validation_figure_shows_the_error_in_nm_and_zooms_on_the_largest_error():
+    from hystid.metrics import error_scale, plot_validation, zoom_window
+
+    assert error_scale("um") == (1e3, "nm") and error_scale("m") == (1e9, "nm")
+    assert error_scale("V") == (1.0, "V")
+    t = np.arange(6000) / 30000.0
+    y = np.sin(2 * np.pi * 10 * t)
+    yhat = y.copy()
+    yhat[4500] += 0.002  # one 2 nm error in um
+    start, stop = zoom_window(t, y - yhat, 0.01)
+    assert stop - start == 300 and start <= 4500 < stop
+    fig = plot_validation(t, y, yhat, unit="um")
+    err_ax = fig.axes[-1]
+    assert err_ax.get_ylabel() == "error [nm]"
+    np.testing.assert_allclose(np.min(err_ax.lines[0].get_ydata()), -2.0)
+
+
+def test_convergence_of_many_parameters_is_one_panel_of_families():
+    from hystid.metrics import plot_convergence
+
+    names = ["a11", "a12", "b11", "b12"] + [f"mu{i}" for i in range(41)] + ["a21", "a22"]
+    history = np.ones((100, len(names)))
+    fig = plot_convergence(history, names)
+    (ax,) = fig.axes
+    labels = [line.get_label() for line in ax.lines]
+    assert labels == ["a1 (2 parameters, largest)", "b1 (2 parameters, largest)",
+                      "mu (41 parameters, largest)", "a2 (2 parameters, largest)"]
+    assert ax.get_xscale() == "log" and ax.get_yscale() == "log"
+    truth = {"alpha": 2.0, "f1": 2.0}
+    fig = plot_convergence(np.ones((10, 2)), ["alpha", "f1"], truth, samples=np.arange(0, 20, 2))
+    ax = fig.axes[0]
+    assert ax.lines[0].get_label() == "alpha (true 2)"
+    np.testing.assert_allclose(ax.lines[0].get_xdata(), np.arange(1, 21, 2))
+    np.testing.assert_allclose(ax.lines[0].get_ydata(), 0.5)

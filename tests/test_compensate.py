@@ -281,3 +281,51 @@ def test_bad_signals_and_models_are_named(stage):
         hc.scan_reference("square", 10)
     with pytest.raises(ValueError, match="plant"):
         hc.simulate_closed_loop(stage, [0.0, 0.1], plant=ct.tf([1], [1, 0], stage.dt))
+
+
+# --------------------------------------------------------------------------- kernel caching
+def test_source_stamp_follows_the_kernels_called_in_other_modules(tmp_path, monkeypatch):
+    # the cached compensator kernels close over this stamp: it must change when a kernel they
+    # reach through another module changes, and only then
+    from hystid.compensate.compensator import source_stamp
+
+    (tmp_path / "stamp_leaf.py").write_text(
+        "from numba import njit\n\n@njit(cache=True)\ndef leaf(x):\n    return x + 1.0\n")
+    (tmp_path / "stamp_mid.py").write_text(
+        "from numba import njit\nfrom stamp_leaf import leaf\n\n"
+        "@njit(cache=True)\ndef mid(x):\n    return 2.0 * leaf(x)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import importlib
+
+    import stamp_mid
+
+    first = source_stamp(stamp_mid.mid)
+    assert source_stamp(stamp_mid.mid) == first
+    leaf = tmp_path / "stamp_leaf.py"
+    leaf.write_text(leaf.read_text().replace("x + 1.0", "x + 2.0"))
+    importlib.reload(importlib.import_module("stamp_leaf"))
+    importlib.reload(stamp_mid)
+    assert source_stamp(stamp_mid.mid) != first
+
+
+def test_compensator_kernels_are_cached():
+    from hystid.compensate import closedloop, compensator
+
+    for kernel in (compensator.chain_step, compensator.chain_run, closedloop._run_loop):
+        assert kernel._cache.__class__.__name__ == "FunctionCache", kernel
+        assert kernel.py_func.__closure__, "the source stamp is not in the cache key"
+
+
+def test_closed_loop_response_is_a_labelled_control_response(stage):
+    ref = hc.scan_reference("triangle", 200, periods=1)
+    out = hc.simulate_closed_loop(stage, ref.y, None)
+    assert isinstance(out, ct.TimeResponseData)
+    assert out.input_labels == ["y_ref"]
+    assert out.output_labels == ["y", "u", "yd", "e", "u_ff", "u_fb", "status"]
+    np.testing.assert_array_equal(out.y_ref, ref.y)  # the input, not the output u
+    frame = out.to_pandas()
+    np.testing.assert_array_equal(frame["u"], out.u)
+    np.testing.assert_array_equal(frame["y"], out.y)
+    assert out.status.dtype == np.int64 and out.outputs.shape == (7, len(ref.y))
+    t, y = out
+    np.testing.assert_array_equal(y[0], out.y)  # python-control's layout: signal, time

@@ -53,7 +53,32 @@ def test_simulate_matches_plain_loop(model):
     np.testing.assert_allclose(r.w2, w2, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(r.y, y, rtol=1e-12, atol=1e-12)
     t, yy = r  # unpacks like a python-control response
-    assert len(t) == len(u) and yy is r.y
+    assert len(t) == len(u)
+    np.testing.assert_array_equal(yy, r.y)
+
+
+def test_simulate_returns_a_labelled_control_response(model):
+    import control as ct
+    import matplotlib
+
+    matplotlib.use("Agg")  # the test's own backend choice; the library makes none
+    u = _input(200)
+    r = model.simulate(u)
+    assert isinstance(r, ct.TimeResponseData)
+    assert (r.input_labels, r.output_labels, r.state_labels) == (["u"], ["y"], ["w1", "w2"])
+    np.testing.assert_array_equal(r.outputs["y"], r.y)
+    np.testing.assert_array_equal(r.states["w2"], r.w2)
+    np.testing.assert_array_equal(r.inputs, u)
+    frame = r.to_pandas()
+    assert list(frame.columns) == ["time", "u", "y", "w1", "w2"]
+    np.testing.assert_array_equal(frame["w1"], r.w1)
+    np.testing.assert_array_equal(frame["time"], r.t)
+    cplt = r.plot()
+    lines = [line for row in cplt.lines.ravel() for line in row]
+    assert len(lines) == 2  # y and u
+    np.testing.assert_array_equal(lines[0].get_ydata(), r.y)
+    with pytest.raises(AttributeError, match="signals: u, y, w1, w2"):
+        _ = r.w3
 
 
 def _past(model, seed=5):
@@ -163,3 +188,14 @@ def test_stability_check():
     assert reference_model().is_stable()
     assert not DuhemSandwich({**PAPER_PARAMS, "a22": 1.2}).is_stable()
     assert not DuhemSandwich({**PAPER_PARAMS, "alpha": -0.1}).is_stable()
+
+
+def test_response_signals_can_be_replaced_without_touching_the_simulation(model):
+    u = _input(100)
+    r = model.simulate(u)
+    y0 = r.y.copy()
+    r.y = r.y + 1.0  # e.g. sensor noise added afterwards
+    np.testing.assert_array_equal(r.y, y0 + 1.0)
+    np.testing.assert_array_equal(r.to_pandas()["y"], y0 + 1.0)
+    with pytest.raises(ValueError, match="expected 100 samples"):
+        r.y = np.zeros(3)

@@ -30,16 +30,17 @@ times faster (``benchmarks/bench_compensate.py``), for long runs.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
 
 import control as ct
 import numpy as np
 from numba import njit
+from numba.core.dispatcher import Dispatcher
 
 from ..kernels import step as stage_step
 from ..model import DuhemSandwich
+from ..response import LabelledResponse
 from ..signals import finite_signal
 from .compensator import (
     COMPENSATIONS,
@@ -50,6 +51,7 @@ from .compensator import (
     _build,
     _pad_hold,
     chain_step,
+    source_stamp,
 )
 from .feedback import FeedbackDesign
 from .tracking import TrackingMetrics, tracking_metrics
@@ -69,11 +71,13 @@ __all__ = [
 OUTPUTS = ["y", "u", "yd", "e", "u_ff", "u_fb", "du", "ff_status"]
 
 
-@dataclass
-class ClosedLoopResponse:
-    """Signals of a closed-loop run. Unpacks as ``t, y``.
+class ClosedLoopResponse(LabelledResponse):
+    """Signals of a closed-loop run, as a :class:`control.TimeResponseData`. Unpacks as ``t, y``.
 
-    Attributes
+    Input ``y_ref``; outputs ``y, u, yd, e, u_ff, u_fb, status`` (each also an attribute), so
+    ``.plot()`` and ``.to_pandas()`` work as for any python-control response.
+
+    Parameters
     ----------
     t : ndarray
         Time in seconds.
@@ -87,41 +91,71 @@ class ClosedLoopResponse:
         Error seen by the controller: ``yd - (y + noise)``, or 0 while it holds.
     status : ndarray
         Compensator status flags (see :class:`~hystid.compensate.compensator.Feedforward`).
+    name : str
+        Name of the loop.
     """
 
-    t: np.ndarray
-    y_ref: np.ndarray
-    yd: np.ndarray
-    y: np.ndarray
-    u: np.ndarray
-    u_ff: np.ndarray
-    u_fb: np.ndarray
-    e: np.ndarray
-    status: np.ndarray
+    def __init__(self, t: np.ndarray, y_ref: np.ndarray, yd: np.ndarray, y: np.ndarray,
+                 u: np.ndarray, u_ff: np.ndarray, u_fb: np.ndarray, e: np.ndarray,
+                 status: np.ndarray, name: str = "closed loop") -> None:
+        outputs = {"y": y, "u": u, "yd": yd, "e": e, "u_ff": u_ff, "u_fb": u_fb,
+                   "status": status}
+        super().__init__(t, {"y_ref": y_ref}, outputs, name=name)
 
-    def __iter__(self) -> Iterator[np.ndarray]:
-        yield self.t
-        yield self.y
+    @property
+    def status(self) -> np.ndarray:
+        """Compensator status flags, as integers."""
+        return self._find("status").astype(np.int64)
 
     def metrics(self, skip: int = 0, *, against: str = "y_ref") -> TrackingMetrics:
-        """Tracking figures of ``y`` against ``y_ref`` (or ``"yd"``) after ``skip`` samples."""
+        """Tracking figures of ``y`` against ``y_ref`` (or ``"yd"``) after ``skip`` samples.
+
+        Parameters
+        ----------
+        skip : int
+            Leading samples left out.
+        against : {"y_ref", "yd"}
+            The reference, or the desired output the compensator aims at.
+
+        Returns
+        -------
+        TrackingMetrics
+            Maximum and RMS error and the loop width left.
+        """
         if against not in ("y_ref", "yd"):
             raise ValueError(f"against: expected 'y_ref' or 'yd', got {against!r}")
         return tracking_metrics(getattr(self, against), self.y, skip=skip)
 
-    def plot(
-        self, ax: Sequence[Axes] | np.ndarray | None = None, label: str | None = None
+    def plot_tracking(
+        self, ax: Sequence[Axes] | np.ndarray | None = None, label: str | None = None,
+        *, unit: str = "um",
     ) -> Sequence[Axes] | np.ndarray:
-        """Output against reference, and the error; returns the axes."""
-        import matplotlib.pyplot as plt
+        """Output against reference, and the error in nm; returns the two axes.
 
+        Parameters
+        ----------
+        ax : two matplotlib axes, optional
+            Where to draw; a new figure (not registered with pyplot) by default.
+        label : str, optional
+            Legend label of the lines.
+        unit : str
+            Unit of ``y`` (the error is drawn in nm when it is ``"um"``).
+
+        Returns
+        -------
+        sequence of matplotlib.axes.Axes
+            The output axis and the error axis.
+        """
         if ax is None:
-            _, ax = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
+            from matplotlib.figure import Figure
+
+            ax = Figure(figsize=(7, 5), layout="constrained").subplots(2, 1, sharex=True)
+        scale, e_unit = (1e3, "nm") if unit == "um" else (1.0, unit)
         ax[0].plot(self.t, self.y_ref, color="0.6", lw=0.8)
         ax[0].plot(self.t, self.y, lw=0.9, label=label)
-        ax[0].set_ylabel("y [um]")
-        ax[1].plot(self.t, self.y - self.y_ref, lw=0.9, label=label)
-        ax[1].set_ylabel("y - y_ref [um]")
+        ax[0].set_ylabel(f"y [{unit}]")
+        ax[1].plot(self.t, scale * (self.y - self.y_ref), lw=0.9, label=label)
+        ax[1].set_ylabel(f"y - y_ref [{e_unit}]")
         ax[1].set_xlabel("time [s]")
         return ax
 
@@ -284,6 +318,11 @@ def closed_loop_response(
         Desired output, one value per sample, starting at rest.
     noise : ndarray, optional
         Sensor noise added to ``y`` (needs ``noise_input=True``).
+
+    Returns
+    -------
+    ClosedLoopResponse
+        Input ``y_ref``; outputs ``y, u, yd, e, u_ff, u_fb, status``.
     """
     subs = {s.name: s for s in sys.syslist}
     ff = subs.get("ff")
@@ -306,46 +345,55 @@ def closed_loop_response(
     out = {label: resp.outputs[i] for i, label in enumerate(sys.output_labels)}
     return ClosedLoopResponse(
         t, y_ref, out["yd"], out["y"], out["u"], out["u_ff"], out["u_fb"], out["e"],
-        out["ff_status"].astype(np.int64),
+        out["ff_status"].astype(np.int64), name=sys.name,
     )
 
 
 # =========================================================================== compiled twin
-@njit(cache=False)  # calls into other modules: a cached copy would not see their edits
-def _run_loop(x_ff, rs, chain_args, Ac, Bc, Cc, Dc, theta, layout, U, W1, W2, Y, P0,
-              noise, umin, umax, hold, y, u, u_ff, u_fb, yd, e, status):
-    nc = Ac.shape[0]
-    xc = np.zeros(nc)
-    xc_new = np.zeros(nc)
-    (ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv) = chain_args
-    for k in range(rs.shape[0]):
-        stage_step(theta, layout, U, W1, W2, Y, P0 + k)  # y(k) from u(k-1) and before
-        y[k] = Y[P0 + k]
-        x_ff, uf, ydk, st = chain_step(x_ff, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM,
-                                       DM, r_pi, mu_pi, r_inv, mu_inv)
-        ek = ydk - (y[k] + noise[k])
-        if hold and (st & 8):
-            ek = 0.0
-        ub = Dc[0] * ek
-        for i in range(nc):
-            ub += Cc[i] * xc[i]
-        uc = uf + ub
-        ua = min(max(uc, umin), umax)
-        du = ua - uc
-        for i in range(nc):
-            acc = Bc[i, 0] * ek + Bc[i, 1] * du
-            for j in range(nc):
-                acc += Ac[i, j] * xc[j]
-            xc_new[i] = acc
-        for i in range(nc):
-            xc[i] = xc_new[i]
-        U[P0 + k] = ua
-        u[k] = ua
-        u_ff[k] = uf
-        u_fb[k] = ub
-        yd[k] = ydk
-        e[k] = ek
-        status[k] = st
+def _stamped_run_loop(stamp: int) -> Dispatcher:
+    """:func:`_run_loop` compiled with the source ``stamp`` of the kernels it calls."""
+
+    @njit(cache=True)
+    def _run_loop(x_ff, rs, chain_args, Ac, Bc, Cc, Dc, theta, layout, U, W1, W2, Y, P0,
+                  noise, umin, umax, hold, y, u, u_ff, u_fb, yd, e, status):
+        _ = stamp  # in numba's cache key: see compensator.source_stamp
+        nc = Ac.shape[0]
+        xc = np.zeros(nc)
+        xc_new = np.zeros(nc)
+        (ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv) = chain_args
+        for k in range(rs.shape[0]):
+            stage_step(theta, layout, U, W1, W2, Y, P0 + k)  # y(k) from u(k-1) and before
+            y[k] = Y[P0 + k]
+            x_ff, uf, ydk, st = chain_step(x_ff, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM,
+                                           DM, r_pi, mu_pi, r_inv, mu_inv)
+            ek = ydk - (y[k] + noise[k])
+            if hold and (st & 8):
+                ek = 0.0
+            ub = Dc[0] * ek
+            for i in range(nc):
+                ub += Cc[i] * xc[i]
+            uc = uf + ub
+            ua = min(max(uc, umin), umax)
+            du = ua - uc
+            for i in range(nc):
+                acc = Bc[i, 0] * ek + Bc[i, 1] * du
+                for j in range(nc):
+                    acc += Ac[i, j] * xc[j]
+                xc_new[i] = acc
+            for i in range(nc):
+                xc[i] = xc_new[i]
+            U[P0 + k] = ua
+            u[k] = ua
+            u_ff[k] = uf
+            u_fb[k] = ub
+            yd[k] = ydk
+            e[k] = ek
+            status[k] = st
+
+    return _run_loop
+
+
+_run_loop = _stamped_run_loop(source_stamp(stage_step, chain_step))
 
 
 def simulate_closed_loop(
@@ -391,6 +439,11 @@ def simulate_closed_loop(
         As for :func:`~hystid.compensate.compensator.inverse`.
     hold_while_turning : bool
         As for :func:`closed_loop`.
+
+    Returns
+    -------
+    ClosedLoopResponse
+        Input ``y_ref``; outputs ``y, u, yd, e, u_ff, u_fb, status``.
     """
     stage = model if plant is None else plant
     if not isinstance(stage, DuhemSandwich):

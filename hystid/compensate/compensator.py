@@ -39,13 +39,17 @@ or the play-operator states ``p_i`` for the PI block.
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 import control as ct
 import numpy as np
 from numba import njit
+from numba.core.dispatcher import Dispatcher
 
 from ..model import DuhemSandwich
 from ..pi import play
@@ -138,77 +142,122 @@ def _push_reference(x, r, ispec, fpar, a2, b2t, AM, BM, CM, DM):
     x[oW + LW - 1] = w2
 
 
-@njit(cache=False)
-def chain_step(x, r, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv):
-    """One sample of the compensator: returns ``(x_next, u, yd, status)`` (``x`` untouched)."""
-    xn = x.copy()
-    _push_reference(xn, r, ispec, fpar, a2, b2t, AM, BM, CM, DM)
-    kind, P, LY, LW = ispec[_KIND], ispec[_P], ispec[_LY], ispec[_LW]
-    oW, oU, oW1, oH, H1 = ispec[_OFF_W], ispec[_OFF_U], ispec[_OFF_W1], ispec[_OFF_H], ispec[_H1]
-    n1a, n1b = ispec[_N1A], ispec[_N1B]
-    yd = xn[ispec[_OFF_Y] + LY - 1 - (ispec[_Q] + P)]
-    if kind == KIND_NONE:  # reference path only (a feedback loop without feed-forward)
-        return xn, 0.0, yd, 0
-    window = xn[oW + LW - 1 - P : oW + LW]  # w2d(k+q1) .. w2d(k+q1+P)
-    w2d = window[0]
-    w1p = xn[oW1 + H1 - 1]  # w1(k+q1-1) of the internal model
-    status = 0
-    alpha, f0, f1, g0 = fpar[_ALPHA], fpar[_F0], fpar[_F1], fpar[_G0]
-    # hysteresis inverse -> w1c = w1(k+q1)
-    if kind == KIND_DUHEM:
-        d, status, far = plan_step(window, w1p, xn[oH], alpha, f0, f1, g0, fpar[_BOUND])
-        if far:
-            status |= 8
-        w1c = w1p + d
-    elif kind == KIND_PI:
-        n = ispec[_NPI]
-        # inverse-operator states matching the forward states p (pi_inverse_state)
-        tail = 0.0
-        pinv = np.empty(n)
-        for i in range(n - 1, -1, -1):
-            pinv[i] = tail
-            tail += mu_pi[i] * xn[oH + i]
-        cum = 0.0
-        for i in range(n):
-            cum += mu_pi[i]
-            pinv[i] += cum * xn[oH + i]
-        w1c = 0.0
-        for i in range(n):
-            w1c += mu_inv[i] * play(w2d, pinv[i], r_inv[i])
-    else:
-        w1c = w2d / fpar[_KH]
-    # L1^-1 (eq. 1 solved for u(k))
-    u = w1c
-    for j in range(1, n1b + 1):
-        u -= b1t[j - 1] * xn[oU + n1b - j]
-    for i in range(1, n1a + 1):
-        u += a1[i - 1] * xn[oW1 + H1 - i]
-    u /= fpar[_B1LEAD]
-    if u > fpar[_UMAX]:
-        u = fpar[_UMAX]
-        status |= 4
-    elif u < fpar[_UMIN]:
-        u = fpar[_UMIN]
-        status |= 4
-    # internal model driven by the applied (saturated) command: no windup
-    w1 = fpar[_B1LEAD] * u
-    for j in range(1, n1b + 1):
-        w1 += b1t[j - 1] * xn[oU + n1b - j]
-    for i in range(1, n1a + 1):
-        w1 -= a1[i - 1] * xn[oW1 + H1 - i]
-    if kind == KIND_DUHEM:
-        xn[oH] = duhem_forward(w1, w1p, xn[oH], alpha, f0, f1, g0)
-    elif kind == KIND_PI:
-        for i in range(ispec[_NPI]):
-            xn[oH + i] = play(w1, xn[oH + i], r_pi[i])
-    for i in range(H1 - 1):
-        xn[oW1 + i] = xn[oW1 + i + 1]
-    xn[oW1 + H1 - 1] = w1
-    for i in range(n1b - 1):
-        xn[oU + i] = xn[oU + i + 1]
-    if n1b > 0:
-        xn[oU + n1b - 1] = u
-    return xn, u, yd, status
+def source_stamp(*kernels: Dispatcher) -> int:
+    """A number that changes whenever the source of ``kernels``, or of a kernel they call, does.
+
+    numba's cache checks the source file of the cached function only. A cached kernel that
+    calls kernels of other modules closes over this stamp instead (the values it closes over
+    are part of numba's cache key), so editing any kernel it reaches compiles it afresh.
+
+    Parameters
+    ----------
+    *kernels : numba dispatcher
+        The compiled functions called across modules; the kernels they call are followed.
+
+    Returns
+    -------
+    int
+        A hash of the source files of every kernel reached (56 bits).
+    """
+    files: set[str] = set()
+    todo = [k.py_func for k in kernels]
+    seen: set[object] = set()
+    while todo:
+        func = todo.pop()
+        if func in seen:
+            continue
+        seen.add(func)
+        files.add(inspect.getfile(func))
+        todo += [obj.py_func for name in func.__code__.co_names
+                 if isinstance(obj := func.__globals__.get(name), Dispatcher)]
+    digest = hashlib.sha256()
+    for path in sorted(files):
+        digest.update(Path(path).read_bytes())
+    return int.from_bytes(digest.digest()[:7], "little")
+
+
+def _stamped_chain_step(stamp: int) -> Dispatcher:
+    """:func:`chain_step` compiled with the source ``stamp`` of the kernels it calls."""
+
+    @njit(cache=True)
+    def chain_step(x, r, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv,
+                   mu_inv):
+        """One sample of the compensator: returns ``(x_next, u, yd, status)`` (``x`` untouched)."""
+        _ = stamp  # in numba's cache key: see source_stamp
+        xn = x.copy()
+        _push_reference(xn, r, ispec, fpar, a2, b2t, AM, BM, CM, DM)
+        kind, P, LY, LW = ispec[_KIND], ispec[_P], ispec[_LY], ispec[_LW]
+        oW, oU, oW1 = ispec[_OFF_W], ispec[_OFF_U], ispec[_OFF_W1]
+        oH, H1 = ispec[_OFF_H], ispec[_H1]
+        n1a, n1b = ispec[_N1A], ispec[_N1B]
+        yd = xn[ispec[_OFF_Y] + LY - 1 - (ispec[_Q] + P)]
+        if kind == KIND_NONE:  # reference path only (a feedback loop without feed-forward)
+            return xn, 0.0, yd, 0
+        window = xn[oW + LW - 1 - P : oW + LW]  # w2d(k+q1) .. w2d(k+q1+P)
+        w2d = window[0]
+        w1p = xn[oW1 + H1 - 1]  # w1(k+q1-1) of the internal model
+        status = 0
+        alpha, f0, f1, g0 = fpar[_ALPHA], fpar[_F0], fpar[_F1], fpar[_G0]
+        # hysteresis inverse -> w1c = w1(k+q1)
+        if kind == KIND_DUHEM:
+            d, status, far = plan_step(window, w1p, xn[oH], alpha, f0, f1, g0, fpar[_BOUND])
+            if far:
+                status |= 8
+            w1c = w1p + d
+        elif kind == KIND_PI:
+            n = ispec[_NPI]
+            # inverse-operator states matching the forward states p (pi_inverse_state)
+            tail = 0.0
+            pinv = np.empty(n)
+            for i in range(n - 1, -1, -1):
+                pinv[i] = tail
+                tail += mu_pi[i] * xn[oH + i]
+            cum = 0.0
+            for i in range(n):
+                cum += mu_pi[i]
+                pinv[i] += cum * xn[oH + i]
+            w1c = 0.0
+            for i in range(n):
+                w1c += mu_inv[i] * play(w2d, pinv[i], r_inv[i])
+        else:
+            w1c = w2d / fpar[_KH]
+        # L1^-1 (eq. 1 solved for u(k))
+        u = w1c
+        for j in range(1, n1b + 1):
+            u -= b1t[j - 1] * xn[oU + n1b - j]
+        for i in range(1, n1a + 1):
+            u += a1[i - 1] * xn[oW1 + H1 - i]
+        u /= fpar[_B1LEAD]
+        if u > fpar[_UMAX]:
+            u = fpar[_UMAX]
+            status |= 4
+        elif u < fpar[_UMIN]:
+            u = fpar[_UMIN]
+            status |= 4
+        # internal model driven by the applied (saturated) command: no windup
+        w1 = fpar[_B1LEAD] * u
+        for j in range(1, n1b + 1):
+            w1 += b1t[j - 1] * xn[oU + n1b - j]
+        for i in range(1, n1a + 1):
+            w1 -= a1[i - 1] * xn[oW1 + H1 - i]
+        if kind == KIND_DUHEM:
+            xn[oH] = duhem_forward(w1, w1p, xn[oH], alpha, f0, f1, g0)
+        elif kind == KIND_PI:
+            for i in range(ispec[_NPI]):
+                xn[oH + i] = play(w1, xn[oH + i], r_pi[i])
+        for i in range(H1 - 1):
+            xn[oW1 + i] = xn[oW1 + i + 1]
+        xn[oW1 + H1 - 1] = w1
+        for i in range(n1b - 1):
+            xn[oU + i] = xn[oU + i + 1]
+        if n1b > 0:
+            xn[oU + n1b - 1] = u
+        return xn, u, yd, status
+
+    return chain_step
+
+
+chain_step = _stamped_chain_step(source_stamp(plan_step, duhem_forward, play))
 
 
 @njit(cache=True)
@@ -218,14 +267,23 @@ def chain_prime(x, rs, ispec, fpar, a2, b2t, AM, BM, CM, DM):
         _push_reference(x, rs[k], ispec, fpar, a2, b2t, AM, BM, CM, DM)
 
 
-@njit(cache=False)
-def chain_run(x, rs, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv,
-              u, yd, status):
-    """Run :func:`chain_step` over the advanced reference ``rs``; returns the final state."""
-    for k in range(rs.shape[0]):
-        x, u[k], yd[k], status[k] = chain_step(x, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM,
-                                               CM, DM, r_pi, mu_pi, r_inv, mu_inv)
-    return x
+def _stamped_chain_run(stamp: int) -> Dispatcher:
+    """:func:`chain_run` compiled with the source ``stamp`` of the kernels it calls."""
+
+    @njit(cache=True)
+    def chain_run(x, rs, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv,
+                  mu_inv, u, yd, status):
+        """Run :func:`chain_step` over the advanced reference ``rs``; returns the final state."""
+        _ = stamp  # in numba's cache key: see source_stamp
+        for k in range(rs.shape[0]):
+            x, u[k], yd[k], status[k] = chain_step(x, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM,
+                                                   BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv)
+        return x
+
+    return chain_run
+
+
+chain_run = _stamped_chain_run(source_stamp(chain_step))
 
 
 # =========================================================================== configuration
@@ -406,6 +464,16 @@ def hysteresis_gain(model: DuhemSandwich | PISandwich) -> float:
     ``f1`` for the Duhem block (its ascending and descending branches are
     ``w2 = f1 w1 -+ (f1 - g0) / alpha``); for a PI block the secant of the loading curve over the
     largest threshold.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified stage.
+
+    Returns
+    -------
+    float
+        The slope ``dw2/dw1`` of the central line.
     """
     if isinstance(model, DuhemSandwich):
         return float(model.params["f1"])
@@ -534,6 +602,19 @@ class HysteresisInverse(ct.NonlinearIOSystem):
         Samples of reference the reversal planner looks ahead.
     advance : int
         ``delay + preview``: how far ahead of ``y`` the input reference runs.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model inverted.
+    chain : _Chain
+        The compiled chain's arrays (made by :func:`inverse`).
+    inputs : str
+        Name of the reference input.
+    outputs : sequence of str
+        Names of the command, desired-output and status outputs.
+    name : str
+        System name.
     """
 
     def __init__(self, model, chain: _Chain, *, inputs, outputs, name):
@@ -559,7 +640,18 @@ class HysteresisInverse(ct.NonlinearIOSystem):
         return self._chain.advance
 
     def reference_input(self, y_ref: np.ndarray | Sequence[float]) -> np.ndarray:
-        """The input signal ``r(k) = y_ref(k + advance)`` (the last value held at the end)."""
+        """The input signal ``r(k) = y_ref(k + advance)`` (the last value held at the end).
+
+        Parameters
+        ----------
+        y_ref : array_like
+            Desired output, one value per sample.
+
+        Returns
+        -------
+        ndarray
+            The advanced reference, as long as ``y_ref``.
+        """
         y = _as_reference(y_ref)
         return _pad_hold(y, self.advance)[self.advance:]
 
@@ -569,6 +661,16 @@ class HysteresisInverse(ct.NonlinearIOSystem):
         Pass it as ``X0`` to :func:`control.input_output_response` together with
         :meth:`reference_input`; without ``y_ref``, the reference is taken as zero before
         sample ``advance``.
+
+        Parameters
+        ----------
+        y_ref : array_like, optional
+            Desired output, one value per sample.
+
+        Returns
+        -------
+        ndarray
+            The compensator's state vector.
         """
         return self._chain.initial_state(None if y_ref is None else _as_reference(y_ref))
 
@@ -738,6 +840,22 @@ def linear_feedforward(
 
     L1 and L2 are inverted exactly as in :func:`feedforward`, so the difference between the two
     tracking errors is the error hysteresis causes.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified stage.
+    y_ref : array_like
+        Desired output, one value per sample.
+    u_limits, reference_model, reference_lead
+        As for :func:`inverse`.
+    full_output : bool
+        Return a :class:`Feedforward` instead of the command alone.
+
+    Returns
+    -------
+    ndarray or Feedforward
+        The command ``u``.
     """
     chain = _build(model, kind=KIND_LINEAR, u_limits=u_limits, reference_model=reference_model,
                    preview=0, duhem_bound=DUHEM_BOUND, reference_lead=reference_lead)

@@ -409,7 +409,23 @@ def plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound):
 
 
 def check_bound(bound: float) -> float:
-    """Validate the step bound ``alpha |dw1| <= bound`` (condition 8 needs ``0 < bound < 2``)."""
+    """Validate the step bound ``alpha |dw1| <= bound`` (condition 8 needs ``0 < bound < 2``).
+
+    Parameters
+    ----------
+    bound : float
+        The largest ``alpha |dw1|`` per sample asked for.
+
+    Returns
+    -------
+    float
+        ``bound`` as a float.
+
+    Raises
+    ------
+    ValueError
+        When ``bound`` is not in (0, 2).
+    """
     bound = float(bound)
     if not (np.isfinite(bound) and 0.0 < bound < 2.0):
         raise ValueError(

@@ -52,6 +52,11 @@ def linear_plant(
         The identified stage.
     gain : float, optional
         Incremental gain of the hysteresis block; :func:`hysteresis_gain` (``f1``) by default.
+
+    Returns
+    -------
+    control.TransferFunction
+        Discrete ``u -> y``.
     """
     k = hysteresis_gain(model) if gain is None else float(gain)
     if not (np.isfinite(k) and k != 0):
@@ -65,6 +70,16 @@ def flexure_mode(model: DuhemSandwich | PISandwich) -> tuple[float, float]:
     """Natural frequency (Hz) and damping ratio of L2's most lightly damped pole pair.
 
     The z-plane pole ``p`` maps to ``s = ln(p) / T``; ``f = |s| / 2 pi``, ``zeta = -Re(s)/|s|``.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The identified stage.
+
+    Returns
+    -------
+    tuple of float
+        Frequency in Hz and damping ratio.
     """
     poles = np.roots(np.asarray(model.L2.den[0][0], float))
     pairs = poles[np.imag(poles) > 0]
@@ -157,6 +172,11 @@ class FeedbackDesign:
             Inputs ``e`` and ``du`` (applied minus commanded voltage), output ``u_fb``; states
             those of the notch and the integrator ``x_I`` (``x_I(k+1) = x_I(k) + ki T v(k) +
             du(k)``, ``v`` the notch output). With ``du = 0`` it is :attr:`controller`.
+
+        Parameters
+        ----------
+        name : str
+            System name.
         """
         T = self.dt
         ki = self.ki * T
@@ -183,11 +203,22 @@ class FeedbackDesign:
                      name=name)
 
     def plot(self, ax: Sequence[Axes] | np.ndarray | None = None) -> Sequence[Axes] | np.ndarray:
-        """Bode plot of the loop with the margins in the title; returns the axes."""
-        import matplotlib.pyplot as plt
+        """Bode plot of the loop with the margins in the title.
 
+        Parameters
+        ----------
+        ax : two matplotlib axes, optional
+            Where to draw; a new figure (not registered with pyplot) by default.
+
+        Returns
+        -------
+        sequence of matplotlib.axes.Axes
+            The magnitude and phase axes.
+        """
         if ax is None:
-            _, ax = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
+            from matplotlib.figure import Figure
+
+            ax = Figure(figsize=(7, 5), layout="constrained").subplots(2, 1, sharex=True)
         f = np.geomspace(1.0, 0.49 / self.dt, 600)
         resp = self.loop(np.exp(2j * np.pi * f * self.dt))
         ax[0].loglog(f, np.abs(resp))

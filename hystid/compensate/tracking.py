@@ -75,6 +75,11 @@ def scan_reference(
         Seconds of the approach from rest.
     rest : float
         Seconds at 0 before the approach.
+
+    Returns
+    -------
+    ScanReference
+        Time, desired output and the samples to skip in the tracking figures.
     """
     if kind not in ("triangle", "sine"):
         raise ValueError(f"kind: expected 'triangle' or 'sine', got {kind!r}")
@@ -125,7 +130,13 @@ class TrackingMetrics:
         yield from (self.max_error, self.rms_error, self.loop_width)
 
     def to_dict(self) -> dict[str, float]:
-        """The figures as a plain dict (JSON-ready)."""
+        """The figures as a plain dict (JSON-ready).
+
+        Returns
+        -------
+        dict
+            ``max_error, rms_error, loop_width, samples``.
+        """
         return asdict(self)
 
 

@@ -13,16 +13,16 @@ it shrinks once that effect is in the model.
 * :mod:`.report` -- summary and figures; :mod:`.command` -- ``hystid diagnose``.
 """
 
-from .diagnosis import DiagnosisError, DiagnosisResult, EffectOutcome, diagnose
-from .effects import (
-    EFFECT_NAMES,
-    EFFECTS,
-    FAMILIES,
-    AugmentedSandwich,
-    family_of,
-    simulate_with_effect,
-)
-from .where import Where, localise, noise_floor
+import importlib
+
+# the submodules load on first use, so that ``hystid --help`` (which reads .command) stays light
+_HOME = {
+    "DiagnosisError": "diagnosis", "DiagnosisResult": "diagnosis", "EffectOutcome": "diagnosis",
+    "diagnose": "diagnosis", "EFFECT_NAMES": "effects", "EFFECTS": "effects",
+    "FAMILIES": "effects", "AugmentedSandwich": "effects", "family_of": "effects",
+    "simulate_with_effect": "effects", "Where": "where", "localise": "where",
+    "noise_floor": "where",
+}
 
 __all__ = [
     "EFFECTS",
@@ -39,3 +39,13 @@ __all__ = [
     "noise_floor",
     "simulate_with_effect",
 ]
+
+
+def __getattr__(name: str):
+    if name in _HOME:
+        return getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_HOME])

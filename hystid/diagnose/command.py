@@ -211,6 +211,11 @@ def run(args: argparse.Namespace) -> int:
     ----------
     args : argparse.Namespace
         Parsed arguments (see :func:`configure_parser`).
+
+    Returns
+    -------
+    int
+        0 on success, 2 for bad input.
     """
     from .diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
 

@@ -129,7 +129,13 @@ class EffectOutcome:
         return self.status == "accepted"
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready figures."""
+        """JSON-ready figures.
+
+        Returns
+        -------
+        dict
+            The outcome's figures by name.
+        """
         return _clean({
             "name": self.name,
             "family": self.family or self.name,
@@ -217,7 +223,13 @@ class DiagnosisResult:
         return [family_of(n) for n in self.accepted]
 
     def to_dict(self) -> dict[str, Any]:
-        """The issue's JSON object (``noise_floor_rms``, ``nominal``, ``where``, ``effects``...)."""
+        """The issue's JSON object (``noise_floor_rms``, ``nominal``, ``where``, ``effects``...).
+
+        Returns
+        -------
+        dict
+            The report, JSON-ready.
+        """
         return _clean({
             "noise_floor_rms": self.noise_floor_rms,
             "nominal": self.nominal,
@@ -233,14 +245,31 @@ class DiagnosisResult:
         })
 
     def summary(self) -> str:
-        """A readable summary (what ``hystid diagnose`` prints)."""
+        """A readable summary (what ``hystid diagnose`` prints).
+
+        Returns
+        -------
+        str
+            Several lines of text.
+        """
         from .report import summary_text
 
         return summary_text(self)
 
     def plot(self, out_dir: str | os.PathLike[str]) -> list[Path]:
         """Write the figures (error in time, spectrum, branches, gap per candidate) to
-        ``out_dir``; returns their paths."""
+        ``out_dir``; returns their paths.
+
+        Parameters
+        ----------
+        out_dir : path-like
+            Folder the PNG files are written into.
+
+        Returns
+        -------
+        list of Path
+            The files written.
+        """
         from .report import plot_diagnosis
 
         return plot_diagnosis(self, out_dir)

@@ -413,7 +413,24 @@ def augmented_output(
     u: np.ndarray,
     x0: InitialCondition | None = None,
 ) -> np.ndarray:
-    """Output of the augmented sandwich for the effect vector ``phi`` (fast path, no checks)."""
+    """Output of the augmented sandwich for the effect vector ``phi`` (fast path, no checks).
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        Nominal stage.
+    phi : ndarray
+        The effect vector (zero: the nominal stage).
+    u : ndarray
+        Input samples.
+    x0 : InitialCondition, optional
+        Past signal values; at rest by default.
+
+    Returns
+    -------
+    ndarray
+        The output ``y``.
+    """
     ws = _Workspace(u, _history(model), x0)
     return ws.run(model.theta, model.structure.layout, phi, model.dt)[2].copy()
 
@@ -514,6 +531,8 @@ def simulate_with_effect(
         Standard deviation of white noise added to ``y`` (output units).
     seed : int or None
         Seed of the noise.
+    x0 : InitialCondition, optional
+        Past signal values; at rest by default.
 
     Returns
     -------

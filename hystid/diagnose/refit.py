@@ -69,7 +69,18 @@ class FitData:
         self._ws: dict[int, _Workspace] = {}
 
     def workspace(self, P: int) -> _Workspace:
-        """Reusable kernel arrays for a history of ``P`` samples."""
+        """Reusable kernel arrays for a history of ``P`` samples.
+
+        Parameters
+        ----------
+        P : int
+            Samples of history the kernels read before sample 0.
+
+        Returns
+        -------
+        _Workspace
+            Arrays sized for this record, reused across calls.
+        """
         if P not in self._ws:
             self._ws[P] = _Workspace(self.u, P, None)
         return self._ws[P]
@@ -78,7 +89,24 @@ class FitData:
 def initial_state(
     model: DuhemSandwich, level: float | None, u0: float, P: int
 ) -> InitialCondition | None:
-    """Past windows (u, w1, w2, y) for a record starting at rest at output ``level``."""
+    """Past windows (u, w1, w2, y) for a record starting at rest at output ``level``.
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        The model simulated.
+    level : float or None
+        Output level at rest; None: at rest from zero (returns None).
+    u0 : float
+        Input held at rest.
+    P : int
+        Length of the past windows.
+
+    Returns
+    -------
+    InitialCondition or None
+        Constant past windows at the static levels.
+    """
     if level is None:
         return None
     th = model.params
@@ -97,7 +125,22 @@ def simulate_fit_data(
     model: DuhemSandwich, phi: np.ndarray, data: FitData
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Simulate the augmented model over ``data``; returns ``(w1, w2, y)`` views (copy them to
-    keep them past the next call)."""
+    keep them past the next call).
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        Nominal model.
+    phi : ndarray
+        The effect vector.
+    data : FitData
+        The record and its initial-state rule.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``w1``, ``w2`` and ``y``.
+    """
     P = max(model.structure.history, 2)
     ws = data.workspace(P)
     # the model's own output at rest is the measured level less the sensor offset

@@ -134,54 +134,72 @@ def summary_text(result: DiagnosisResult) -> str:
 
 
 def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> list[Path]:
-    """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths."""
-    import matplotlib.pyplot as plt
+    """Write the diagnosis figures to ``out_dir`` (created if missing); returns the paths.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        The diagnosis.
+    out_dir : path-like
+        Folder of the PNG files.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    from matplotlib.figure import Figure
+
+    from ..metrics import error_scale
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    u = _unit(result)
+    unit = _unit(result)
+    k, u = error_scale(unit) if unit else (1.0, "")  # errors of a length are drawn in nm
     yu = f" [{u}]" if u else ""
+    out_u = f" [{unit}]" if unit else ""
     psd_u = f" [{u}^2/Hz]" if u else " [unit^2/Hz]"
     w0, wf = result.where, result.where_final
-    nf = result.noise_floor_rms
+    nf = k * result.noise_floor_rms
     ts = w0.series["time"]
 
     # ---------------------------------------------------------------- error in time
-    fig, ax = plt.subplots(2, 1, figsize=(9, 6))
+    fig = Figure(figsize=(9, 6), layout="constrained")
+    ax = fig.subplots(2, 1)
     t = ts["t"]
-    ax[0].plot(t, ts["e"], lw=0.4, color="0.6", label="error (nominal)")
-    ax[0].plot(t, ts["rolling_rms"], lw=1.2, color="C3", label="rolling RMS")
-    ax[0].plot(t, ts["trend"], lw=1.2, color="C0", label="slow trend")
+    ax[0].plot(t, k * ts["e"], lw=0.4, color="0.6", label="error (nominal)")
+    ax[0].plot(t, k * ts["rolling_rms"], lw=1.2, color="C3", label="rolling RMS")
+    ax[0].plot(t, k * ts["trend"], lw=1.2, color="C0", label="slow trend")
     if result.accepted:
-        ax[0].plot(t, wf.series["time"]["e"], lw=0.4, color="C2", alpha=0.7,
+        ax[0].plot(t, k * wf.series["time"]["e"], lw=0.4, color="C2", alpha=0.7,
                    label="error (with " + " + ".join(result.accepted) + ")")
     for sgn in (1, -1):
         ax[0].axhline(sgn * nf, ls="--", color="k", lw=0.8)
     ax[0].set_xlabel("time in its record [s]")
     ax[0].set_ylabel("y - yhat" + yu)
-    ax[0].set_title("held-out simulation error (dashed: noise floor)")
+    ax[0].set_title(f"held-out simulation error (dashed: noise floor, {nf:.3g} {u} RMS)")
     ax[0].legend(loc="best", fontsize=7)
     lag = ts["step_lags"]
     ax[1].axhline(0, color="k", lw=0.5)
-    ax[1].plot(lag, ts["step_avg"], "o-", ms=3, label="nominal")
+    ax[1].plot(lag, k * ts["step_avg"], "o-", ms=3, label="nominal")
     if result.accepted:
-        ax[1].plot(lag, wf.series["time"]["step_avg"], "o-", ms=3, label="final")
+        ax[1].plot(lag, k * wf.series["time"]["step_avg"], "o-", ms=3, label="final")
     ax[1].axvline(0, color="k", ls=":", lw=0.8)
     ax[1].set_xlabel("samples after an input step")
     ax[1].set_ylabel("mean error x sign(step)" + yu)
     ax[1].set_title(f"error after input steps ({w0.time['steps']} steps)")
     ax[1].legend(fontsize=7)
-    fig.tight_layout()
     paths.append(_save(fig, out / "error_time.png"))
 
     # ---------------------------------------------------------------- spectrum
     fser = w0.series["frequency"]
-    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    fig = Figure(figsize=(9, 6), layout="constrained")
+    ax = fig.subplots(2, 1, sharex=True)
     f = fser["f"]
-    ax[0].loglog(f[1:], fser["psd"][1:], lw=1, label="residual (nominal)")
+    ax[0].loglog(f[1:], k**2 * fser["psd"][1:], lw=1, label="residual (nominal)")
     if result.accepted:
-        ax[0].loglog(f[1:], wf.series["frequency"]["psd"][1:], lw=1,
+        ax[0].loglog(f[1:], k**2 * wf.series["frequency"]["psd"][1:], lw=1,
                      label="residual (with " + " + ".join(result.accepted) + ")")
     ax[0].axhline(2 * nf**2 / w0.series["fs"], color="k", ls="--", lw=1,
                   label=f"noise floor ({nf:.3g} {u} RMS)")
@@ -198,40 +216,42 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     ax[1].set_xlabel("frequency [Hz]")
     ax[1].set_ylabel("coherence u - e")
     ax[1].legend(fontsize=7)
-    fig.tight_layout()
     paths.append(_save(fig, out / "spectrum.png"))
 
     # ---------------------------------------------------------------- branches
     bs = w0.series["branch"]
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
-    y, e, up = bs["y"], bs["e"], bs["up"]
+    fig = Figure(figsize=(10, 4), layout="constrained")
+    ax = fig.subplots(1, 2)
+    y, e, up = bs["y"], k * bs["e"], bs["up"]
+    rising, falling = k * bs["ascending"], k * bs["descending"]
     step = max(1, len(y) // 6000)
     ax[0].plot(y[::step][up[::step]], e[::step][up[::step]], ".", ms=1, alpha=0.4, color="C0",
                label="ascending")
     ax[0].plot(y[::step][~up[::step]], e[::step][~up[::step]], ".", ms=1, alpha=0.4,
                color="C1", label="descending")
     centres = 0.5 * (bs["edges"][1:] + bs["edges"][:-1])
-    ax[0].plot(centres, bs["ascending"], "o-", color="C0")
-    ax[0].plot(centres, bs["descending"], "s-", color="C1")
-    ax[0].set_xlabel("simulated output" + yu)
+    ax[0].plot(centres, rising, "o-", color="C0")
+    ax[0].plot(centres, falling, "s-", color="C1")
+    ax[0].set_xlabel("simulated output" + out_u)
     ax[0].set_ylabel("error" + yu)
     ax[0].set_title("error by branch")
     ax[0].legend(fontsize=7, markerscale=8)
-    ax[1].plot(centres, 0.5 * (bs["ascending"] + bs["descending"]), "o-", label="common")
-    ax[1].plot(centres, 0.5 * (bs["ascending"] - bs["descending"]), "s-", label="loop width")
+    ax[1].plot(centres, 0.5 * (rising + falling), "o-", label="common")
+    ax[1].plot(centres, 0.5 * (rising - falling), "s-", label="loop width")
     ax[1].axhline(0, color="k", lw=0.5)
-    ax[1].set_xlabel("simulated output" + yu)
+    ax[1].set_xlabel("simulated output" + out_u)
     ax[1].set_ylabel("error" + yu)
     ax[1].set_title("common vs loop-width error")
     ax[1].legend(fontsize=7)
-    fig.tight_layout()
     paths.append(_save(fig, out / "branch.png"))
 
     # ---------------------------------------------------------------- gap per candidate
-    fig, ax = plt.subplots(figsize=(8, 0.6 * len(result.effects) + 1.5))
+    fig = Figure(figsize=(8, 0.6 * len(result.effects) + 1.5), layout="constrained")
+    ax = fig.subplots()
     names = [e.name for e in result.effects]
-    before = result.nominal["rms_val"]
-    after = [e.rms_val_after if e.rms_val_after is not None else np.nan for e in result.effects]
+    before = k * result.nominal["rms_val"]
+    after = [k * e.rms_val_after if e.rms_val_after is not None else np.nan
+             for e in result.effects]
     yk = np.arange(len(names))[::-1]
     ax.barh(yk + 0.2, [before] * len(names), height=0.4, color="0.7", label="nominal")
     colors = ["C2" if e.accepted else "C0" for e in result.effects]
@@ -239,7 +259,7 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     for k, e in zip(yk, result.effects, strict=True):
         text = e.status if e.gap_closed is None else f"{e.status}, {_pct(e.gap_closed)} closed"
         ax.text(before * 1.01, k, text, va="center", fontsize=7)
-    floor = (result.floor or {}).get("rms", nf)
+    floor = k * (result.floor or {}).get("rms", result.noise_floor_rms)
     ax.axvline(floor, color="k", ls="--", lw=1,
                label=f"{(result.floor or {}).get('kind', 'sensor noise')} floor")
     ax.set_yticks(yk)
@@ -248,12 +268,12 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     ax.set_xlim(0, before * 1.45)
     ax.set_title("gap before/after per candidate (green: accepted)")
     ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
     paths.append(_save(fig, out / "gap.png"))
 
     # ---------------------------------------------------------------- correlation tests
     cs = w0.series["correlation"]
-    fig, axs = plt.subplots(1, len(cs), figsize=(3 * len(cs), 3), sharey=True)
+    fig = Figure(figsize=(3 * len(cs), 3), layout="constrained")
+    axs = fig.subplots(1, len(cs), sharey=True)
     for a, (name, res) in zip(np.atleast_1d(axs), cs.items(), strict=True):
         a.plot(res["lags"], res["rho"], lw=0.8)
         a.axhline(res["band"], color="C3", ls="--", lw=0.8)
@@ -261,14 +281,10 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
         a.set_title(name, fontsize=8)
         a.set_xlabel("lag [samples]")
     np.atleast_1d(axs)[0].set_ylabel("correlation (99 % band)")
-    fig.tight_layout()
     paths.append(_save(fig, out / "correlation.png"))
     return paths
 
 
 def _save(fig, path: Path) -> Path:
-    import matplotlib.pyplot as plt
-
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path

@@ -329,6 +329,18 @@ def hac_variance(d: np.ndarray, demean: bool = True) -> tuple[float, int]:
     Bartlett kernel with Andrews' (1991) AR(1) plug-in bandwidth
     ``L = 1.1447 (a N)^(1/3)``, ``a = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``, at most ``N / 4``.
     With ``demean=False`` the series is taken as already centred (a score with known mean 0).
+
+    Parameters
+    ----------
+    d : ndarray
+        The series.
+    demean : bool
+        Subtract the mean first.
+
+    Returns
+    -------
+    tuple
+        The long-run variance (float) and the bandwidth in samples (int).
     """
     x = np.asarray(d, float)
     x = x - np.mean(x) if demean else x
@@ -428,12 +440,29 @@ def _block_t_centered(x: np.ndarray, w: np.ndarray, beta: float, blocks: int):
 
 
 def zero_vector() -> np.ndarray:
-    """An effect vector with every effect off."""
+    """An effect vector with every effect off.
+
+    Returns
+    -------
+    ndarray
+        The effect vector, all zero.
+    """
     return np.zeros(N_SLOTS)
 
 
 def effect_names_check(names: Sequence[str]) -> tuple[str, ...]:
-    """Validate a list of candidate names."""
+    """Validate a list of candidate names.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Effect or family names.
+
+    Returns
+    -------
+    tuple of str
+        The names, checked.
+    """
     names = tuple(names)
     bad = [n for n in names if n not in EFFECTS]
     if bad:

@@ -152,6 +152,16 @@ def input_period(u: np.ndarray) -> int | None:
 
     The candidate period is the highest peak of the overlap-normalised autocorrelation after
     its first drop below zero; at least two periods must fit in the record.
+
+    Parameters
+    ----------
+    u : ndarray
+        Input samples.
+
+    Returns
+    -------
+    int or None
+        The period in samples.
     """
     u = np.asarray(u, float)
     n = len(u)
@@ -185,6 +195,18 @@ def periodic_noise(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, float] 
 
     Returns ``None`` when the input does not repeat or holds fewer than two periods. The figure
     is an upper bound of the sensor noise: drift and any non-repeatable error add to it.
+
+    Parameters
+    ----------
+    u, y : ndarray
+        Input and measured output.
+    fs : float
+        Sampling rate in Hz.
+
+    Returns
+    -------
+    dict or None
+        The noise figure and the period it was measured over.
     """
     period = input_period(u)
     if period is None:
@@ -198,6 +220,22 @@ def harmonics(e: np.ndarray, period: int, fs: float, top: int = 5) -> dict:
 
     Returns the fundamental ``f0_hz``, the ``top`` strongest harmonics ``[(k, f, amplitude)]``
     and the share of the error's mean square that lies at harmonics.
+
+    Parameters
+    ----------
+    e : ndarray
+        The error.
+    period : int
+        Period of the input in samples.
+    fs : float
+        Sampling rate in Hz.
+    top : int
+        Number of harmonics listed.
+
+    Returns
+    -------
+    dict
+        ``f0_hz``, ``top`` and the harmonic share of the mean square.
     """
     m = len(e) // period
     x = np.asarray(e[: m * period], float)
@@ -253,6 +291,15 @@ def cross_correlation_test(
     Under independence of ``x`` and ``e``, ``var rho_xe(tau) = (1/N) sum_k rho_xx(k) rho_ee(k)``
     (Bartlett); the sum runs over ``|k| < K`` with a triangular taper. The band is two-sided at
     ``level`` per lag, Bonferroni-corrected over the lags for the ``significant`` flag.
+
+    Parameters
+    ----------
+    x, e : ndarray
+        The two series, same length (an input and the error).
+    max_lag : int
+        Largest lag in samples.
+    level : float
+        Two-sided significance level per lag.
 
     Returns
     -------
@@ -327,7 +374,13 @@ class Where:
         return self.rms - self.noise["rms"]
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready figures."""
+        """JSON-ready figures.
+
+        Returns
+        -------
+        dict
+            The localisation's figures by name.
+        """
         return {
             "rms": self.rms,
             "noise_floor_rms": self.noise["rms"],
@@ -629,7 +682,18 @@ def localise(segments: list[Segment], noise: dict | None = None) -> Where:
 
 def noise_floor_of(segments: list[Segment]) -> dict:
     """Noise floor of the segments' residual (:func:`noise_floor`), with the repeated-period
-    figure added when the input repeats."""
+    figure added when the input repeats.
+
+    Parameters
+    ----------
+    segments : list of Segment
+        The record's segments with their residuals.
+
+    Returns
+    -------
+    dict
+        The noise-floor figures.
+    """
     fs = segments[0].fs
     parts = []
     for s in segments:

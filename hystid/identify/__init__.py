@@ -26,6 +26,20 @@ def min_samples(method: str, structure: Structure | None = None, **settings: Any
     Ten samples per parameter for every method, and for the on-line identifier at least one
     more than its start-up window (``n_start``): its estimate stays at ``theta0`` until the
     window is full.
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`METHODS`.
+    structure : Structure, optional
+        The model structure; the paper's by default.
+    **settings
+        The method's settings (``n_start`` for the on-line identifier).
+
+    Returns
+    -------
+    int
+        The number of samples.
     """
     need = SAMPLES_PER_PARAMETER * len((structure or Structure()).names)
     if method == "online":

@@ -28,7 +28,18 @@ ALPHA_MIN = 1e-9
 
 
 def reflection_to_poly(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Step-up recursion: coefficients ``c_1..c_n`` and their Jacobian ``dc/dk`` (n x n)."""
+    """Step-up recursion: coefficients ``c_1..c_n`` and their Jacobian ``dc/dk`` (n x n).
+
+    Parameters
+    ----------
+    k : ndarray
+        Reflection coefficients.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``c`` and ``dc/dk``.
+    """
     k = np.asarray(k, dtype=float)
     n = len(k)
     c = np.zeros(0)
@@ -48,6 +59,16 @@ def poly_to_reflection(c: np.ndarray) -> np.ndarray:
     """Step-down recursion: reflection coefficients of ``1 + c_1 z^-1 + ...``.
 
     Returns values with ``|k| >= 1`` when the polynomial has roots on or outside the unit circle.
+
+    Parameters
+    ----------
+    c : ndarray
+        Coefficients ``c_1 .. c_n``.
+
+    Returns
+    -------
+    ndarray
+        Reflection coefficients ``k_1 .. k_n``.
     """
     c = np.asarray(c, dtype=float).copy()
     n = len(c)
@@ -148,7 +169,18 @@ class Reflections:
 
 
 def polynomial_groups(structure: Structure) -> list[np.ndarray]:
-    """Indices into theta of the monic polynomials a1, b1, a2, b2 (empty groups dropped)."""
+    """Indices into theta of the monic polynomials a1, b1, a2, b2 (empty groups dropped).
+
+    Parameters
+    ----------
+    structure : Structure
+        The model structure.
+
+    Returns
+    -------
+    list of ndarray
+        One integer index array per polynomial.
+    """
     names = structure.names
     groups = []
     for prefix, n in (("a1", structure.n1a), ("b1", structure.n1b),
@@ -161,7 +193,22 @@ def polynomial_groups(structure: Structure) -> list[np.ndarray]:
 def is_admissible(
     theta: np.ndarray, structure: Structure, margin: float = STABILITY_MARGIN
 ) -> bool:
-    """True when alpha > 0 and every polynomial's reflection coefficients are below 1 - margin."""
+    """True when alpha > 0 and every polynomial's reflection coefficients are below 1 - margin.
+
+    Parameters
+    ----------
+    theta : ndarray
+        Parameter vector in the order of ``structure.names``.
+    structure : Structure
+        The model structure.
+    margin : float
+        Distance kept from the unit circle.
+
+    Returns
+    -------
+    bool
+        Whether ``theta`` is admissible.
+    """
     if not np.all(np.isfinite(theta)):
         return False
     if theta[structure.names.index("alpha")] <= 0:
@@ -171,7 +218,22 @@ def is_admissible(
 
 
 def project_admissible(theta: np.ndarray, structure: Structure, kmax: float = 0.999) -> np.ndarray:
-    """Nearest-in-reflection-coefficients admissible vector: clip each ``|k|`` to ``kmax``."""
+    """Nearest-in-reflection-coefficients admissible vector: clip each ``|k|`` to ``kmax``.
+
+    Parameters
+    ----------
+    theta : ndarray
+        Parameter vector in the order of ``structure.names``.
+    structure : Structure
+        The model structure.
+    kmax : float
+        Largest ``|k|`` kept.
+
+    Returns
+    -------
+    ndarray
+        The projected parameter vector.
+    """
     theta = np.array(theta, dtype=float)
     ia = structure.names.index("alpha")
     theta[ia] = max(theta[ia], ALPHA_MIN)

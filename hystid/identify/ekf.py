@@ -61,7 +61,18 @@ P0_RELATIVE = 0.2
 
 
 def state_sizes(structure: Structure) -> tuple[int, int, int, int]:
-    """Window lengths ``(m1, m2, m3, mu)`` of w1, w2, y in the state and of the input buffer."""
+    """Window lengths ``(m1, m2, m3, mu)`` of w1, w2, y in the state and of the input buffer.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model structure.
+
+    Returns
+    -------
+    tuple of int
+        ``(m1, m2, m3, mu)``.
+    """
     s = structure
     return max(1, s.n1a), max(1, s.q2 + s.n2b), max(1, s.n2a), s.q1 + s.n1b + 1
 

@@ -27,7 +27,20 @@ __all__ = ["BOUND_MAX", "fit_output_error", "initial_theta", "linear_start",
 
 
 def initial_theta(structure: Structure, theta0: float | dict | np.ndarray) -> np.ndarray:
-    """Start vector from a scalar (every parameter, as in the paper), a dict or a vector."""
+    """Start vector from a scalar (every parameter, as in the paper), a dict or a vector.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model structure.
+    theta0 : float, dict or ndarray
+        One value for every parameter, values by name, or the vector.
+
+    Returns
+    -------
+    ndarray
+        The start vector in the order of ``structure.names``.
+    """
     names = structure.names
     if np.isscalar(theta0):
         theta = np.full(len(names), float(theta0))
@@ -43,7 +56,24 @@ def initial_theta(structure: Structure, theta0: float | dict | np.ndarray) -> np
 def output_sensitivities(
     theta: np.ndarray, structure: Structure, u: np.ndarray, x0: InitialCondition | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Simulated output ``yhat`` and its Jacobian ``d yhat / d theta`` (N x n_params)."""
+    """Simulated output ``yhat`` and its Jacobian ``d yhat / d theta`` (N x n_params).
+
+    Parameters
+    ----------
+    theta : ndarray
+        Parameter vector in the order of ``structure.names``.
+    structure : Structure
+        The model structure.
+    u : ndarray
+        Input samples (relative to the rest).
+    x0 : InitialCondition, optional
+        Past signal values; at rest by default.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``yhat`` (N) and its Jacobian (N x n_params).
+    """
     x0 = x0 or InitialCondition()
     P = structure.history
     n = len(u)
@@ -70,6 +100,22 @@ def linear_start(
     roots cannot be split into real polynomials of the required orders. With ``with_offset``
     the regression also holds a constant, and ``(theta, offset)`` is returned: the output's
     level at zero input.
+
+    Parameters
+    ----------
+    record : Record
+        The record (input relative to the rest).
+    structure : Structure
+        Orders and delays of the sandwich.
+    alpha : float
+        The ``alpha`` given to the start (the linear fit does not see it).
+    with_offset : bool
+        Fit a constant too and return it.
+
+    Returns
+    -------
+    ndarray, tuple of (ndarray, float), or None
+        The start vector, with the offset when ``with_offset``; None when no split exists.
     """
     s = structure
     na, nb, q = s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2

@@ -427,7 +427,22 @@ def _n_full(s: PIStructure) -> int:
 def pi_output_sensitivities(
     model: PISandwich, u: np.ndarray, x0: InitialCondition | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Simulated output and its Jacobian ``d yhat / d theta`` (``N x n_params``) from rest/x0."""
+    """Simulated output and its Jacobian ``d yhat / d theta`` (``N x n_params``) from rest/x0.
+
+    Parameters
+    ----------
+    model : PISandwich
+        The model at the current parameters.
+    u : ndarray
+        Input samples.
+    x0 : InitialCondition, optional
+        Past signal values; at rest by default.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``yhat`` (N) and its Jacobian (N x n_params).
+    """
     s = model.structure
     x0 = x0 or InitialCondition()
     P = s.history
@@ -475,6 +490,18 @@ def keyterm_to_model(theta_kt: np.ndarray, structure: PIStructure) -> np.ndarray
     ``p_i(k-2)`` are nearly collinear and the difference of the rows of ``beta`` is poorly
     determined), and ``b2`` is the least-squares factor ``beta mu / |mu|^2`` (whose sum is then
     ``A2(1)``).
+
+    Parameters
+    ----------
+    theta_kt : ndarray
+        Key-term parameters (a vector, or one per row).
+    structure : PIStructure
+        Orders and delays.
+
+    Returns
+    -------
+    ndarray
+        Model parameters, same leading shape as ``theta_kt``.
     """
     s = structure
     th = np.atleast_2d(np.asarray(theta_kt, dtype=float))
@@ -1148,6 +1175,11 @@ def identify_pi(
         ``progress(k, n)`` during the recursive run.
     **settings
         Passed to the identifier's constructor or to :func:`fit_pi_output_error`.
+
+    Returns
+    -------
+    IdentificationResult
+        The model, its parameter history (recursive) and the run's information.
     """
     if method == "recursive":
         settings.setdefault("fs", record.fs)

@@ -103,7 +103,18 @@ class Prepared:
         return 0.0
 
     def offset(self, y0n: float) -> float:
-        """The sensor offset in record units from its normalised value."""
+        """The sensor offset in record units from its normalised value.
+
+        Parameters
+        ----------
+        y0n : float
+            The offset in the fit's normalised output units.
+
+        Returns
+        -------
+        float
+            The offset in the record's output units.
+        """
         return float(self.y_ref + self.y_scale * y0n)
 
 

@@ -26,6 +26,18 @@ def converged_at(history: np.ndarray, epsilon: float) -> int | None:
     The change at sample ``k`` is ``max_i |theta_i(k) - theta_i(k-1)| / max(|theta_i(k)|, 1e-12)``;
     the paper stops when it falls below the stop index ``epsilon`` (1e-4). Returns ``None`` when
     the estimate never settles.
+
+    Parameters
+    ----------
+    history : ndarray
+        Parameter history, one row per sample.
+    epsilon : float
+        The stop index.
+
+    Returns
+    -------
+    int or None
+        The sample index.
     """
     history = np.asarray(history, dtype=float)
     if history.ndim != 2 or len(history) < 2:
@@ -175,7 +187,20 @@ class IdentificationResult:
         truth: dict[str, float] | None = None,
         axes: Axes | Sequence[Axes] | np.ndarray | None = None,
     ) -> np.ndarray:
-        """Plot the parameter history (the paper's Fig. 3); returns the axes."""
+        """Plot the parameter history (the paper's Fig. 3); returns the axes.
+
+        Parameters
+        ----------
+        truth : dict, optional
+            True values by name, drawn as dashed lines.
+        axes : matplotlib axes, optional
+            One per parameter; new ones by default.
+
+        Returns
+        -------
+        ndarray of matplotlib.axes.Axes
+            The axes.
+        """
         import matplotlib.pyplot as plt
 
         if self.history is None:

@@ -320,11 +320,37 @@ class Hysteresis(Protocol):
     """A hysteresis block: maps the actuator input ``x = w1`` to its output ``w2``."""
 
     def response(self, x: np.ndarray, fs: float, x_rest: float) -> np.ndarray:
-        """Output for the input ``x``, starting at rest at ``x_rest``."""
+        """Output for the input ``x``, starting at rest at ``x_rest``.
+
+        Parameters
+        ----------
+        x : ndarray
+            Input samples.
+        fs : float
+            Sampling rate in Hz.
+        x_rest : float
+            Input level at rest before the first sample.
+
+        Returns
+        -------
+        ndarray
+            The output, as long as ``x``.
+        """
         ...
 
     def rest_output(self, x_rest: float) -> float:
-        """Output at rest at ``x_rest``."""
+        """Output at rest at ``x_rest``.
+
+        Parameters
+        ----------
+        x_rest : float
+            Input level at rest.
+
+        Returns
+        -------
+        float
+            The output there.
+        """
         ...
 
 
