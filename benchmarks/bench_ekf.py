@@ -96,7 +96,7 @@ def main() -> None:
     print(table(rows, ["theta0", "noise nm", "seed", "start err", "to 2 %", "to 0.1 %",
                        "final err", "stop index", "proj", "resets", "samples/s",
                        "time / simulation"]))
-    used = KalmanIdentifier(**settings).get_settings()
+    used = KalmanIdentifier(**settings).settings
     used["r"] = "max(noise, 1e-3)**2"
     name = "ekf" if not settings else f"ekf_alpha_min_{args.alpha_min:g}"
     path = write_json(name, {"samples": n, "seeds": list(seeds), "settings": used,

@@ -557,15 +557,6 @@ class KalmanIdentifier(Estimator):
             "history": self.history, "history_rows": self.history_rows,
         }
 
-    def get_settings(self) -> dict[str, Any]:
-        """The same as :attr:`settings` (kept for existing callers).
-
-        Returns
-        -------
-        dict
-        """
-        return self.settings
-
     def reset(self) -> KalmanIdentifier:
         """Back to the start (:meth:`initialize`; a ``"linear"`` start waits for a record).
 
