@@ -324,6 +324,23 @@ def test_command_json_and_figures(tmp_path, capsys):
         assert (out / name).stat().st_size > 0
 
 
+def test_command_time_budget_zero_refits_only_each_familys_best_form(tmp_path, capsys):
+    train, val = _records("asymmetry", CASES["asymmetry"], n=6000)
+    train.save(tmp_path / "train.npz")
+    val.save(tmp_path / "val.npz")
+    argv = [str(tmp_path / "train.npz"), "--val", str(tmp_path / "val.npz"), "--json",
+            "--quiet", "--time-budget", "0"]
+    assert diagnose_command.run(_parse(argv)) == 0
+    report = json.loads(capsys.readouterr().out)
+    refitted = [e for e in report["effects"] if e["status"] in ("accepted", "rejected")]
+    families = [e["family"] for e in refitted]
+    assert len(families) >= 2
+    assert len(families) == len(set(families))  # one form per family, whatever the machine
+    with pytest.raises(SystemExit):
+        _parse([str(tmp_path / "train.npz"), "--time-budget", "-1"])
+    assert "--time-budget" in capsys.readouterr().err
+
+
 def test_command_bad_input_exit_status(tmp_path, capsys, monkeypatch):
     train, val = _records("none", {}, n=3000)
     train.save(tmp_path / "train.npz")

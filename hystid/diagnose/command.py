@@ -93,10 +93,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="records of the same input as TRAIN or a --val record: the gap is "
                         "then measured against their repeatability when it is above the "
                         "sensor noise")
-    parser.add_argument("--time-budget", type=_positive, default=None, metavar="S",
+    parser.add_argument("--time-budget", type=number(0.0), default=None, metavar="S",
                         help="seconds after which no further form is refitted (the best form "
                         "of every family the screen cannot rule out always is; default: as "
-                        "long as the nominal identification took)")
+                        "long as the nominal identification took; 0: only those, the same "
+                        "diagnosis on every machine)")
 
 
 class _BadInput(Exception):
