@@ -354,6 +354,28 @@ class Hysteresis(Protocol):
         ...
 
 
+class _SpringAtRest:
+    """Hysteresis whose memory term is zero at rest: the output there is ``k x_rest + offset``."""
+
+    k: float
+    offset: float
+
+    def rest_output(self, x_rest: float) -> float:
+        """Return ``k x_rest + offset`` (the memory term relaxed at rest).
+
+        Parameters
+        ----------
+        x_rest : float
+            Input at rest.
+
+        Returns
+        -------
+        float
+            Output at rest.
+        """
+        return float(self.k * x_rest + self.offset)
+
+
 @dataclass(frozen=True)
 class Duhem:
     """Discrete Duhem hysteresis of eqs. (7) / (24), with optional asymmetry.
@@ -425,7 +447,7 @@ class Duhem:
 
 
 @dataclass(frozen=True)
-class BoucWen:
+class BoucWen(_SpringAtRest):
     """Bouc-Wen hysteresis ``w2 = k x + z + offset``.
 
     ``dz = A dx - beta |dx| |z|^(n-1) z - gamma dx |z|^n``.
@@ -471,21 +493,6 @@ class BoucWen:
     width_slope: float = 0.0
     width_centre: float = 0.0
     width_scale: float = 1.0
-
-    def rest_output(self, x_rest: float) -> float:
-        """Return ``k x_rest + offset`` (``z = 0`` at rest).
-
-        Parameters
-        ----------
-        x_rest : float
-            Input at rest.
-
-        Returns
-        -------
-        float
-            Output at rest.
-        """
-        return float(self.k * x_rest + self.offset)
 
     def response(self, x: np.ndarray, fs: float, x_rest: float) -> np.ndarray:
         """Integrate the Bouc-Wen equation.
@@ -611,7 +618,7 @@ class Preisach:
 
 
 @dataclass(frozen=True)
-class MaxwellSlip:
+class MaxwellSlip(_SpringAtRest):
     """Maxwell-slip hysteresis: elasto-slip elements in parallel with a spring.
 
     Element i is a spring of stiffness ``s_i`` in series with a slider that slips once the spring
@@ -656,21 +663,6 @@ class MaxwellSlip:
         radii = self.r_max * (np.arange(self.n_elements) + 1) / self.n_elements
         stiff = np.exp(-radii / self.r_decay)
         return radii, stiff * self.slip_stiffness / stiff.sum()
-
-    def rest_output(self, x_rest: float) -> float:
-        """Return ``k x_rest + offset`` (every spring relaxed at rest).
-
-        Parameters
-        ----------
-        x_rest : float
-            Input at rest.
-
-        Returns
-        -------
-        float
-            Output at rest.
-        """
-        return float(self.k * x_rest + self.offset)
 
     def response(self, x: np.ndarray, fs: float, x_rest: float) -> np.ndarray:
         """Move the sliders along ``x``.
