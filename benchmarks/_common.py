@@ -27,11 +27,12 @@ def best_time(fn: Callable[[], object], repeat: int = 5, min_time: float = 0.05)
 
 
 def table(rows: list[list], header: list[str]) -> str:
-    """A plain-text table."""
+    """A Markdown table (readable as printed, and what the README's generated blocks hold)."""
     cells = [[str(c) for c in r] for r in [header, *rows]]
     widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
-    lines.insert(1, "  ".join("-" * w for w in widths))
+    lines = ["| " + " | ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) + " |"
+             for r in cells]
+    lines.insert(1, "|" + "|".join("-" * (w + 2) for w in widths) + "|")
     return "\n".join(lines)
 
 

@@ -13,6 +13,10 @@ from _common import best_time, table, write_json
 
 from hystid.reference import paper_excitation, reference_model
 
+#: The README blocks this script renders (see ``benchmarks/readme.py``).
+README_BLOCKS = {"simulate": "render"}
+
+
 
 def plain_loop(p: dict, u: np.ndarray) -> np.ndarray:
     """Eqs. (24)-(25) sample by sample in plain Python (the experimental structure)."""
@@ -28,12 +32,22 @@ def plain_loop(p: dict, u: np.ndarray) -> np.ndarray:
     return y
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--quick", action="store_true", help="3 000 samples instead of 30 000")
-    parser.add_argument("--samples", type=int, default=None)
-    args = parser.parse_args()
-    n = args.samples or (3_000 if args.quick else 30_000)
+def measure(quick: bool = False, samples: int | None = None) -> dict:
+    """Time the three ways through the reference stage and a short input's overhead.
+
+    Parameters
+    ----------
+    quick : bool
+        3 000 samples instead of 30 000.
+    samples : int, optional
+        Record length (overrides ``quick``).
+
+    Returns
+    -------
+    dict
+        Seconds per run, ratios to ``input_output_response`` and the agreement.
+    """
+    n = samples or (3_000 if quick else 30_000)
     model = reference_model()
     u = paper_excitation(n, seed=0)
     sys = model.to_control()
@@ -47,26 +61,62 @@ def main() -> None:
     t_ct = best_time(lambda: ct.input_output_response(sys, t, u, X0=x0), repeat=1, min_time=0)
     t_py = best_time(lambda: plain_loop(model.params, u), repeat=3)
     t_fast = best_time(lambda: model.simulate(u), repeat=7)
-    rows = [
-        ["control.input_output_response", f"{t_ct * 1e3:.1f}", "1"],
-        ["plain Python loop", f"{t_py * 1e3:.2f}", f"{t_ct / t_py:.0f}"],
-        ["DuhemSandwich.simulate (numba)", f"{t_fast * 1e3:.3f}", f"{t_ct / t_fast:.0f}"],
-    ]
-    print(f"Simulation of the reference stage, {n} samples (max relative difference "
-          f"compiled vs python-control: {agree:.1e})")
-    print(table(rows, ["method", "time [ms]", "speed-up vs input_output_response"]))
-    path = write_json("simulate", {
-        "samples": n, "seconds": {"input_output_response": t_ct, "plain_loop": t_py,
-                                  "compiled": t_fast},
-        "ratio_compiled_vs_control": t_ct / t_fast, "ratio_plain_vs_control": t_ct / t_py,
-        "max_relative_difference": agree, "target_ratio": 1000,
-    })
-    print(f"wrote {path}")
-    short_inputs(model)
+    return {"samples": n, "seconds": {"input_output_response": t_ct, "plain_loop": t_py,
+                                      "compiled": t_fast},
+            "ratio_compiled_vs_control": t_ct / t_fast, "ratio_plain_vs_control": t_ct / t_py,
+            "max_relative_difference": agree, "target_ratio": 1000,
+            "short": short_inputs(model)}
 
 
-def short_inputs(model, n: int = 100) -> None:
-    """Cost of ``simulate`` on a short input: the compiled kernel alone vs the whole call."""
+def render(payload: dict) -> str:
+    """The figures as Markdown.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+    """
+    s, short = payload["seconds"], payload["short"]
+    rows = [["`control.input_output_response`", f"{s['input_output_response']:.3g} s", "1"],
+            ["plain Python loop", f"{s['plain_loop'] * 1e3:.3g} ms",
+             f"{payload['ratio_plain_vs_control']:.0f}"],
+            ["`DuhemSandwich.simulate` (numba)", f"{s['compiled'] * 1e3:.3g} ms",
+             f"{payload['ratio_compiled_vs_control']:.0f}"]]
+    k = short["seconds"]
+    rows_short = [["kernel on preallocated arrays", f"{k['kernel'] * 1e6:.1f}", "1"],
+                  ["`simulate(check=False)` -> response", f"{k['simulate_unchecked'] * 1e6:.1f}",
+                   f"{short['ratio_unchecked_vs_kernel']:.1f}"],
+                  ["`simulate()` with the admissibility check",
+                   f"{k['simulate_checked'] * 1e6:.1f}", f"{short['ratio_checked_vs_kernel']:.1f}"]]
+    return "\n".join([
+        f"{payload['samples']} samples of the reference stage through the same interconnected "
+        f"system; the compiled kernel agrees with `control.input_output_response` to "
+        f"{payload['max_relative_difference']:.1e} relative.", "",
+        table(rows, ["run", "time", "speed-up vs `input_output_response`"]), "",
+        f"On a short input ({short['samples']} samples) what a call costs beyond the compiled "
+        "kernel (building the `TimeResponseData`, checking the envelope):", "",
+        table(rows_short, ["call", "time [us]", "ratio to the kernel"])])
+
+
+def short_inputs(model, n: int = 100) -> dict:
+    """Cost of ``simulate`` on a short input: the compiled kernel alone vs the whole call.
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        The model to simulate.
+    n : int
+        Input length.
+
+    Returns
+    -------
+    dict
+        Seconds per call and ratios to the kernel.
+    """
     from hystid.kernels import simulate_into
 
     u = paper_excitation(n, seed=1)
@@ -81,22 +131,20 @@ def short_inputs(model, n: int = 100) -> None:
     t_kernel = best_time(kernel_only, repeat=7)
     t_plain = best_time(lambda: model.simulate(u, check=False), repeat=7)
     t_checked = best_time(lambda: model.simulate(u), repeat=7)
-    rows = [
-        ["kernel on preallocated arrays", f"{t_kernel * 1e6:.1f}", "1"],
-        ["simulate(check=False) -> response", f"{t_plain * 1e6:.1f}",
-         f"{t_plain / t_kernel:.1f}"],
-        ["simulate() with the admissibility check", f"{t_checked * 1e6:.1f}",
-         f"{t_checked / t_kernel:.1f}"],
-    ]
-    print(f"\nShort input ({n} samples): what a call costs beyond the kernel")
-    print(table(rows, ["call", "time [us]", "ratio to the kernel"]))
-    path = write_json("simulate_short", {
-        "samples": n, "seconds": {"kernel": t_kernel, "simulate_unchecked": t_plain,
-                                  "simulate_checked": t_checked},
-        "ratio_unchecked_vs_kernel": t_plain / t_kernel,
-        "ratio_checked_vs_kernel": t_checked / t_kernel,
-    })
-    print(f"wrote {path}")
+    return {"samples": n, "seconds": {"kernel": t_kernel, "simulate_unchecked": t_plain,
+                                      "simulate_checked": t_checked},
+            "ratio_unchecked_vs_kernel": t_plain / t_kernel,
+            "ratio_checked_vs_kernel": t_checked / t_kernel}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="3 000 samples instead of 30 000")
+    parser.add_argument("--samples", type=int, default=None)
+    args = parser.parse_args()
+    payload = measure(args.quick, args.samples)
+    print(render(payload))
+    print(f"wrote {write_json('simulate', payload)}")
 
 
 if __name__ == "__main__":

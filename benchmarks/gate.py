@@ -31,6 +31,12 @@ from pathlib import Path
 if __name__ == "__main__":  # run as a script: measure the checkout this file belongs to
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import figures  # noqa: E402
+from _common import table  # noqa: E402
+
+#: The README blocks rendered from the baseline (see ``benchmarks/readme.py``).
+README_BLOCKS = {"accuracy": "render"}
+COMMAND = "python benchmarks/gate.py --update"
+
 
 BASELINE = Path(__file__).resolve().parent / "accuracy_baseline.json"
 
@@ -298,6 +304,29 @@ def write_baseline(values: dict[str, float | None], path: Path = BASELINE) -> No
                         "'python benchmarks/gate.py --update'; edit the tolerances here.",
                "figures": figs}
     path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
+def render(figures_: dict) -> str:
+    """The baseline's figures as a Markdown table (the README's ``accuracy`` block).
+
+    Parameters
+    ----------
+    figures_ : dict
+        The baseline's figures (:func:`load_baseline`).
+
+    Returns
+    -------
+    str
+    """
+    rows = []
+    for name, e in figures_.items():
+        v = e["value"]
+        allowed = None if v is None else max(e["atol"], e["rtol"] * abs(v))
+        rows.append([f"`{name}`", e.get("what", ""), "-" if v is None else f"{v:.4g}",
+                     ("any change" if allowed == 0 else
+                      "-" if allowed is None else f"{'+' if e['better'] == 'lower' else '-'}"
+                      f"{allowed:.2g}")])
+    return table(rows, ["figure", "what", "baseline", "fails when worse by more than"])
 
 
 def report(findings: list[Finding]) -> str:

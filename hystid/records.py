@@ -495,6 +495,7 @@ def load_record(
     fs: float | None = None,
     columns: Mapping[str, str | int] | None = None,
     name: str | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> Record:
     """Load a record from a file; the format follows the extension.
 
@@ -516,12 +517,16 @@ def load_record(
     name : str, optional
         Name of the record; by default the name stored in the file, else the file stem (with
         the HDF5 group appended).
+    units : mapping, optional
+        The units of ``u`` and ``y``, e.g. ``{"u": "N", "y": "m"}``; they replace what the file
+        states. Without them and without units stored in the file the record says V and um,
+        which only labels the numbers (the fits do not depend on the units).
 
     Returns
     -------
     Record
-        The loaded record. Units come from the file when it stores them (files written by
-        :meth:`Record.save`), else the :class:`Record` default.
+        The loaded record. Units come from ``units``, else from the file when it stores them
+        (files written by :meth:`Record.save`), else the :class:`Record` default.
 
     Raises
     ------
@@ -548,15 +553,30 @@ def load_record(
         reason = "is a directory" if Path(file).is_dir() else "does not exist"
         raise RecordError(f"file {reason} (expected a record file)", file=file)
     roles = _check_columns(columns, text)
+    stated = _check_units(units, text)
     if suffix in _CSV_SUFFIXES:
-        return _load_csv(file, fs, roles, name)
-    if suffix == ".npz":
-        source = _read_npz(file, roles)
-    elif suffix == ".mat":
-        source = _read_mat(file, roles)
+        rec = _load_csv(file, fs, roles, name)
     else:
-        source = _read_h5(file, group, roles)
-    return _record_from_arrays(source, fs, name)
+        if suffix == ".npz":
+            source = _read_npz(file, roles)
+        elif suffix == ".mat":
+            source = _read_mat(file, roles)
+        else:
+            source = _read_h5(file, group, roles)
+        rec = _record_from_arrays(source, fs, name)
+    if stated:
+        rec.units = {**rec.units, **stated}
+    return rec
+
+
+def _check_units(units: Mapping[str, str] | None, where: str) -> dict[str, str]:
+    if units is None:
+        return {}
+    if not isinstance(units, Mapping) or not set(units) <= {"u", "y"} or not all(
+            isinstance(v, str) and v.strip() for v in units.values()):
+        raise RecordError(f"units={units!r} (expected a mapping of 'u' and/or 'y' to unit "
+                          "names, e.g. {'u': 'N', 'y': 'm'})", file=where)
+    return {k: v.strip() for k, v in units.items()}
 
 
 def load_piezo_sine_150v(path: str | os.PathLike[str]) -> Record:
@@ -584,9 +604,8 @@ def load_piezo_sine_150v(path: str | os.PathLike[str]) -> Record:
     file = Path(path)
     if file.is_dir():
         file = file / "hysteresis_v_150_1hz.csv"
-    rec = load_record(file, columns={"t": 1, "y": 2, "u": 3}, name=file.parent.name)
-    rec.units = {"u": "V", "y": "um"}
-    return rec
+    return load_record(file, columns={"t": 1, "y": 2, "u": 3}, name=file.parent.name,
+                       units={"u": "V", "y": "um"})
 
 
 def read_records(

@@ -573,3 +573,14 @@ def test_bouc_wen_multisine_group():
     assert rec.n == 8192
     assert rec.fs == 750.0
     assert np.all(np.isfinite(rec.u)) and np.std(rec.y) > 0
+
+
+def test_units_stated_on_load_replace_the_default_label(tmp_path):
+    path = tmp_path / "bw.csv"
+    path.write_text("t,u,y\n0,1,0.001\n0.001,2,0.002\n0.002,1,0.001\n")
+    assert load_record(path).units == {"u": "V", "y": "um"}  # the default label
+    rec = load_record(path, units={"u": "N", "y": "m"})
+    assert rec.units == {"u": "N", "y": "m"}
+    assert load_record(path, units={"y": "nm"}).units == {"u": "V", "y": "nm"}
+    with pytest.raises(RecordError, match=r"bw.csv.*units=.*expected a mapping of 'u'"):
+        load_record(path, units={"x": "m"})
