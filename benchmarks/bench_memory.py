@@ -9,15 +9,18 @@ does not hide it), both divided by the number of samples. The record itself (``u
 bytes per sample) is made before and is not counted.
 
     python benchmarks/bench_memory.py            # 1e5 and 1e6 samples
-    python benchmarks/bench_memory.py --full     # also 1e7 (several minutes)
+    python benchmarks/bench_memory.py --quick    # 1e5 only
+    python benchmarks/bench_memory.py --full     # also 1e7 (the batch fit: beyond 20 minutes)
 
-Prints a table and writes ``benchmarks/results/bench_memory.json``.
+The children import the ``hystid`` of this checkout. Prints a table (the README's block
+``memory``, see ``benchmarks/readme.py``) and writes ``benchmarks/results/bench_memory.json``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -30,6 +33,12 @@ from _common import table, write_json  # noqa: E402
 
 FS = 30_000.0
 CASES = ("batch", "online")
+ROOT = Path(__file__).resolve().parents[1]
+
+#: The README blocks this script renders (see ``benchmarks/readme.py``).
+README_BLOCKS = {"memory": "render"}
+#: What each case is called in the table.
+LABELS = {"batch": "batch fit", "online": "on-line identifier"}
 
 
 def _rss_bytes() -> int:
@@ -60,8 +69,22 @@ def _fit(case: str, record) -> None:
     identify(record, method=case)
 
 
-def measure(case: str, n: int) -> dict:
-    """Run one case in this process; the figures of the fit alone."""
+def measure_case(case: str, n: int) -> dict:
+    """Run one case in this process; the figures of the fit alone.
+
+    Parameters
+    ----------
+    case : {"batch", "online"}
+        The identification method.
+    n : int
+        Record length, samples.
+
+    Returns
+    -------
+    dict
+        ``case``, ``samples``, ``seconds``, ``traced_bytes_per_sample``,
+        ``rss_growth_bytes_per_sample``, ``peak_rss_mb``.
+    """
     import warnings
 
     from hystid.reference import reference_record
@@ -86,33 +109,103 @@ def measure(case: str, n: int) -> dict:
     }
 
 
+def run_case(case: str, n: int) -> dict:
+    """One case in a fresh process that imports this checkout's ``hystid``.
+
+    Parameters
+    ----------
+    case : {"batch", "online"}
+        The identification method.
+    n : int
+        Record length, samples.
+
+    Returns
+    -------
+    dict
+        What :func:`measure_case` returns in the child.
+    """
+    env = {**os.environ,
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    out = subprocess.run([sys.executable, __file__, "--case", case, "--n", str(n)], env=env,
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"{__file__} --case {case} --n {n} failed:\n{out.stderr.strip()}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def measure(quick: bool = False, full: bool = False) -> dict:
+    """Both cases at each record length, each in its own process.
+
+    Parameters
+    ----------
+    quick : bool
+        1e5 samples only.
+    full : bool
+        Also 1e7 samples (the batch fit alone takes beyond 20 minutes there).
+
+    Returns
+    -------
+    dict
+        ``rows`` (:func:`measure_case` per case and length, shortest first) and ``full``.
+    """
+    sizes = [100_000] + ([] if quick else [1_000_000]) + ([10_000_000] if full else [])
+    rows = []
+    for n in sizes:
+        for case in CASES:
+            rows.append(run_case(case, n))
+            r = rows[-1]
+            print(f"{case} {n:.0e}: {r['traced_bytes_per_sample']:.0f} B/sample traced, "
+                  f"{r['rss_growth_bytes_per_sample']:.0f} B/sample RSS, {r['seconds']:.1f} s",
+                  flush=True)
+    return {"rows": rows, "full": full}
+
+
+def _count(n: float) -> str:
+    return f"{n:,.0f}".replace(",", " ")
+
+
+def render(payload: dict) -> str:
+    """The table of bytes per sample, and the batch fit's time at the longest record.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+        Markdown.
+    """
+    rows = [[LABELS[r["case"]], f"{r['samples']:.0e}".replace("+0", ""),
+             _count(r["traced_bytes_per_sample"]), _count(r["rss_growth_bytes_per_sample"]),
+             _count(r["peak_rss_mb"]), f"{r['seconds']:.1f}"] for r in payload["rows"]]
+    batch = [r for r in payload["rows"] if r["case"] == "batch"]
+    longest = max(batch, key=lambda r: r["samples"])
+    online = max((r for r in payload["rows"] if r["case"] == "online"),
+                 key=lambda r: r["samples"])
+    return "\n".join([
+        table(rows, ["fit", "samples", "traced B/sample", "resident growth B/sample",
+                     "peak resident MB", "seconds"]), "",
+        f"The batch fit took {longest['seconds']:.0f} s at {longest['samples']:.0e} samples, "
+        f"the on-line identifier {online['seconds']:.1f} s at {online['samples']:.0e}."
+        .replace("e+0", "e")])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="1e5 samples only")
     parser.add_argument("--full", action="store_true", help="also run 1e7 samples")
     parser.add_argument("--case", choices=CASES, help=argparse.SUPPRESS)
     parser.add_argument("--n", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.case:  # a child process: one case, its figures as JSON on stdout
-        print(json.dumps(measure(args.case, args.n)))
+        print(json.dumps(measure_case(args.case, args.n)))
         return
-    sizes = [100_000, 1_000_000] + ([10_000_000] if args.full else [])
-    rows = []
-    for n in sizes:
-        for case in CASES:
-            out = subprocess.run([sys.executable, __file__, "--case", case, "--n", str(n)],
-                                 capture_output=True, text=True, check=True)
-            rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
-            r = rows[-1]
-            print(f"{case} {n:.0e}: {r['traced_bytes_per_sample']:.0f} B/sample traced, "
-                  f"{r['rss_growth_bytes_per_sample']:.0f} B/sample RSS, {r['seconds']:.1f} s",
-                  flush=True)
+    payload = measure(args.quick, args.full)
     print()
-    print(table([[r["case"], f"{r['samples']:.0e}", f"{r['traced_bytes_per_sample']:.0f}",
-                  f"{r['rss_growth_bytes_per_sample']:.0f}", f"{r['peak_rss_mb']:.0f}",
-                  f"{r['seconds']:.1f}"] for r in rows],
-                ["fit", "samples", "traced B/sample", "RSS growth B/sample", "peak RSS MB",
-                 "seconds"]))
-    write_json("bench_memory", {"rows": rows, "full": args.full})
+    print(render(payload))
+    write_json("bench_memory", payload)
 
 
 if __name__ == "__main__":
