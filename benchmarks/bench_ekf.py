@@ -30,6 +30,8 @@ STARTS = (0.01, "linear")
 
 #: The README blocks this script renders (see ``benchmarks/readme.py``).
 README_BLOCKS = {"ekf": "render"}
+#: The command that measures the README's figures (one BLAS thread, as in the README).
+COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ekf.py"
 
 
 def settle_sample(rel: np.ndarray, level: float) -> int | None:

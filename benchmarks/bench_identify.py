@@ -31,6 +31,8 @@ from hystid.reference import PAPER_PARAMS, reference_record
 
 #: The README blocks this script renders (see ``benchmarks/readme.py``).
 README_BLOCKS = {"identify": "render"}
+#: The command that measures the README's figures (one BLAS thread, as in the README).
+COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_identify.py"
 #: The identification methods compared, in the table's order.
 METHODS = ("batch", "online", "eria", "ekf")
 #: Samples of the throughput record consumed before the timing (the start-up solve among them).

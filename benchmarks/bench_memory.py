@@ -37,6 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: The README blocks this script renders (see ``benchmarks/readme.py``).
 README_BLOCKS = {"memory": "render"}
+#: The command that measures the README's figures (one BLAS thread, as in the README).
+COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_memory.py"
 #: What each case is called in the table.
 LABELS = {"batch": "batch fit", "online": "on-line identifier"}
 

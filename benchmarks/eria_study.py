@@ -31,6 +31,8 @@ TRUTH = np.array(list(PAPER_PARAMS.values()))
 
 #: The README blocks this script renders (see ``benchmarks/readme.py``).
 README_BLOCKS = {"eria": "render"}
+#: The command that measures the README's figures (one BLAS thread, as in the README).
+COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/eria_study.py"
 
 #: Starts of the recursion: the truth, near it, and the paper's theta(0) = 0.01.
 STARTS = {"truth": PAPER_PARAMS, "truth +1 %": TRUTH * 1.01, "truth +10 %": TRUTH * 1.1,
