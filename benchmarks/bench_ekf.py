@@ -188,8 +188,8 @@ def render(payload: dict) -> str:
     ratio = [r["time_ratio_vs_simulation"] for r in runs]
     seed_text = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]}"
     return "\n".join([
-        f"{payload['samples']} samples per record, {seed_text}; \"samples to 0.1 %\" per seed, "
-        "the others as the range over the seeds (max relative parameter error):", "",
+        f"{_samples(payload['samples'])} samples per record, {seed_text}; \"samples to 0.1 %\" "
+        "per seed, the others as the range over the seeds (max relative parameter error):", "",
         table(rows, ["start", "noise", "samples to 2 %", "samples to 0.1 %", "final err"]), "",
         f"Speed: {min(rate):,.0f}-{max(rate):,.0f} samples per second "
         f"({min(ratio):.0f}-{max(ratio):.0f}x the time of the compiled simulation of the same "

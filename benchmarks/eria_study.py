@@ -155,6 +155,10 @@ def _sci(x: float) -> str:
     return text
 
 
+def _count(n: float) -> str:
+    return f"{n:,.0f}".replace(",", " ")
+
+
 def _percent(share: float) -> str:
     return f"{share * 100:.0f} %"
 
@@ -243,8 +247,8 @@ def render(payload: dict) -> str:
                                           ("mu = 1", "mu = 1 + floor"))]
     seed_text = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {seeds[0]}-{seeds[-1]}"
     return "\n".join([
-        f"{payload['samples']} samples per record, {seed_text}; \"final err\" is the median "
-        "max relative parameter error, \"leaves 2 %\" the earliest sample over the seeds; "
+        f"{_count(payload['samples'])} samples per record, {seed_text}; \"final err\" is the "
+        "median max relative parameter error, \"leaves 2 %\" the earliest sample over the seeds; "
         f"`recover=False`, so the estimate runs free and only a non-finite value would be "
         f"restarted ({'none was' if restarts == 0 else f'{restarts} were'}).", "",
         table(rows, ["noise", "variant", "start", "leaves 2 % at sample", "final err",
