@@ -532,8 +532,9 @@ def _early_bullet(payload: dict) -> str:
     within = sum(e < 0.02 for e in at)
     first = payload["offline"]["first"]
     one_at = [r["err_at_1000"] for r in one]
-    text = (f"* Within 2 % by sample 1 000: {within} of {len(at)} seeds at 0 and 1 nm (median "
-            f"{_samples_to(clean + one, 'to_2pc')} samples, when the start-up solve lands). "
+    text = (f"* Within 2 % at sample 1 000: {within} of {len(at)} seeds at 0 and 1 nm (for good "
+            f"from sample {_samples_to(clean + one, 'to_2pc')}, median, when the start-up solve "
+            "lands). "
             f"At sample 1 000 the on-line estimate is "
             f"{_pc(min(one_at))[:-2]}-{_pc(max(one_at))} off "
             f"over the {len(one)} seeds at 1 nm (the off-line fit on the same first "
