@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 import warnings
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -26,6 +28,25 @@ DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensiti
 
 class CommandError(Exception):
     """A user-facing error: printed without a traceback, exit status 2."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (no usage block), status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``PROG: error: MESSAGE`` and a pointer to ``--help``, exit with status 2.
+
+        Parameters
+        ----------
+        message : str
+            argparse's message; an option given no value because the value starts with ``-``
+            gets the way to write it (``--crop=-1:2``).
+        """
+        missing = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
+        if missing:
+            option = missing.group(1)
+            message += f" (a value starting with '-' is written {option}=VALUE)"
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 class Progress:
@@ -65,17 +86,18 @@ class Progress:
 
 
 # --------------------------------------------------------------------------- helpers
-def _load(path: str, fs: float | None, columns: dict | None = None):
+def _load(path: str, fs: float | None, columns: dict | None = None, option: str = ""):
+    """Load a record; a problem with it is a :class:`CommandError` naming ``option`` and file."""
     from .records import RecordError, load_record
 
     try:
         return load_record(path, fs=fs, columns=columns)
     except RecordError as err:
-        raise CommandError(str(err)) from err
+        raise CommandError(f"{option} {err}" if option else str(err)) from err
 
 
 def _check_file(path: str | None, option: str, args: argparse.Namespace,
-                inputs: tuple = ()) -> Path | None:
+                inputs: tuple = (), create_folder: bool = False) -> Path | None:
     """Check an output file before any work (see :func:`hystid.safeio.check_output`)."""
     from .safeio import OutputError, check_output
 
@@ -83,9 +105,27 @@ def _check_file(path: str | None, option: str, args: argparse.Namespace,
         return None
     try:
         return check_output(path, option=option, inputs=inputs,
-                            force=getattr(args, "force", False))
+                            force=getattr(args, "force", False), create_folder=create_folder)
     except OutputError as err:
         raise CommandError(str(err)) from err
+
+
+def _check_identify_outputs(args: argparse.Namespace, inputs: tuple) -> None:
+    """``--history`` and ``--out`` of ``identify``: each writable, and apart from each other.
+
+    ``--history`` may lie inside the ``--out`` folder (which is created), but never be the
+    folder or one of the files written into it, not even with ``--force``.
+    """
+    from .safeio import OutputError, check_apart, inside
+
+    if args.history and args.out:
+        try:
+            check_apart(args.history, args.out, REPORT_FILES, option="--history")
+        except OutputError as err:
+            raise CommandError(str(err)) from err
+    _check_dir(args.out, args, inputs)
+    in_out = bool(args.history and args.out and inside(args.history, args.out))
+    _check_file(args.history, "--history", args, inputs, create_folder=in_out)
 
 
 def _check_dir(path: str | None, args: argparse.Namespace, inputs: tuple = (),
@@ -157,23 +197,43 @@ def _holdout_fraction(text: str) -> float:
     return value
 
 
-def _identify_record(rec, args, progress: Progress):
+#: Methods of each hysteresis block (``--model``) that keep a parameter history.
+_HISTORY_METHODS = {"duhem": ("online", "eria", "ekf"), "pi": ("online", "eria")}
+
+
+def _method_arg(args: argparse.Namespace) -> str:
+    """The ``--method`` of ``identify`` checked against ``--model`` and ``--history``."""
+    model_kind = getattr(args, "model", "duhem")
+    method = args.method or ("batch" if model_kind == "duhem" else "online")
+    if model_kind == "pi" and method == "ekf":
+        raise CommandError("--method ekf: the PI sandwich is identified by 'online' (its "
+                           "recursive identifier) or 'batch' (expected one of these)")
+    if getattr(args, "history", None) and method not in _HISTORY_METHODS[model_kind]:
+        raise CommandError(f"--history: method {method!r} keeps no parameter history "
+                           f"(expected --method {_one_of(_HISTORY_METHODS[model_kind])})")
+    return method
+
+
+def _one_of(names: tuple[str, ...]) -> str:
+    """``"a, b or c"``."""
+    return " or ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
+
+
+def _identify_record(rec, args, progress: Progress, structure=None):
     """Run the chosen model/method on a record; returns the IdentificationResult."""
     from .identify import identify
 
-    model_kind = getattr(args, "model", "duhem")
-    if model_kind == "pi":
+    method = _method_arg(args)
+    if getattr(args, "model", "duhem") == "pi":
         from .identify.pi_recursive import identify_pi
 
-        method = "recursive" if args.method in (None, "online", "eria") else args.method
-        return identify_pi(rec, method=method)
-    method = args.method or "batch"
+        return identify_pi(rec, method="batch" if method == "batch" else "recursive")
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", "estimate") == "estimate"
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
-    return identify(rec, method=method, structure=_structure_arg(args), **settings)
+    return identify(rec, method=method, structure=structure, **settings)
 
 
 def _structure_arg(args):
@@ -261,14 +321,16 @@ def _jsonable(value) -> bool:
 
 
 def _write_history(path: str, result) -> None:
+    """Write the parameter history as CSV (atomically; its folder is created when missing)."""
     from .safeio import atomic_open
 
-    if result.history is None:
+    if result.history is None:  # pragma: no cover - refused before the work by _method_arg
         raise CommandError(f"--history: method {result.method!r} keeps no parameter history")
     names = list(result.names)
     index = getattr(result, "history_index", None)  # a decimated history names its samples
     k = np.arange(1, len(result.history) + 1) if index is None else np.asarray(index) + 1
     data = np.column_stack([k, result.history])
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(path, "w", newline="\n") as out:
         np.savetxt(out, data, delimiter=",", header=",".join(["k", *names]), comments="",
                    fmt=["%d"] + ["%.10g"] * len(names))
@@ -378,13 +440,15 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from .safeio import dumps_strict
 
     progress = Progress(args.quiet or args.json)
-    inputs = (args.record, args.val)
-    _check_file(args.history, "--history", args, inputs)
-    _check_dir(args.out, args, inputs)
+    inputs = (args.record, args.val, *(args.repeat or []))
+    _check_identify_outputs(args, inputs)
+    _method_arg(args)
     span = _crop_arg(args)
+    structure = _structure_arg(args)
     rec = _cropped(_load(args.record, args.fs, args.columns), span)
-    val = _cropped(_load(args.val, args.fs, args.columns), span) if args.val else None
-    repeats = [_cropped(_load(p, args.fs, args.columns), span) for p in args.repeat or []]
+    val = _cropped(_load(args.val, args.fs, args.columns, "--val"), span) if args.val else None
+    repeats = [_cropped(_load(p, args.fs, args.columns, "--repeat"), span)
+               for p in args.repeat or []]
     for other, label in [(val, f"--val {args.val}")] + [
             (r, f"--repeat {p}") for r, p in zip(repeats, args.repeat or [], strict=True)]:
         if other is not None and not np.isclose(other.fs, rec.fs, rtol=1e-9):
@@ -393,7 +457,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     train, target, scored_from = _split_for_validation(rec, val, args)
     progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
     try:
-        result = _identify_record(train, args, progress)
+        result = _identify_record(train, args, progress, structure)
         floor_set = [target, *repeats] if repeats else None
         report, yhat, target = _report(result, train, target if val is not None or scored_from
                                        is not None else None, args, scored_from, floor_set)
@@ -402,14 +466,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for w in report["warnings"]:
         if not args.json:
             print(f"hystid identify: warning: {w}", file=sys.stderr)
-    if args.history:
-        _write_history(args.history, result)
     if args.out:
         from .modelfile import make_provenance
 
         provenance = make_provenance(result.method, args.record, result.settings)
         _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance,
                        scored_from=scored_from or 0)
+    if args.history:
+        _write_history(args.history, result)
     if args.json:
         print(dumps_strict(report))
     else:
@@ -436,14 +500,16 @@ def cmd_identify(args: argparse.Namespace) -> int:
 def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
                    provenance: dict | None = None, seed: int | None = None,
                    scored_from: int = 0) -> None:
-    """Write report.json, model.json and the figures into ``out`` (each file atomically).
+    """Write report.json, model.json and the figures into ``out``, all or none of them.
 
-    The validation figure shows the samples the validation figures were computed on: from
+    The files are written into a staging folder and moved in place once all are written
+    (:func:`hystid.safeio.atomic_folder`): a failure midway leaves ``out`` as it was. The
+    validation figure shows the samples the validation figures were computed on: from
     ``scored_from`` (a held-out end of the record) less the transient.
     """
     from .metrics import plot_convergence, plot_validation
     from .modelfile import save_model
-    from .safeio import atomic_path, write_json
+    from .safeio import atomic_folder, write_json
 
     model = result.model
     units = {"u": target.units.get("u", ""), "y": target.units.get("y", "")}
@@ -454,17 +520,15 @@ def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
         "provenance": {**(provenance or {}), "fs": model.fs,
                        "structure": dict(vars(model.structure)), "seed": seed},
     }
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", report)
-    save_model(model, out / "model.json", provenance=provenance, force=True)
-    with atomic_path(out / "validation.png") as tmp:
-        plot_validation(target.t, target.y, yhat, tmp, u=target.u,
+    with atomic_folder(out) as stage:
+        write_json(stage / "report.json", report)
+        save_model(model, stage / "model.json", provenance=provenance)
+        plot_validation(target.t, target.y, yhat, stage / "validation.png", u=target.u,
                         title=f"{report['model']} sandwich, {report['method']}: validation on "
                         f"{target.name}", unit=units["y"], u_unit=units["u"],
                         skip=scored_from + (report["validation"] or {}).get("skip", 0))
-    if result.history is not None:
-        with atomic_path(out / "convergence.png") as tmp:
-            plot_convergence(result.history, result.names, truth, tmp,
+        if result.history is not None:
+            plot_convergence(result.history, result.names, truth, stage / "convergence.png",
                              samples=result.history_index,
                              title=f"{report['model']} sandwich, {report['method']}: "
                              "parameter convergence")
@@ -594,7 +658,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The parser; each command sets ``func``.
     """
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="hystid",
         description="Identify piezo-driven positioning stages (L1-Duhem-L2 sandwich).",
     )
