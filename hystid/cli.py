@@ -17,6 +17,9 @@ from . import __version__
 from .options import MAX_SECONDS, integer, number
 
 EXIT_BAD_INPUT = 2
+#: numpy's floating-point RuntimeWarnings raised while a fit tries a diverging candidate: not
+#: shown by ``identify`` (a result the fit could not trust carries its own warnings).
+NUMERIC_NOISE = r"(overflow|invalid value|divide by zero|underflow) encountered"
 #: Files ``identify --out`` and ``demo --out`` write into their folder.
 REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png")
 _RECORD_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
@@ -159,6 +162,13 @@ def _positive(kind):
 _non_negative_float = number(0.0)
 
 
+def _path(text: str) -> str:
+    """argparse ``type=`` for a file or folder name: not empty, not blank."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a file or folder name, got {text!r}")
+    return text
+
+
 def _table(rows: list[list[str]], header: list[str]) -> str:
     widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
     line = "  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True))
@@ -211,7 +221,30 @@ def _method_arg(args: argparse.Namespace) -> str:
     if getattr(args, "history", None) and method not in _HISTORY_METHODS[model_kind]:
         raise CommandError(f"--history: method {method!r} keeps no parameter history "
                            f"(expected --method {_one_of(_HISTORY_METHODS[model_kind])})")
+    batch_only = (("--skip", getattr(args, "skip", None)),
+                  ("--offset", getattr(args, "offset", None)))
+    for option, value in batch_only:
+        if value is not None and (model_kind, method) != ("duhem", "batch"):
+            raise CommandError(f"{option} applies to the Duhem sandwich's batch fit only (got "
+                               f"--model {model_kind} --method {method}; expected --method "
+                               f"--model duhem --method batch, or no {option})")
+    if model_kind == "pi" and getattr(args, "structure", None) is not None:
+        raise CommandError("--structure applies to the Duhem sandwich only (got --model pi)")
     return method
+
+
+def _check_skip(args: argparse.Namespace, train, structure) -> None:
+    """``--skip`` must leave the batch fit enough samples of the record it fits."""
+    from .identify import min_samples
+
+    if getattr(args, "skip", None) is None:
+        return
+    left = train.n - int(round(args.skip * train.fs))
+    need = min_samples("batch", None if structure == "auto" else structure)
+    if left < need:
+        raise CommandError(f"--skip {args.skip:g}: leaves {max(left, 0)} of the {train.n} "
+                           f"samples fitted ({train.n / train.fs:g} s of {train.name!r} "
+                           f"without its held-out end; expected at least {need} samples left)")
 
 
 def _one_of(names: tuple[str, ...]) -> str:
@@ -230,7 +263,7 @@ def _identify_record(rec, args, progress: Progress, structure=None):
         return identify_pi(rec, method="batch" if method == "batch" else "recursive")
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
-        settings["offset"] = getattr(args, "offset", "estimate") == "estimate"
+        settings["offset"] = getattr(args, "offset", None) != "none"
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
     return identify(rec, method=method, structure=structure, **settings)
@@ -455,9 +488,12 @@ def cmd_identify(args: argparse.Namespace) -> int:
             raise CommandError(f"{label}: fs {other.fs:g} Hz differs from {rec.fs:g} Hz "
                                f"of {args.record}")
     train, target, scored_from = _split_for_validation(rec, val, args)
+    _check_skip(args, train, structure)
     progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
     try:
-        result = _identify_record(train, args, progress, structure)
+        with warnings.catch_warnings():  # the fit's own checks report what these would mean
+            warnings.filterwarnings("ignore", NUMERIC_NOISE, RuntimeWarning)
+            result = _identify_record(train, args, progress, structure)
         floor_set = [target, *repeats] if repeats else None
         report, yhat, target = _report(result, train, target if val is not None or scored_from
                                        is not None else None, args, scored_from, floor_set)
@@ -669,7 +705,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                        description="Make a record from the built-in reference stage (the paper's "
                        "eqs. 26-28 at 30 kHz), identify it, validate on a second record and write "
                        "a short report (JSON + PNG).")
-    p.add_argument("--out", default="hystid-demo", help="report folder (default: hystid-demo)")
+    p.add_argument("--out", type=_path, default="hystid-demo",
+                   help="report folder (default: hystid-demo)")
     p.add_argument("--force", action="store_true", help="replace files already in --out")
     p.add_argument("--seconds", type=_seconds, default=1.0,
                    help=f"length of each record in seconds (default 1.0, at most {MAX_SECONDS:g})")
@@ -689,15 +726,15 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--noise", type=_non_negative_float, default=None,
                    help="sensor noise standard deviation in the output's units (default 0.001 um "
                    "for the built-in stage, none for --model)")
-    p.add_argument("--model", default=None, metavar="MODEL.json",
+    p.add_argument("--model", type=_path, default=None, metavar="MODEL.json",
                    help="a saved model (hystid identify --out writes DIR/model.json)")
-    p.add_argument("--input", default=None, metavar="REC",
+    p.add_argument("--input", type=_path, default=None, metavar="REC",
                    help="record whose input u drives --model")
     p.add_argument("--fs", type=_positive(float), default=None,
                    help="sampling rate of --input in Hz (if it has no t column or fs)")
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in --input (names or 0-based positions)")
-    p.add_argument("--out", required=True, help="output file (.csv, .npz, .mat, .h5)")
+    p.add_argument("--out", type=_path, required=True, help="output file (.csv, .npz, .mat, .h5)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_simulate)
@@ -705,9 +742,10 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("identify", help="identify a record",
                        description="Identify a sandwich model from a record (CSV with a header "
                        "naming u, y and optionally t; .npz, .mat, .h5) and validate it.")
-    p.add_argument("record", help="record file")
+    p.add_argument("record", type=_path, help="record file")
     p.add_argument("--fs", type=_positive(float), help="sampling rate in Hz (if no t column)")
-    p.add_argument("--val", help="validation record (default: validate on the record itself)")
+    p.add_argument("--val", type=_path,
+                   help="validation record (default: validate on the record itself)")
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
     p.add_argument("--model", choices=("duhem", "pi"), default="duhem", help="hysteresis block")
@@ -718,20 +756,22 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                    "experimental one by default), or 'auto' to choose on held-out error")
     p.add_argument("--crop", default=None, metavar="START:STOP",
                    help="keep only this time span of every record, in seconds")
-    p.add_argument("--offset", choices=("estimate", "none"), default="estimate",
-                   help="estimate the sensor offset (default) or take the output as zero at rest")
+    p.add_argument("--offset", choices=("estimate", "none"), default=None,
+                   help="batch fit: estimate the sensor offset (default) or take the output as "
+                   "zero at rest")
     p.add_argument("--skip", type=_non_negative_float, default=None, metavar="S",
                    help="seconds at the start simulated but left out of the fit (default: none "
                    "for a record that starts at rest, else until the input has swept its range)")
     p.add_argument("--holdout", type=_holdout_fraction, default=0.4, metavar="F",
                    help="without --val, the share of the record held out at its end for "
                    "validation (default 0.4; 0 validates on the record itself)")
-    p.add_argument("--repeat", nargs="+", default=None, metavar="REC",
+    p.add_argument("--repeat", type=_path, nargs="+", default=None, metavar="REC",
                    help="records of the same input as the validation record: their "
                    "repeat-to-repeat RMS is the floor no deterministic model can beat")
-    p.add_argument("--history", help="write the parameter history (CSV: k, one column a parameter)")
+    p.add_argument("--history", type=_path,
+                   help="write the parameter history (CSV: k, one column a parameter)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--out", help="folder for report.json, model.json and figures")
+    p.add_argument("--out", type=_path, help="folder for report.json, model.json and figures")
     p.add_argument("--force", action="store_true",
                    help="replace --history and files already in --out")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

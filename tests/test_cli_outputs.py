@@ -197,8 +197,8 @@ def test_diagnose_out_failing_midway_leaves_the_previous_files(stage, report_fol
     before = snapshot(tmp_path)
     monkeypatch.setattr("hystid.diagnose.report.plot_diagnosis", full_disk)
     code, _, err = run(["diagnose", stage[1], "--val", stage[0],
-                        "--model", report_folder / "model.json", "--effects", "creep", "--time-budget", "0", "--quiet", "--force",
-                        "--out", out], capsys)
+                        "--model", report_folder / "model.json", "--effects", "creep",
+                        "--time-budget", "0", "--quiet", "--force", "--out", out], capsys)
     assert code == 2 and "--out" in err and "No space left" in err
     assert snapshot(tmp_path) == before
 
@@ -212,6 +212,9 @@ def test_diagnose_out_failing_midway_leaves_the_previous_files(stage, report_fol
     (["identify", "REC", "--columns", "u=1,y=1"], ["--columns", "both read column 1"]),
     (["identify", "REC", "--metod", "online"], ["--metod", "unrecognized"]),
     (["identify"], ["record", "required"]),
+    (["identify", "REC", "--out", ""], ["--out", "expected a file or folder name"]),
+    (["identify", "REC", "--history", " ", "--method", "online"], ["--history", "got ' '"]),
+    (["identify", ""], ["record", "expected a file or folder name"]),
     (["simulate", "--seconds", "-1", "--seed", "0", "--out", "x.csv"], ["--seconds"]),
     (["diagnose", "REC", "--time-budget", "-1"], ["--time-budget"]),
     (["fleet", "identify", "REC", "--out", "f", "--workers", "-1"], ["--workers"]),
@@ -252,9 +255,35 @@ def test_structure_and_method_are_checked_before_loading(tmp_path, capsys, never
 
     monkeypatch.setattr(cli, "_load", no_load)
     for extra, option in ((["--structure", "order=2"], "--structure"),
-                          (["--model", "pi", "--method", "ekf"], "--method ekf")):
+                          (["--model", "pi", "--method", "ekf"], "--method ekf"),
+                          (["--model", "pi", "--structure", "n2a=1"], "--structure"),
+                          (["--method", "online", "--skip", "0.01"], "--skip"),
+                          (["--model", "pi", "--offset", "none"], "--offset")):
         code, _, err = run(["identify", tmp_path / "rec.csv", *extra], capsys)
-        assert code == 2 and option in error_line(err), err
+        line = error_line(err)
+        assert code == 2 and option in line, (extra, line)
+        assert "applies" in line or "expected" in line, line
+
+
+def test_skip_beyond_the_fitted_part_is_refused_naming_it(stage, capsys, never_fit):
+    # 3000 samples at 30 kHz, the last 40 % held out: 0.06 s are fitted
+    code, _, err = run(["identify", stage[0], "--skip", "0.0599"], capsys)
+    line = error_line(err)
+    assert code == 2 and line.startswith("hystid identify: error: --skip 0.0599: leaves 3 of "
+                                         "the 1800 samples"), line
+
+
+def test_numpy_noise_of_a_diverging_candidate_is_not_shown(stage, capsys, monkeypatch):
+    real = cli._identify_record
+
+    def overflowing_first(*args, **kwargs):  # a candidate overflowing, as a start-up try may
+        np.exp(np.float64(1e3))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cli, "_identify_record", overflowing_first)
+    code, out, err = run(["identify", stage[0], "--method", "online", "--quiet"], capsys)
+    assert code == 0 and "alpha" in out
+    assert "overflow" not in err and "RuntimeWarning" not in err, err
 
 
 # --------------------------------------------------------------------------- the measured record
