@@ -226,8 +226,8 @@ def _method_arg(args: argparse.Namespace) -> str:
     for option, value in batch_only:
         if value is not None and (model_kind, method) != ("duhem", "batch"):
             raise CommandError(f"{option} applies to the Duhem sandwich's batch fit only (got "
-                               f"--model {model_kind} --method {method}; expected --method "
-                               f"--model duhem --method batch, or no {option})")
+                               f"--model {model_kind} --method {method}; expected --model duhem "
+                               f"--method batch, or no {option})")
     if model_kind == "pi" and getattr(args, "structure", None) is not None:
         raise CommandError("--structure applies to the Duhem sandwich only (got --model pi)")
     return method
@@ -769,7 +769,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                    help="records of the same input as the validation record: their "
                    "repeat-to-repeat RMS is the floor no deterministic model can beat")
     p.add_argument("--history", type=_path,
-                   help="write the parameter history (CSV: k, one column a parameter)")
+                   help="write the parameter history of an on-line method (CSV: k, one column "
+                   "a parameter); may lie in --out but never be one of its files")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--out", type=_path, help="folder for report.json, model.json and figures")
     p.add_argument("--force", action="store_true",
