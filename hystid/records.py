@@ -547,6 +547,8 @@ def load_record(
     text = os.fspath(path)
     file, group = _split_h5_group(text)
     suffix = Path(file).suffix.lower()
+    if Path(file).is_dir():
+        raise RecordError("file is a directory (expected a record file)", file=file)
     if suffix not in _SUFFIXES:
         raise RecordError(_unknown_extension(suffix), file=text)
     if not Path(file).is_file():

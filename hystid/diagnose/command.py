@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 from ..options import OptionError, crop, fraction, integer, number, parse_crop, parse_structure
@@ -186,7 +184,7 @@ def _check_out(args: argparse.Namespace) -> None:
 
     if args.out is None:
         return
-    inputs = [p for p in (args.train, *args.val, args.model) if p]
+    inputs = [p for p in (args.train, *args.val, *args.repeat, args.model) if p]
     try:
         check_output_dir(args.out, OUTPUT_FILES, inputs=inputs, force=args.force)
     except OutputError as err:
@@ -194,15 +192,13 @@ def _check_out(args: argparse.Namespace) -> None:
 
 
 def _write(out: Path, report: dict, result) -> None:
-    """Write the report, the summary and the figures, each file atomically."""
-    from ..safeio import write_json, write_text
+    """Write the report, the summary and the figures: all of them, or none on a failure."""
+    from ..safeio import atomic_folder, write_json, write_text
 
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", report)
-    write_text(out / "summary.txt", result.summary() + "\n")
-    with tempfile.TemporaryDirectory(dir=out, prefix=".figures.") as tmp:
-        for path in result.plot(tmp):
-            os.replace(path, out / Path(path).name)
+    with atomic_folder(out) as stage:
+        write_json(stage / "report.json", report)
+        write_text(stage / "summary.txt", result.summary() + "\n")
+        result.plot(stage)
 
 
 def run(args: argparse.Namespace) -> int:
