@@ -89,12 +89,13 @@ class Progress:
 
 
 # --------------------------------------------------------------------------- helpers
-def _load(path: str, fs: float | None, columns: dict | None = None, option: str = ""):
+def _load(path: str, fs: float | None, columns: dict | None = None, option: str = "",
+          units: dict | None = None):
     """Load a record; a problem with it is a :class:`CommandError` naming ``option`` and file."""
     from .records import RecordError, load_record
 
     try:
-        return load_record(path, fs=fs, columns=columns)
+        return load_record(path, fs=fs, columns=columns, units=units)
     except RecordError as err:
         raise CommandError(f"{option} {err}" if option else str(err)) from err
 
@@ -152,6 +153,19 @@ def _columns_arg(text: str) -> dict:
         return parse_columns(text)
     except ValueError as err:
         raise argparse.ArgumentTypeError(str(err)) from err
+
+
+def _units_arg(text: str) -> dict:
+    from .records import parse_units
+
+    try:
+        return parse_units(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from err
+
+
+UNITS_HELP = ("units of the input and output, e.g. u=N,y=m (default: those stored in the "
+              "file, else V and um; they label the numbers, the fit does not depend on them)")
 
 
 def _positive(kind):
@@ -433,7 +447,7 @@ def _model_record(args: argparse.Namespace, progress: Progress):
         model = load_model(args.model)
     except ModelFileError as err:
         raise CommandError(f"--model {err}") from err
-    rec = _load(args.input, args.fs, args.columns)
+    rec = _load(args.input, args.fs, args.columns, units=args.units)
     if not np.isclose(rec.fs, model.fs, rtol=1e-9):
         raise CommandError(f"--input {args.input}: sampled at {rec.fs:g} Hz but the model at "
                            f"{model.fs:g} Hz (expected the model's rate)")
@@ -478,9 +492,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
     _method_arg(args)
     span = _crop_arg(args)
     structure = _structure_arg(args)
-    rec = _cropped(_load(args.record, args.fs, args.columns), span)
-    val = _cropped(_load(args.val, args.fs, args.columns, "--val"), span) if args.val else None
-    repeats = [_cropped(_load(p, args.fs, args.columns, "--repeat"), span)
+    rec = _cropped(_load(args.record, args.fs, args.columns, units=args.units), span)
+    val = (_cropped(_load(args.val, args.fs, args.columns, "--val", args.units), span)
+           if args.val else None)
+    repeats = [_cropped(_load(p, args.fs, args.columns, "--repeat", args.units), span)
                for p in args.repeat or []]
     for other, label in [(val, f"--val {args.val}")] + [
             (r, f"--repeat {p}") for r, p in zip(repeats, args.repeat or [], strict=True)]:
@@ -734,6 +749,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                    help="sampling rate of --input in Hz (if it has no t column or fs)")
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in --input (names or 0-based positions)")
+    p.add_argument("--units", type=_units_arg, metavar="u=V,y=um", help=UNITS_HELP)
     p.add_argument("--out", type=_path, required=True, help="output file (.csv, .npz, .mat, .h5)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -748,6 +764,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                    help="validation record (default: validate on the record itself)")
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
+    p.add_argument("--units", type=_units_arg, metavar="u=V,y=um", help=UNITS_HELP)
     p.add_argument("--model", choices=("duhem", "pi"), default="duhem", help="hysteresis block")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch for duhem, recursive for pi)")

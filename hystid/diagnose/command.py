@@ -48,6 +48,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="sampling rate in Hz (for files without a time vector or fs)")
     parser.add_argument("--columns", default=None, metavar="t=1,u=3,y=2",
                         help="where t, u and y are in the files (names or 0-based positions)")
+    parser.add_argument("--units", default=None, metavar="u=V,y=um",
+                        help="units of the input and output, e.g. u=N,y=m (default: those "
+                        "stored in the files, else V and um)")
     parser.add_argument("--model", default=None, metavar="MODEL.json",
                         help="diagnose this saved model instead of identifying one (the "
                         "model.json written by 'hystid identify --out'; an older report.json "
@@ -113,11 +116,23 @@ def _columns(text: str | None) -> dict | None:
         raise _BadInput(f"--columns: {err}") from err
 
 
+def _units(text: str | None) -> dict | None:
+    from ..records import parse_units
+
+    if text is None:
+        return None
+    try:
+        return parse_units(text)
+    except ValueError as err:
+        raise _BadInput(f"--units: {err}") from err
+
+
 def _load(path: str, args, label: str):
     from ..records import Record, RecordError, load_record
 
     try:
-        rec = load_record(path, fs=args.fs, columns=_columns(args.columns))
+        rec = load_record(path, fs=args.fs, columns=_columns(args.columns),
+                          units=_units(args.units))
     except RecordError as err:
         raise _BadInput(str(err)) from err
     try:
