@@ -217,13 +217,15 @@ def measure(quick: bool = False) -> dict:
     Returns
     -------
     dict
-        ``designs`` (:func:`measure_designs`), ``tracking`` (:func:`measure_tracking`),
+        ``flexure_hz`` (the identified flexure mode), ``designs`` (:func:`measure_designs`),
+        ``tracking`` (:func:`measure_tracking`),
         ``smoothed`` (:func:`measure_smoothed`), ``robustness`` (:func:`measure_robustness`).
     """
     stage, model = reference_model(), identified_model()
     design = hc.design_feedback(model)
     scans = tuple(s for s in SCANS if s[1] == 50.0) if quick else SCANS
-    return {"quick": quick, "designs": measure_designs(model, stage),
+    return {"quick": quick, "flexure_hz": hc.flexure_mode(model)[0],
+            "designs": measure_designs(model, stage),
             "tracking": measure_tracking(model, stage, design, scans),
             "smoothed": measure_smoothed(model, stage, (50.0,) if quick else (10.0, 50.0)),
             "robustness": measure_robustness(model, quick)}
@@ -271,7 +273,11 @@ def render_designs(payload: dict) -> str:
     (b_max, b_rms), (p_max, p_rms) = (base["sine_200_max_rms_nm"], pi5["sine_200_max_rms_nm"])
     verb = "falls" if p_rms < b_rms else "rises"
     tri_b, tri_p = base["triangle_50_max_rms_nm"], pi5["triangle_50_max_rms_nm"]
-    out += (f"\n\nThe wide notch trades bandwidth ({wide['crossover_hz']:.0f} Hz against "
+    out += "\n\n"
+    if "flexure_hz" in payload:
+        out += (f"The notch sits on the identified flexure mode, "
+                f"{payload['flexure_hz'] / 1e3:.2f} kHz. ")
+    out += (f"The wide notch trades bandwidth ({wide['crossover_hz']:.0f} Hz against "
             f"{base['crossover_hz']:.0f} Hz) for margins ({wide['phase_margin_deg']:.0f} deg, "
             f"{wide['gain_margin_db']:.1f} dB). With the proportional part (`pi_zero=5`, `kp` = "
             f"{pi5['kp']:.2g} V/um) the crossover moves to {pi5['crossover_hz']:.0f} Hz and, with "
