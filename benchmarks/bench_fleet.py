@@ -17,7 +17,8 @@ The withheld-effect cases of ``bench_withheld_effects.py`` (its ``run_case``, th
 ``--withheld`` cases of its draw) run once serially and once through
 :func:`hystid.fleet.map_seeds` on each cluster; the diagnoses must agree case by case. Usage:
 
-    python benchmarks/bench_fleet.py [--records N] [--seconds S] [--repeat R] [--withheld M]
+    python benchmarks/bench_fleet.py [--quick] [--records N] [--seconds S] [--repeat R]
+                                     [--withheld M]
 """
 
 from __future__ import annotations
@@ -38,6 +39,9 @@ from _common import table, write_json  # noqa: E402
 
 from hystid.fleet import Job, fleet_client, map_seeds, run_fleet, run_job  # noqa: E402
 from hystid.reference import reference_record  # noqa: E402
+
+#: The README blocks this script renders (see ``benchmarks/readme.py``).
+README_BLOCKS = {"fleet": "render"}
 
 
 def warm_up(path: str) -> float:
@@ -127,9 +131,98 @@ def start_cluster(workers: int, warm_path: str, stack: contextlib.ExitStack):
     return client, time.perf_counter() - t0
 
 
+def measure(quick: bool = False, records: int = 16, seconds: float = 0.5, repeat: int = 3,
+            withheld: int = 12) -> dict:
+    """Time the fleet serially and on 1 and 2 local workers (and the withheld-effect cases).
+
+    Parameters
+    ----------
+    quick : bool
+        4 records, one timing, 2 withheld-effect cases.
+    records, seconds, repeat, withheld : int, float, int, int
+        Records, their length, timings per configuration, withheld-effect diagnoses (0: none).
+
+    Returns
+    -------
+    dict
+        Timings, the best of each, per-record times, speed-up, start-up, load averages.
+    """
+    if quick:
+        records, repeat, withheld = 4, 1, 2
+    load_before = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="bench-fleet-") as tmp:
+        folder = Path(tmp)
+        jobs = make_records(folder, records, seconds)
+        warm_path = str(folder / "warm.npz")
+        reference_record(0.05, seed=999).save(warm_path)
+        warm_up(warm_path)
+        stack = contextlib.ExitStack()
+        clusters = {n: start_cluster(n, warm_path, stack) for n in (1, 2)}
+        times: dict[str, list[float]] = {"serial": [], "1 worker": [], "2 workers": []}
+        with stack:
+            for r in range(repeat):
+                times["serial"].append(time_serial(jobs))
+                for n, (client, _) in clusters.items():
+                    label = f"{n} worker{'s' if n > 1 else ''}"
+                    times[label].append(time_fleet(client, jobs, folder / f"out{n}-{r}"))
+                print(f"round {r + 1}/{repeat}: " + ", ".join(
+                    f"{k} {v[-1]:.2f} s" for k, v in times.items()), flush=True)
+            diagnoses = (time_withheld(withheld_jobs(withheld), 9000, clusters)
+                         if withheld else {})
+    best = {k: min(v) for k, v in times.items()}
+    return {
+        "settings": {"records": records, "seconds": seconds, "repeat": repeat},
+        "timings_s": times, "best_s": best,
+        "ms_per_record": {k: 1e3 * v / records for k, v in best.items()},
+        "speedup_1_to_2_workers": best["1 worker"] / best["2 workers"], "goal_speedup": 1.7,
+        "overhead_1_worker_vs_serial": best["1 worker"] / best["serial"] - 1,
+        "withheld_effect_diagnoses": {"cases": withheld, "seconds": diagnoses},
+        "startup_s": {f"{n} worker{'s' if n > 1 else ''}": c[1] for n, c in clusters.items()},
+        "cores": os.cpu_count(), "load_average_before": load_before,
+        "load_average_after": os.getloadavg()}
+
+
+def render(payload: dict) -> str:
+    """The fleet's timings as Markdown.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+    """
+    st, ms = payload["settings"], payload["ms_per_record"]
+    configs = ("serial", "1 worker", "2 workers")
+    rows = [["per record (best of the timings)", *(f"{ms[k]:.0f} ms" for k in configs)],
+            [f"speed-up from 1 to 2 workers (goal >= {payload['goal_speedup']:g}x)", "", "",
+             f"**{payload['speedup_1_to_2_workers']:.2f}x**"]]
+    w = payload["withheld_effect_diagnoses"]
+    if w["seconds"]:
+        sec = w["seconds"]
+        rows.append([f"{w['cases']} withheld-effect diagnoses via `map_seeds`",
+                     *(f"{sec[k]:.1f} s" for k in configs[:2]),
+                     f"{sec['2 workers']:.1f} s ({sec['1 worker'] / sec['2 workers']:.2f}x)"])
+    before, after = payload["load_average_before"], payload["load_average_after"]
+    startup = payload["startup_s"]
+    return "\n".join([
+        f"{st['records']} records of {st['seconds']:g} s from the reference stage, identified on "
+        f"60 % and scored on the rest against both baselines; best of {st['repeat']} "
+        f"interleaved timings; load average {before[0]:.1f} before, {after[0]:.1f} after, on "
+        f"{payload['cores']} cores:", "",
+        table(rows, ["", "serial loop, no Dask", "1 worker", "2 workers"]), "",
+        f"One worker costs {100 * payload['overhead_1_worker_vs_serial']:+.1f} % against the "
+        f"plain loop; a local cluster starts, with the kernels loaded on every worker, in "
+        + " / ".join(f"{v:.1f} s" for v in startup.values()) + " (1 / 2 workers)."])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true",
+                        help="4 records, one timing, 2 withheld-effect cases")
     parser.add_argument("--records", type=int, default=16, help="records (default 16)")
     parser.add_argument("--seconds", type=float, default=0.5,
                         help="length of each record in seconds (default 0.5 = 15 000 samples)")
@@ -138,60 +231,9 @@ def main() -> None:
                         help="withheld-effect diagnoses (0.3 s + 0.3 s records) to run on the "
                         "clusters too (default 12; 0 to skip)")
     args = parser.parse_args()
-    load_before = os.getloadavg()
-    with tempfile.TemporaryDirectory(prefix="bench-fleet-") as tmp:
-        folder = Path(tmp)
-        jobs = make_records(folder, args.records, args.seconds)
-        warm_path = str(folder / "warm.npz")
-        reference_record(0.05, seed=999).save(warm_path)
-        warm_up(warm_path)
-        stack = contextlib.ExitStack()
-        clusters = {n: start_cluster(n, warm_path, stack) for n in (1, 2)}
-        times: dict[str, list[float]] = {"serial": [], "1 worker": [], "2 workers": []}
-        with stack:
-            for r in range(args.repeat):
-                times["serial"].append(time_serial(jobs))
-                for n, (client, _) in clusters.items():
-                    label = f"{n} worker{'s' if n > 1 else ''}"
-                    times[label].append(time_fleet(client, jobs, folder / f"out{n}-{r}"))
-                print(f"round {r + 1}/{args.repeat}: " + ", ".join(
-                    f"{k} {v[-1]:.2f} s" for k, v in times.items()), flush=True)
-            withheld = (time_withheld(withheld_jobs(args.withheld), 9000, clusters)
-                        if args.withheld else {})
-    load_after = os.getloadavg()
-    best = {k: min(v) for k, v in times.items()}
-    speedup = best["1 worker"] / best["2 workers"]
-    rows = [[k, f"{best[k]:.2f}", f"{1e3 * best[k] / args.records:.0f}",
-             f"{best['serial'] / best[k]:.2f}", " ".join(f"{t:.2f}" for t in v)]
-            for k, v in times.items()]
-    print(f"\n{args.records} records of {args.seconds:g} s ({int(args.seconds * 30000)} samples),"
-          f" identify + held-out comparison with the baselines")
-    print(table(rows, ["configuration", "best [s]", "ms per record", "speed vs serial",
-                       "all timings [s]"]))
-    startup = {f"{n} worker{'s' if n > 1 else ''}": c[1] for n, c in clusters.items()}
-    print(f"\nspeed-up from 1 to 2 workers: {speedup:.2f}x (goal >= 1.7x)")
-    print(f"Dask overhead with 1 worker: {100 * (best['1 worker'] / best['serial'] - 1):+.1f} % "
-          f"against the serial loop")
-    print("cluster start-up incl. kernel warm-up: "
-          + ", ".join(f"{k} {v:.1f} s" for k, v in startup.items()))
-    if withheld:
-        ratio = withheld["1 worker"] / withheld["2 workers"]
-        print(f"\n{args.withheld} withheld-effect diagnoses through map_seeds (same diagnoses as "
-              "the serial loop): " + ", ".join(f"{k} {v:.1f} s" for k, v in withheld.items())
-              + f"; speed-up from 1 to 2 workers {ratio:.2f}x")
-    print(f"load average (1, 5, 15 min) before {load_before[0]:.2f} {load_before[1]:.2f} "
-          f"{load_before[2]:.2f}, after {load_after[0]:.2f} {load_after[1]:.2f} "
-          f"{load_after[2]:.2f} on {os.cpu_count()} cores")
-    path = write_json("fleet", {
-        "settings": {"records": args.records, "seconds": args.seconds, "repeat": args.repeat},
-        "timings_s": times, "best_s": best,
-        "ms_per_record": {k: 1e3 * v / args.records for k, v in best.items()},
-        "speedup_1_to_2_workers": speedup, "goal_speedup": 1.7,
-        "overhead_1_worker_vs_serial": best["1 worker"] / best["serial"] - 1,
-        "withheld_effect_diagnoses": {"cases": args.withheld, "seconds": withheld},
-        "startup_s": startup, "cores": os.cpu_count(),
-        "load_average_before": load_before, "load_average_after": load_after})
-    print(f"wrote {path}")
+    payload = measure(args.quick, args.records, args.seconds, args.repeat, args.withheld)
+    print(render(payload))
+    print(f"wrote {write_json('fleet', payload)}")
 
 
 if __name__ == "__main__":

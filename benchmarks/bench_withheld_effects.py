@@ -41,6 +41,10 @@ from hystid.identify import identify
 from hystid.records import Record
 from hystid.reference import paper_excitation, reference_model
 
+#: The README blocks this script renders (see ``benchmarks/readme.py``).
+README_BLOCKS = {"withheld-effects": "render", "diagnosis-speed": "render_budget"}
+COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_withheld_effects.py"
+
 FS = 30_000.0
 STRENGTHS = ("weak", "medium", "strong")
 #: Families of the independent simulator under the diagnosis' names.
@@ -304,17 +308,64 @@ def run_jobs(jobs: list[tuple], n: int, workers: int | None, scheduler: str | No
     return rows
 
 
+def measure(quick: bool = False, draws: int = 1, clean: int | None = None,
+            seconds: float = 0.5, only: str | None = None, with_budget: bool = True,
+            seed: int = 2024, workers: int | None = None, scheduler: str | None = None) -> dict:
+    """Diagnose every case blind and summarise per source; time the 45 000-sample budget.
+
+    Parameters
+    ----------
+    quick : bool
+        4 clean records per source instead of 20 (unless ``clean`` is given).
+    draws : int
+        Draws per form, each at three strengths.
+    clean : int, optional
+        Clean records per source.
+    seconds : float
+        Length of each train and held-out record.
+    only : {"in-form", "cross-form"}, optional
+        One source only.
+    with_budget : bool
+        Also time the diagnosis of 45 000 + 45 000 samples against the nominal fit.
+    seed : int
+        Seed of the draws.
+    workers, scheduler : int or str, optional
+        Run the cases on Dask (:func:`hystid.fleet.map_seeds`).
+
+    Returns
+    -------
+    dict
+        ``settings``, ``summary`` per source (and ``budget``) and every case.
+    """
+    n_clean = clean if clean is not None else (4 if quick else 20)
+    n = int(round(seconds * FS))
+    rng = np.random.default_rng(seed)
+    jobs = []
+    if only in (None, "in-form"):
+        jobs += jobs_in_form(draws, n_clean, rng)
+    if only in (None, "cross-form"):
+        jobs += jobs_cross_form(draws, n_clean, rng)
+    jobs = [jobs[j] for j in rng.permutation(len(jobs))]
+    rows = run_jobs(jobs, n, workers, scheduler)
+    summary = {src: summarise([r for r in rows if r["source"] == src])
+               for src in ("in-form", "cross-form") if any(r["source"] == src for r in rows)}
+    if with_budget:
+        summary["budget"] = budget()
+    return {"settings": {"draws": draws, "clean": n_clean, "seconds": seconds, "seed": seed,
+                         "quick": quick, "only": only, "cross_scale": CROSS_SCALE},
+            "summary": summary, "cases": rows}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
                         help="one draw per form, 4 clean records per source")
-    parser.add_argument("--draws", type=int, default=None,
-                        help="draws per form, each at three strengths (default 1 cross-form, "
-                        "1 in-form)")
+    parser.add_argument("--draws", type=int, default=1,
+                        help="draws per form, each at three strengths (default 1)")
     parser.add_argument("--clean", type=int, default=None,
                         help="clean records per source (default 20)")
-    parser.add_argument("--seconds", type=float, default=None,
+    parser.add_argument("--seconds", type=float, default=0.5,
                         help="length of each train and held-out record (default 0.5 s)")
     parser.add_argument("--only", choices=("in-form", "cross-form"), default=None)
     parser.add_argument("--no-budget", action="store_true", help="skip the 45 000-sample budget")
@@ -324,34 +375,13 @@ def main() -> None:
     parser.add_argument("--scheduler", default=None,
                         help="run the cases on a running Dask scheduler (tcp://HOST:PORT)")
     args = parser.parse_args()
-    draws = args.draws or 1
-    n_clean = args.clean if args.clean is not None else (4 if args.quick else 20)
-    seconds = args.seconds or 0.5
-    n = int(round(seconds * FS))
-    rng = np.random.default_rng(args.seed)
-    jobs = []
-    if args.only in (None, "in-form"):
-        jobs += jobs_in_form(draws, n_clean, rng)
-    if args.only in (None, "cross-form"):
-        jobs += jobs_cross_form(draws, n_clean, rng)
-    jobs = [jobs[j] for j in rng.permutation(len(jobs))]
-    rows = run_jobs(jobs, n, args.workers, args.scheduler)
-    summary = {src: summarise([r for r in rows if r["source"] == src])
-               for src in ("in-form", "cross-form") if any(r["source"] == src for r in rows)}
-    for src, s in summary.items():
-        print_report(src, s)
-    if not args.no_budget:
-        b = budget()
-        summary["budget"] = b
-        print(f"\nbudget: {b['samples']} + {b['held_out_samples']} samples diagnosed with all "
-              f"candidates in {b['seconds']:.1f} s, {b['ratio_to_nominal_fit']:.1f}x the "
-              f"nominal identification alone ({b['nominal_fit_seconds']:.2f} s; goal <= 3x); "
-              f"accepted {', '.join(b['accepted']) or 'none'}")
-    path = write_json("withheld_effects", {
-        "settings": {"draws": draws, "clean": n_clean, "seconds": seconds, "seed": args.seed,
-                     "quick": args.quick, "only": args.only, "cross_scale": CROSS_SCALE},
-        "summary": summary, "cases": rows})
-    print(f"\nwrote {path}")
+    payload = measure(args.quick, args.draws, args.clean, args.seconds, args.only,
+                      not args.no_budget, args.seed, args.workers, args.scheduler)
+    for src, s in payload["summary"].items():
+        if src != "budget":
+            print_report(src, s)
+    print("\n" + render(payload))
+    print(f"\nwrote {write_json('withheld_effects', payload)}")
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -432,6 +462,89 @@ def print_report(source: str, s: dict) -> None:
         print(f"{source}: an output offset ({', '.join(ABSORBED)}) is the nominal model's "
               f"sensor offset: nothing accepted in "
               f"{_pct(s['absorbed_offset_nothing_accepted'])} of {s['absorbed_offset_cases']}")
+
+
+def _count(rate: float | None, cases: int) -> str:
+    return "-" if rate is None else f"{100 * rate:.0f} % ({round(rate * cases)} of {cases})"
+
+
+def render(payload: dict) -> str:
+    """The accuracy per source, the misses and the offset cases, as Markdown.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+    """
+    sources = [s for s in ("in-form", "cross-form") if s in payload["summary"]]
+    S = {s: payload["summary"][s] for s in sources}
+    goals = {"top-1 accuracy": ">= 90 % cross-form", "a wrong family accepted": "<= 5 %",
+             "false acceptance on clean records": "<= 5 %"}
+    rows = [["top-1 accuracy", *(_count(S[s]["top1_accuracy"], S[s]["effect_cases"])
+                                 for s in sources)],
+            ["first accepted family = withheld family",
+             *(_pct(S[s]["accepted_correct"]) for s in sources)],
+            ["a wrong family accepted", *(_count(S[s]["wrong_acceptance"], S[s]["effect_cases"])
+                                          for s in sources)],
+            ["false acceptance on clean records",
+             *(_count(S[s]["false_acceptance_clean"], S[s]["clean_cases"]) for s in sources)],
+            ["refits that failed", *(_pct(S[s]["refits_failed"]) for s in sources)],
+            ["time per diagnosis (median)", *(f"{S[s]['median_seconds']:.1f} s"
+                                              for s in sources)]]
+    rows = [[*r, goals.get(r[0], "")] for r in rows]
+    text = [table(rows, ["", *sources, "goal"])]
+    for s in sources:
+        by = S[s]["by_strength"]
+        strengths = ", ".join(f"{_pct(v['top1'])} ({k})" for k, v in by.items())
+        misses = [r for r in payload["cases"] if r["source"] == s and r["truth"] != "none"
+                  and r["form"] not in ABSORBED and r["top1"] != r["truth"]]
+        wrong = [r for r in payload["cases"] if r["source"] == s and r["truth"] != "none"
+                 and r["form"] not in ABSORBED
+                 and any(f != r["truth"] for f in r["accepted_families"])]
+        line = f"\n*{s.capitalize()}*: top-1 by strength {strengths}."
+        if misses:
+            line += " Top-1 misses: " + "; ".join(
+                f"{r['form']} ({r['strength']}) ranked {r['top1_form']}" for r in misses) + "."
+        if wrong:
+            line += " Wrong acceptances: " + "; ".join(
+                f"{r['form']} ({r['strength']}) -> accepted {', '.join(r['accepted'])}"
+                for r in wrong) + "."
+        if S[s]["absorbed_offset_cases"]:
+            line += (f" An output offset ({S[s]['absorbed_offset_cases']} cases, left out of "
+                     f"the rates) is the nominal model's sensor offset: nothing accepted in "
+                     f"{_pct(S[s]['absorbed_offset_nothing_accepted'])}.")
+        text.append(line)
+    st = payload["settings"]
+    text.append(f"\n({st['draws']} draw(s) per form at three strengths, {st['clean']} clean "
+                f"records per source, {st['seconds']:g} s + {st['seconds']:g} s records, seed "
+                f"{st['seed']}; every case in `benchmarks/results/withheld_effects.json`.)")
+    return "\n".join(text)
+
+
+def render_budget(payload: dict) -> str:
+    """The diagnosis' cost against the nominal identification, as a sentence.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+    """
+    b = payload["summary"].get("budget")
+    if b is None:
+        return "(not measured: run without `--no-budget`)"
+    return (f"{b['samples']} + {b['held_out_samples']} samples with all candidates: "
+            f"{b['seconds']:.1f} s, **{b['ratio_to_nominal_fit']:.1f}x** the nominal "
+            f"identification alone (`identify(train, \"batch\")`, "
+            f"{b['nominal_fit_seconds']:.2f} s, same process; goal <= 3x); accepted: "
+            f"{', '.join(b['accepted']) or 'none'}.")
 
 
 if __name__ == "__main__":

@@ -384,7 +384,10 @@ def main() -> None:
             entry = measure(BLOCKS[name])
             print(f"  {entry.get('seconds', 0)} s -> {BLOCKS[name].path}", flush=True)
     text = README.read_text()
-    new = rewrite(text, names)
+    try:
+        new = rewrite(text, names)
+    except ValueError as err:
+        sys.exit(str(err))
     if new != text:
         tmp = README.with_suffix(".md.tmp")
         tmp.write_text(new)
