@@ -339,7 +339,11 @@ def check(path: Path = README) -> list[str]:
     problems += [f"{path}: block {n!r} missing" for n in BLOCKS if n not in spans]
     for name in (n for n in BLOCKS if n in spans):
         start, end = spans[name]
-        want = "\n" + render(BLOCKS[name]) + "\n"
+        try:
+            want = "\n" + render(BLOCKS[name]) + "\n"
+        except ValueError as err:  # never measured
+            problems.append(str(err))
+            continue
         if text[start:end] != want:
             diff = "\n".join(difflib.unified_diff(text[start:end].splitlines(),
                                                   want.splitlines(), "README", "rendered",
