@@ -80,7 +80,7 @@ POLISHED = 2
 #: the same in any units). Operators that the input moves only once (on the ramp out of rest)
 #: have nearly collinear outputs; without it their weights drift along a flat valley of the
 #: cost to large alternating values, and where the solver stops there is arbitrary.
-RIDGE = 1e-6
+RIDGE = 1e-8
 
 
 # =========================================================================== compiled kernels
