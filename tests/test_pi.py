@@ -278,6 +278,25 @@ def test_recursive_recovers_known_pi_sandwich():
     assert np.sqrt(np.mean(err**2)) < np.sqrt(np.mean(warm_err**2))
 
 
+@pytest.mark.parametrize("form", ["output-error", "key-term"])
+def test_update_one_sample_is_the_chunked_path_exactly(form):
+    """update() after the warm-up takes its own compiled one-sample path: the same numbers,
+    bit for bit, a skipped (NaN) output included."""
+    model, u = known_sandwich(u=paper_excitation(1500, FS, seed=12))
+    rec = noisy_record(model, u, 1e-3, seed=13)
+    y = rec.y.copy()
+    y[1000] = np.nan
+    gappy = SimpleNamespace(u=rec.u, y=y, fs=FS, name="gappy")
+    warmup = 600 if form == "output-error" else 0
+    with pytest.warns(RuntimeWarning, match="1 non-finite"):
+        res = PIRecursiveIdentifier(thresholds=model.thresholds, form=form, warmup=warmup).fit(
+            gappy)
+    online = PIRecursiveIdentifier(thresholds=model.thresholds, form=form, warmup=warmup)
+    steps = np.array([online.update(float(a), float(b)) for a, b in zip(rec.u, y, strict=True)])
+    assert np.array_equal(steps, res.history)
+    assert online.e == res.info["prediction_errors"][-1] and online.n_skipped == 1
+
+
 def test_update_one_sample_matches_fit():
     model, u = known_sandwich(u=paper_excitation(1500, FS, seed=12))
     rec = noisy_record(model, u, 1e-3, seed=13)

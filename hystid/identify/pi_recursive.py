@@ -394,6 +394,29 @@ def _rho(n, gamma):
 
 
 @njit(cache=True)
+def _recursion_step(mode, theta, U_, D, lam, gamma, n, layout, r, U, W1, W2, Y, S1, SW2, SY, PH,
+                    SPH, p, SP, k, y_k, K, c, c1, psi_c, psi1, psi, f):
+    # one sample at index k, the n-th of the recursion; returns (e, yhat), updates lam[0]
+    rho_prev = _rho(n - 1, gamma)
+    rho = _rho(n, gamma)
+    if mode == 0:
+        e, lam[0], yhat = _keyterm_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U, W1,
+                                        Y, S1, PH, SPH, p, SP, k, y_k, c1, psi1, psi, K, f)
+    else:
+        e, lam[0], yhat = _minimal_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U, W1,
+                                        W2, Y, S1, SW2, SY, p, SP, k, y_k, False, c, psi_c, psi,
+                                        K, f)
+    return e, yhat
+
+
+@njit(cache=True)
+def _scratch(npar, nc, n1):
+    # work arrays of one recursion step: c, c1, psi_c, psi1, psi, f
+    return (np.empty(max(nc, n1)), np.empty(n1), np.empty(nc), np.empty(n1), np.empty(npar),
+            np.empty(npar))
+
+
+@njit(cache=True)
 def recursion_run(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
                   p, SP, start, ymeas, history, errors, yhats, K):
     """Run the recursion from index ``start`` to the end of the extended arrays.
@@ -401,30 +424,47 @@ def recursion_run(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S
     ``mode`` 0: key-term regressor (measured past outputs); 1: output-error gradient. Row
     ``k - start`` of ``history`` receives theta(k); ``lam[0]`` (Lambda^-1) is updated in place.
     """
-    npar = theta.shape[0]
-    nc = SW2.shape[1]
-    n1 = layout[0] + layout[1]
-    c = np.empty(max(nc, n1))
-    c1 = np.empty(n1)
-    psi_c = np.empty(nc)
-    psi1 = np.empty(n1)
-    psi = np.empty(npar)
-    f = np.empty(npar)
+    c, c1, psi_c, psi1, psi, f = _scratch(theta.shape[0], SW2.shape[1], layout[0] + layout[1])
     for k in range(start, U.shape[0]):
         n = k0 + k - start + 1  # samples since the start of the recursion (1, 2, ...)
-        rho_prev = _rho(n - 1, gamma)
-        rho = _rho(n, gamma)
-        y_k = ymeas[k - start]
-        if mode == 0:
-            e, lam[0], yhat = _keyterm_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U, W1,
-                                            Y, S1, PH, SPH, p, SP, k, y_k, c1, psi1, psi, K, f)
-        else:
-            e, lam[0], yhat = _minimal_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U,
-                                            W1, W2, Y, S1, SW2, SY, p, SP, k, y_k, False, c,
-                                            psi_c, psi, K, f)
+        e, yhat = _recursion_step(mode, theta, U_, D, lam, gamma, n, layout, r, U, W1, W2, Y,
+                                  S1, SW2, SY, PH, SPH, p, SP, k, ymeas[k - start], K, c, c1,
+                                  psi_c, psi1, psi, f)
         history[k - start, :] = theta
         errors[k - start] = e
         yhats[k - start] = yhat
+
+
+@njit(cache=True)
+def _shift(a):
+    # drop the oldest row of a signal window (a one-row placeholder is left as it is)
+    for i in range(a.shape[0] - 1):
+        a[i] = a[i + 1]
+
+
+@njit(cache=True)
+def recursion_one(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, PH,
+                  SPH, p, SP, u_k, y_k, K, out):
+    """One sample on the windows themselves: the same step as :func:`recursion_run` on a chunk
+    of one sample (the windows shifted by one, ``u_k`` at the end), without the copies.
+
+    ``out`` receives ``(e, yhat)``; ``k0`` is the number of samples before this one.
+    """
+    _shift(U)
+    _shift(W1)
+    _shift(W2)
+    _shift(Y)
+    _shift(S1)
+    _shift(SW2)
+    _shift(SY)
+    _shift(PH)
+    _shift(SPH)
+    last = U.shape[0] - 1
+    U[last] = u_k
+    c, c1, psi_c, psi1, psi, f = _scratch(theta.shape[0], SW2.shape[1], layout[0] + layout[1])
+    out[0], out[1] = _recursion_step(mode, theta, U_, D, lam, gamma, k0 + 1, layout, r, U, W1,
+                                     W2, Y, S1, SW2, SY, PH, SPH, p, SP, last, y_k, K, c, c1,
+                                     psi_c, psi1, psi, f)
 
 
 # =========================================================================== helpers
@@ -758,6 +798,8 @@ class PIRecursiveIdentifier(Estimator):
         self._buffers = self._arrays(self._H + self.chunk)
         self._p = np.zeros(s.n_operators)
         self._SP = np.zeros((s.n_operators, _n_full(s)))
+        self._mode = FORMS.index(self.form)
+        self._last = np.zeros(2)  # e, yhat of the last one-sample update
         self._buffer: list[tuple[np.ndarray, np.ndarray]] = []
         self._umin, self._umax = np.inf, -np.inf
         self._ready = True
@@ -911,12 +953,29 @@ class PIRecursiveIdentifier(Estimator):
         ndarray
             A copy of theta(k), in the order of :attr:`names`.
         """
+        if (self._ready and not self.warming_up and isinstance(u_k, float)
+                and isinstance(y_k, float) and u_k - u_k == 0.0):  # the real-time path
+            return self._update_one(u_k, y_k)
         u, y = sample_arrays(u_k, y_k)
         self._require_start()
         history = np.empty((1, len(self.names)))
         errors, yhats = np.zeros(1), np.zeros(1)
         self._process(u, y, history, errors, yhats)
         return history[0].copy()
+
+    def _update_one(self, u_k: float, y_k: float) -> np.ndarray:
+        """One sample after the warm-up: one compiled call on the signal windows, in place."""
+        U, W1, W2, Y, S1, SW2, SY, PH, SPH = self._windows
+        recursion_one(self._mode, self._theta, self._U, self._D, self.lam, self.gamma, self.k,
+                      self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
+                      self._p, self._SP, u_k, y_k, self.K, self._last)
+        self.k += 1
+        if y_k - y_k != 0.0:
+            self.n_skipped += 1
+        self.e, self.yhat = float(self._last[0]), float(self._last[1])
+        if self._mode == 1:
+            return self._theta.copy()
+        return self._model_theta(self._theta)
 
     def _process(self, u, y, history, errors, yhats, progress=None) -> int:
         """Warm-up and recursion over a block of samples; returns the warm-up samples taken."""
@@ -950,9 +1009,8 @@ class PIRecursiveIdentifier(Estimator):
         return w
 
     def _run(self, arrays, start, k0, y, history, errors, yhats) -> None:
-        mode = FORMS.index(self.form)
         U, W1, W2, Y, S1, SW2, SY, PH, SPH = arrays
-        recursion_run(mode, self._theta, self._U, self._D, self.lam, self.gamma,
+        recursion_run(self._mode, self._theta, self._U, self._D, self.lam, self.gamma,
                       k0, self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
                       self._p, self._SP, start, y, history, errors, yhats, self.K)
 
