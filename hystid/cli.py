@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 import warnings
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -15,6 +17,9 @@ from . import __version__
 from .options import MAX_SECONDS, integer, number
 
 EXIT_BAD_INPUT = 2
+#: numpy's floating-point RuntimeWarnings raised while a fit tries a diverging candidate: not
+#: shown by ``identify`` (a result the fit could not trust carries its own warnings).
+NUMERIC_NOISE = r"(overflow|invalid value|divide by zero|underflow) encountered"
 #: Files ``identify --out`` and ``demo --out`` write into their folder.
 REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png")
 _RECORD_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
@@ -26,6 +31,25 @@ DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensiti
 
 class CommandError(Exception):
     """A user-facing error: printed without a traceback, exit status 2."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (no usage block), status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``PROG: error: MESSAGE`` and a pointer to ``--help``, exit with status 2.
+
+        Parameters
+        ----------
+        message : str
+            argparse's message; an option given no value because the value starts with ``-``
+            gets the way to write it (``--crop=-1:2``).
+        """
+        missing = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
+        if missing:
+            option = missing.group(1)
+            message += f" (a value starting with '-' is written {option}=VALUE)"
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 class Progress:
@@ -65,17 +89,19 @@ class Progress:
 
 
 # --------------------------------------------------------------------------- helpers
-def _load(path: str, fs: float | None, columns: dict | None = None):
+def _load(path: str, fs: float | None, columns: dict | None = None, option: str = "",
+          units: dict | None = None):
+    """Load a record; a problem with it is a :class:`CommandError` naming ``option`` and file."""
     from .records import RecordError, load_record
 
     try:
-        return load_record(path, fs=fs, columns=columns)
+        return load_record(path, fs=fs, columns=columns, units=units)
     except RecordError as err:
-        raise CommandError(str(err)) from err
+        raise CommandError(f"{option} {err}" if option else str(err)) from err
 
 
 def _check_file(path: str | None, option: str, args: argparse.Namespace,
-                inputs: tuple = ()) -> Path | None:
+                inputs: tuple = (), create_folder: bool = False) -> Path | None:
     """Check an output file before any work (see :func:`hystid.safeio.check_output`)."""
     from .safeio import OutputError, check_output
 
@@ -83,9 +109,27 @@ def _check_file(path: str | None, option: str, args: argparse.Namespace,
         return None
     try:
         return check_output(path, option=option, inputs=inputs,
-                            force=getattr(args, "force", False))
+                            force=getattr(args, "force", False), create_folder=create_folder)
     except OutputError as err:
         raise CommandError(str(err)) from err
+
+
+def _check_identify_outputs(args: argparse.Namespace, inputs: tuple) -> None:
+    """``--history`` and ``--out`` of ``identify``: each writable, and apart from each other.
+
+    ``--history`` may lie inside the ``--out`` folder (which is created), but never be the
+    folder or one of the files written into it, not even with ``--force``.
+    """
+    from .safeio import OutputError, check_apart, inside
+
+    if args.history and args.out:
+        try:
+            check_apart(args.history, args.out, REPORT_FILES, option="--history")
+        except OutputError as err:
+            raise CommandError(str(err)) from err
+    _check_dir(args.out, args, inputs)
+    in_out = bool(args.history and args.out and inside(args.history, args.out))
+    _check_file(args.history, "--history", args, inputs, create_folder=in_out)
 
 
 def _check_dir(path: str | None, args: argparse.Namespace, inputs: tuple = (),
@@ -111,12 +155,32 @@ def _columns_arg(text: str) -> dict:
         raise argparse.ArgumentTypeError(str(err)) from err
 
 
+def _units_arg(text: str) -> dict:
+    from .records import parse_units
+
+    try:
+        return parse_units(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from err
+
+
+UNITS_HELP = ("units of the input and output, e.g. u=N,y=m (default: those stored in the "
+              "file, else V and um; they label the numbers, the fit does not depend on them)")
+
+
 def _positive(kind):
     """argparse ``type=`` for a positive finite ``kind`` (float or int)."""
     return number(0.0, strict_minimum=True) if kind is float else integer(1)
 
 
 _non_negative_float = number(0.0)
+
+
+def _path(text: str) -> str:
+    """argparse ``type=`` for a file or folder name: not empty, not blank."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a file or folder name, got {text!r}")
+    return text
 
 
 def _table(rows: list[list[str]], header: list[str]) -> str:
@@ -157,23 +221,66 @@ def _holdout_fraction(text: str) -> float:
     return value
 
 
-def _identify_record(rec, args, progress: Progress):
+#: Methods of each hysteresis block (``--model``) that keep a parameter history.
+_HISTORY_METHODS = {"duhem": ("online", "eria", "ekf"), "pi": ("online", "eria")}
+
+
+def _method_arg(args: argparse.Namespace) -> str:
+    """The ``--method`` of ``identify`` checked against ``--model`` and ``--history``."""
+    model_kind = getattr(args, "model", "duhem")
+    method = args.method or ("batch" if model_kind == "duhem" else "online")
+    if model_kind == "pi" and method == "ekf":
+        raise CommandError("--method ekf: the PI sandwich is identified by 'online' (its "
+                           "recursive identifier) or 'batch' (expected one of these)")
+    if getattr(args, "history", None) and method not in _HISTORY_METHODS[model_kind]:
+        raise CommandError(f"--history: method {method!r} keeps no parameter history "
+                           f"(expected --method {_one_of(_HISTORY_METHODS[model_kind])})")
+    batch_only = (("--skip", getattr(args, "skip", None)),
+                  ("--offset", getattr(args, "offset", None)))
+    for option, value in batch_only:
+        if value is not None and (model_kind, method) != ("duhem", "batch"):
+            raise CommandError(f"{option} applies to the Duhem sandwich's batch fit only (got "
+                               f"--model {model_kind} --method {method}; expected --model duhem "
+                               f"--method batch, or no {option})")
+    if model_kind == "pi" and getattr(args, "structure", None) is not None:
+        raise CommandError("--structure applies to the Duhem sandwich only (got --model pi)")
+    return method
+
+
+def _check_skip(args: argparse.Namespace, train, structure) -> None:
+    """``--skip`` must leave the batch fit enough samples of the record it fits."""
+    from .identify import min_samples
+
+    if getattr(args, "skip", None) is None:
+        return
+    left = train.n - int(round(args.skip * train.fs))
+    need = min_samples("batch", None if structure == "auto" else structure)
+    if left < need:
+        raise CommandError(f"--skip {args.skip:g}: leaves {max(left, 0)} of the {train.n} "
+                           f"samples fitted ({train.n / train.fs:g} s of {train.name!r} "
+                           f"without its held-out end; expected at least {need} samples left)")
+
+
+def _one_of(names: tuple[str, ...]) -> str:
+    """``"a, b or c"``."""
+    return " or ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
+
+
+def _identify_record(rec, args, progress: Progress, structure=None):
     """Run the chosen model/method on a record; returns the IdentificationResult."""
     from .identify import identify
 
-    model_kind = getattr(args, "model", "duhem")
-    if model_kind == "pi":
+    method = _method_arg(args)
+    if getattr(args, "model", "duhem") == "pi":
         from .identify.pi_recursive import identify_pi
 
-        method = "recursive" if args.method in (None, "online", "eria") else args.method
-        return identify_pi(rec, method=method)
-    method = args.method or "batch"
+        return identify_pi(rec, method="batch" if method == "batch" else "recursive")
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
-        settings["offset"] = getattr(args, "offset", "estimate") == "estimate"
+        settings["offset"] = getattr(args, "offset", None) != "none"
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
-    return identify(rec, method=method, structure=_structure_arg(args), **settings)
+    return identify(rec, method=method, structure=structure, **settings)
 
 
 def _structure_arg(args):
@@ -261,14 +368,16 @@ def _jsonable(value) -> bool:
 
 
 def _write_history(path: str, result) -> None:
+    """Write the parameter history as CSV (atomically; its folder is created when missing)."""
     from .safeio import atomic_open
 
-    if result.history is None:
+    if result.history is None:  # pragma: no cover - refused before the work by _method_arg
         raise CommandError(f"--history: method {result.method!r} keeps no parameter history")
     names = list(result.names)
     index = getattr(result, "history_index", None)  # a decimated history names its samples
     k = np.arange(1, len(result.history) + 1) if index is None else np.asarray(index) + 1
     data = np.column_stack([k, result.history])
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(path, "w", newline="\n") as out:
         np.savetxt(out, data, delimiter=",", header=",".join(["k", *names]), comments="",
                    fmt=["%d"] + ["%.10g"] * len(names))
@@ -338,7 +447,7 @@ def _model_record(args: argparse.Namespace, progress: Progress):
         model = load_model(args.model)
     except ModelFileError as err:
         raise CommandError(f"--model {err}") from err
-    rec = _load(args.input, args.fs, args.columns)
+    rec = _load(args.input, args.fs, args.columns, units=args.units)
     if not np.isclose(rec.fs, model.fs, rtol=1e-9):
         raise CommandError(f"--input {args.input}: sampled at {rec.fs:g} Hz but the model at "
                            f"{model.fs:g} Hz (expected the model's rate)")
@@ -378,22 +487,28 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from .safeio import dumps_strict
 
     progress = Progress(args.quiet or args.json)
-    inputs = (args.record, args.val)
-    _check_file(args.history, "--history", args, inputs)
-    _check_dir(args.out, args, inputs)
+    inputs = (args.record, args.val, *(args.repeat or []))
+    _check_identify_outputs(args, inputs)
+    _method_arg(args)
     span = _crop_arg(args)
-    rec = _cropped(_load(args.record, args.fs, args.columns), span)
-    val = _cropped(_load(args.val, args.fs, args.columns), span) if args.val else None
-    repeats = [_cropped(_load(p, args.fs, args.columns), span) for p in args.repeat or []]
+    structure = _structure_arg(args)
+    rec = _cropped(_load(args.record, args.fs, args.columns, units=args.units), span)
+    val = (_cropped(_load(args.val, args.fs, args.columns, "--val", args.units), span)
+           if args.val else None)
+    repeats = [_cropped(_load(p, args.fs, args.columns, "--repeat", args.units), span)
+               for p in args.repeat or []]
     for other, label in [(val, f"--val {args.val}")] + [
             (r, f"--repeat {p}") for r, p in zip(repeats, args.repeat or [], strict=True)]:
         if other is not None and not np.isclose(other.fs, rec.fs, rtol=1e-9):
             raise CommandError(f"{label}: fs {other.fs:g} Hz differs from {rec.fs:g} Hz "
                                f"of {args.record}")
     train, target, scored_from = _split_for_validation(rec, val, args)
+    _check_skip(args, train, structure)
     progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
     try:
-        result = _identify_record(train, args, progress)
+        with warnings.catch_warnings():  # the fit's own checks report what these would mean
+            warnings.filterwarnings("ignore", NUMERIC_NOISE, RuntimeWarning)
+            result = _identify_record(train, args, progress, structure)
         floor_set = [target, *repeats] if repeats else None
         report, yhat, target = _report(result, train, target if val is not None or scored_from
                                        is not None else None, args, scored_from, floor_set)
@@ -402,14 +517,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for w in report["warnings"]:
         if not args.json:
             print(f"hystid identify: warning: {w}", file=sys.stderr)
-    if args.history:
-        _write_history(args.history, result)
     if args.out:
         from .modelfile import make_provenance
 
         provenance = make_provenance(result.method, args.record, result.settings)
         _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance,
                        scored_from=scored_from or 0)
+    if args.history:
+        _write_history(args.history, result)
     if args.json:
         print(dumps_strict(report))
     else:
@@ -436,14 +551,16 @@ def cmd_identify(args: argparse.Namespace) -> int:
 def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
                    provenance: dict | None = None, seed: int | None = None,
                    scored_from: int = 0) -> None:
-    """Write report.json, model.json and the figures into ``out`` (each file atomically).
+    """Write report.json, model.json and the figures into ``out``, all or none of them.
 
-    The validation figure shows the samples the validation figures were computed on: from
+    The files are written into a staging folder and moved in place once all are written
+    (:func:`hystid.safeio.atomic_folder`): a failure midway leaves ``out`` as it was. The
+    validation figure shows the samples the validation figures were computed on: from
     ``scored_from`` (a held-out end of the record) less the transient.
     """
     from .metrics import plot_convergence, plot_validation
     from .modelfile import save_model
-    from .safeio import atomic_path, write_json
+    from .safeio import atomic_folder, write_json
 
     model = result.model
     units = {"u": target.units.get("u", ""), "y": target.units.get("y", "")}
@@ -454,17 +571,15 @@ def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
         "provenance": {**(provenance or {}), "fs": model.fs,
                        "structure": dict(vars(model.structure)), "seed": seed},
     }
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", report)
-    save_model(model, out / "model.json", provenance=provenance, force=True)
-    with atomic_path(out / "validation.png") as tmp:
-        plot_validation(target.t, target.y, yhat, tmp, u=target.u,
+    with atomic_folder(out) as stage:
+        write_json(stage / "report.json", report)
+        save_model(model, stage / "model.json", provenance=provenance)
+        plot_validation(target.t, target.y, yhat, stage / "validation.png", u=target.u,
                         title=f"{report['model']} sandwich, {report['method']}: validation on "
                         f"{target.name}", unit=units["y"], u_unit=units["u"],
                         skip=scored_from + (report["validation"] or {}).get("skip", 0))
-    if result.history is not None:
-        with atomic_path(out / "convergence.png") as tmp:
-            plot_convergence(result.history, result.names, truth, tmp,
+        if result.history is not None:
+            plot_convergence(result.history, result.names, truth, stage / "convergence.png",
                              samples=result.history_index,
                              title=f"{report['model']} sandwich, {report['method']}: "
                              "parameter convergence")
@@ -594,7 +709,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     argparse.ArgumentParser
         The parser; each command sets ``func``.
     """
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="hystid",
         description="Identify piezo-driven positioning stages (L1-Duhem-L2 sandwich).",
     )
@@ -605,7 +720,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                        description="Make a record from the built-in reference stage (the paper's "
                        "eqs. 26-28 at 30 kHz), identify it, validate on a second record and write "
                        "a short report (JSON + PNG).")
-    p.add_argument("--out", default="hystid-demo", help="report folder (default: hystid-demo)")
+    p.add_argument("--out", type=_path, default="hystid-demo",
+                   help="report folder (default: hystid-demo)")
     p.add_argument("--force", action="store_true", help="replace files already in --out")
     p.add_argument("--seconds", type=_seconds, default=1.0,
                    help=f"length of each record in seconds (default 1.0, at most {MAX_SECONDS:g})")
@@ -625,15 +741,16 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--noise", type=_non_negative_float, default=None,
                    help="sensor noise standard deviation in the output's units (default 0.001 um "
                    "for the built-in stage, none for --model)")
-    p.add_argument("--model", default=None, metavar="MODEL.json",
+    p.add_argument("--model", type=_path, default=None, metavar="MODEL.json",
                    help="a saved model (hystid identify --out writes DIR/model.json)")
-    p.add_argument("--input", default=None, metavar="REC",
+    p.add_argument("--input", type=_path, default=None, metavar="REC",
                    help="record whose input u drives --model")
     p.add_argument("--fs", type=_positive(float), default=None,
                    help="sampling rate of --input in Hz (if it has no t column or fs)")
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in --input (names or 0-based positions)")
-    p.add_argument("--out", required=True, help="output file (.csv, .npz, .mat, .h5)")
+    p.add_argument("--units", type=_units_arg, metavar="u=V,y=um", help=UNITS_HELP)
+    p.add_argument("--out", type=_path, required=True, help="output file (.csv, .npz, .mat, .h5)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_simulate)
@@ -641,11 +758,13 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p = sub.add_parser("identify", help="identify a record",
                        description="Identify a sandwich model from a record (CSV with a header "
                        "naming u, y and optionally t; .npz, .mat, .h5) and validate it.")
-    p.add_argument("record", help="record file")
+    p.add_argument("record", type=_path, help="record file")
     p.add_argument("--fs", type=_positive(float), help="sampling rate in Hz (if no t column)")
-    p.add_argument("--val", help="validation record (default: validate on the record itself)")
+    p.add_argument("--val", type=_path,
+                   help="validation record (default: validate on the record itself)")
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
+    p.add_argument("--units", type=_units_arg, metavar="u=V,y=um", help=UNITS_HELP)
     p.add_argument("--model", choices=("duhem", "pi"), default="duhem", help="hysteresis block")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch for duhem, recursive for pi)")
@@ -654,20 +773,23 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                    "experimental one by default), or 'auto' to choose on held-out error")
     p.add_argument("--crop", default=None, metavar="START:STOP",
                    help="keep only this time span of every record, in seconds")
-    p.add_argument("--offset", choices=("estimate", "none"), default="estimate",
-                   help="estimate the sensor offset (default) or take the output as zero at rest")
+    p.add_argument("--offset", choices=("estimate", "none"), default=None,
+                   help="batch fit: estimate the sensor offset (default) or take the output as "
+                   "zero at rest")
     p.add_argument("--skip", type=_non_negative_float, default=None, metavar="S",
                    help="seconds at the start simulated but left out of the fit (default: none "
                    "for a record that starts at rest, else until the input has swept its range)")
     p.add_argument("--holdout", type=_holdout_fraction, default=0.4, metavar="F",
                    help="without --val, the share of the record held out at its end for "
                    "validation (default 0.4; 0 validates on the record itself)")
-    p.add_argument("--repeat", nargs="+", default=None, metavar="REC",
+    p.add_argument("--repeat", type=_path, nargs="+", default=None, metavar="REC",
                    help="records of the same input as the validation record: their "
                    "repeat-to-repeat RMS is the floor no deterministic model can beat")
-    p.add_argument("--history", help="write the parameter history (CSV: k, one column a parameter)")
+    p.add_argument("--history", type=_path,
+                   help="write the parameter history of an on-line method (CSV: k, one column "
+                   "a parameter); may lie in --out but never be one of its files")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--out", help="folder for report.json, model.json and figures")
+    p.add_argument("--out", type=_path, help="folder for report.json, model.json and figures")
     p.add_argument("--force", action="store_true",
                    help="replace --history and files already in --out")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

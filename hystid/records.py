@@ -473,6 +473,31 @@ def parse_columns(text: str) -> dict[str, str | int]:
     return out
 
 
+def parse_units(text: str) -> dict[str, str]:
+    """Parse the units of a record written ``u=N,y=m`` (the ``units`` of :func:`load_record`).
+
+    Raises ``ValueError`` on a malformed text.
+
+    Parameters
+    ----------
+    text : str
+        The map, e.g. ``u=N,y=m`` or ``y=nm``.
+
+    Returns
+    -------
+    dict
+        ``u`` and/or ``y`` to a unit name.
+    """
+    out: dict[str, str] = {}
+    for part in text.split(","):
+        role, sep, unit = (s.strip() for s in part.partition("="))
+        if not sep or role not in ("u", "y") or not unit or role in out:
+            raise ValueError(f"expected u=UNIT,y=UNIT (each at most once) like u=V,y=um, got "
+                             f"{text!r}")
+        out[role] = unit
+    return out
+
+
 def _distinct_columns(columns: Mapping[str, str | int], shown: str) -> None:
     """Raise ``ValueError`` when two roles read the same column (roles left out keep their
     own name, e.g. ``u=y`` alone reads u and y from column 'y')."""
@@ -547,6 +572,8 @@ def load_record(
     text = os.fspath(path)
     file, group = _split_h5_group(text)
     suffix = Path(file).suffix.lower()
+    if Path(file).is_dir():
+        raise RecordError("file is a directory (expected a record file)", file=file)
     if suffix not in _SUFFIXES:
         raise RecordError(_unknown_extension(suffix), file=text)
     if not Path(file).is_file():

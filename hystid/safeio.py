@@ -5,11 +5,16 @@ Three rules, applied by every writer in hystid:
 1. **Check before work.** :func:`check_output` refuses an output that is one of the inputs, an
    existing file (unless ``force``), a symbolic link, or a place that cannot be written, before
    any computation starts; :func:`check_output_dir` does the same for a folder and the files
-   that will be written into it.
+   that will be written into it, and :func:`check_apart` refuses a file output that is a
+   folder output or one of the files written into it (two outputs never overwrite each other,
+   not even with ``force``).
 2. **Write atomically.** :func:`atomic_path` and :func:`atomic_open` write to a temporary file in
    the destination's folder and rename it over the destination (``os.replace``) only once the
    writing succeeded; on any failure (a full disk, an exception in the writer) the temporary
-   file is removed and the previous file is left as it was.
+   file is removed and the previous file is left as it was. :func:`atomic_folder` does the
+   same for a set of files written into one folder: they are written into a hidden staging
+   folder and moved in place only once every one of them is written, so a failure leaves the
+   folder's previous files all as they were (and a new folder does not appear at all).
 3. **Strict JSON.** :func:`dumps_strict` never writes ``NaN`` or ``Infinity`` (which are not
    JSON): non-finite floats become ``null`` and the replacements are listed in a ``"notes"``
    entry of the top-level object.
@@ -21,6 +26,7 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
@@ -30,11 +36,14 @@ import numpy as np
 
 __all__ = [
     "OutputError",
+    "atomic_folder",
     "atomic_open",
     "atomic_path",
+    "check_apart",
     "check_output",
     "check_output_dir",
     "dumps_strict",
+    "inside",
     "same_file",
     "strict_json",
     "write_json",
@@ -83,6 +92,7 @@ def check_output(
     option: str,
     inputs: Iterable[PathLike] = (),
     force: bool = False,
+    create_folder: bool = False,
 ) -> Path:
     """Check that ``path`` may be written, before any work is done.
 
@@ -96,6 +106,9 @@ def check_output(
         Files the command reads; none of them may be the output, even with ``force``.
     force : bool
         Allow replacing an existing regular file.
+    create_folder : bool
+        The file's folder may not exist yet (the writer creates it, with its parents); by
+        default it must exist.
 
     Returns
     -------
@@ -127,8 +140,63 @@ def check_output(
                               "Python, to replace it)")
         if not os.access(out, os.W_OK):
             raise OutputError(f"{label}: the file is not writable")
-    _check_writable_folder(out.parent, label)
+    _check_writable_folder(out.parent, label, create=create_folder)
     return out
+
+
+def check_apart(
+    path: PathLike,
+    folder: PathLike,
+    names: Iterable[str],
+    *,
+    option: str,
+    folder_option: str = "--out",
+) -> None:
+    """Refuse a file output that is a folder output, or one of the files written into it.
+
+    Two outputs of one command must never overwrite each other, whatever ``force`` says: the
+    check holds whether or not the files exist yet.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file output (e.g. ``--history``).
+    folder : str or os.PathLike
+        The folder output (e.g. ``--out``).
+    names : iterable of str
+        File names written into ``folder``.
+    option, folder_option : str
+        How the user named the two outputs, used in the messages.
+
+    Raises
+    ------
+    OutputError
+        If ``path`` is ``folder`` or ``folder / name`` for one of ``names``.
+    """
+    label = f"{option} {path}"
+    if same_file(path, folder):
+        raise OutputError(f"{label}: is the {folder_option} folder (expected a file name "
+                          f"outside the folder's own files)")
+    for name in names:
+        if same_file(path, Path(folder) / name):
+            raise OutputError(f"{label}: is {name}, which {folder_option} {folder} writes too "
+                              f"(expected another file name: the two outputs would overwrite "
+                              f"each other, even with --force)")
+
+
+def inside(path: PathLike, folder: PathLike) -> bool:
+    """True when ``path`` lies in ``folder`` or below it (links and ``..`` resolved).
+
+    Parameters
+    ----------
+    path, folder : str or os.PathLike
+        A file and a folder; neither needs to exist.
+
+    Returns
+    -------
+    bool
+    """
+    return Path(folder).resolve() in Path(path).resolve().parents
 
 
 def check_output_dir(
@@ -271,6 +339,50 @@ def atomic_open(path: PathLike, mode: str = "w", **kwargs: Any) -> Iterator[IO[A
         kwargs.setdefault("encoding", "utf-8")
     with atomic_path(path) as tmp, open(tmp, mode, **kwargs) as handle:
         yield handle
+
+
+@contextlib.contextmanager
+def atomic_folder(folder: PathLike) -> Iterator[Path]:
+    """Yield a staging folder; its files replace those of ``folder`` when the block succeeds.
+
+    The writer writes every file into the staging folder (a hidden folder inside ``folder``, or
+    beside it when ``folder`` does not exist yet). Only when the block succeeds are the files
+    synced and moved in place: into an existing ``folder`` one by one (files of ``folder`` not
+    written in the block are left alone), or, for a new ``folder``, by renaming the staging
+    folder itself. When the block raises, the staging folder is removed: the previous files
+    are all left as they were and a new folder does not appear.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The destination folder; its parents are created when missing.
+
+    Yields
+    ------
+    pathlib.Path
+        The staging folder to write the files into (no sub-folders).
+    """
+    dest = Path(folder)
+    exists = dest.is_dir()
+    home = dest if exists else (dest.parent if str(dest.parent) else Path("."))
+    home.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=home))
+    try:
+        yield stage
+        files = sorted(p for p in stage.iterdir())
+        for written in files:
+            _fsync(written)
+            _keep_mode(dest / written.name, written)
+        if exists:
+            for written in files:
+                os.replace(written, dest / written.name)
+            stage.rmdir()
+        else:
+            os.chmod(stage, 0o777 & ~_umask())
+            os.rename(stage, dest)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
 
 
 def _fsync(path: Path) -> None:

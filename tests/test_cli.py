@@ -238,3 +238,29 @@ def test_convergence_of_many_parameters_is_one_panel_of_families():
     assert ax.lines[0].get_label() == "alpha (true 2)"
     np.testing.assert_allclose(ax.lines[0].get_xdata(), np.arange(1, 21, 2))
     np.testing.assert_allclose(ax.lines[0].get_ydata(), 0.5)
+
+
+def test_units_label_the_report_and_bad_units_are_refused(records, tmp_path, capsys):
+    """A record in other units (here the output in m) says so in the report when --units
+    gives them; without --units the default label is V / um."""
+    from hystid.records import load_record
+
+    rec = load_record(records / "train.csv")
+    path = tmp_path / "si.csv"
+    np.savetxt(path, np.column_stack([rec.t, rec.u, rec.y * 1e-6]), delimiter=",",
+               header="t,u,y", comments="")
+    out_dir = tmp_path / "out"
+    code, out, err = run(["identify", str(path), "--units", "u=V,y=m", "--json", "--out",
+                          str(out_dir)], capsys)
+    assert code == 0, err
+    report = json.loads((out_dir / "report.json").read_text())
+    assert report["units"]["y"] == "m" and report["units"]["validation"] == "m"
+    assert json.loads(out)["validation"]["rms"] < 3e-9  # 1 nm noise, in m
+    assert exit_code(["identify", str(path), "--units", "y=m,x=s"]) == 2
+    err = capsys.readouterr().err
+    assert "--units" in err and "u=UNIT,y=UNIT" in err
+
+
+def test_diagnose_takes_units_too(records, capsys):
+    code = exit_code(["diagnose", str(records / "train.csv"), "--units", "u=V,y"])
+    assert code == 2 and "--units" in capsys.readouterr().err

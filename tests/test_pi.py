@@ -278,6 +278,25 @@ def test_recursive_recovers_known_pi_sandwich():
     assert np.sqrt(np.mean(err**2)) < np.sqrt(np.mean(warm_err**2))
 
 
+@pytest.mark.parametrize("form", ["output-error", "key-term"])
+def test_update_one_sample_is_the_chunked_path_exactly(form):
+    """update() after the warm-up takes its own compiled one-sample path: the same numbers,
+    bit for bit, a skipped (NaN) output included."""
+    model, u = known_sandwich(u=paper_excitation(1500, FS, seed=12))
+    rec = noisy_record(model, u, 1e-3, seed=13)
+    y = rec.y.copy()
+    y[1000] = np.nan
+    gappy = SimpleNamespace(u=rec.u, y=y, fs=FS, name="gappy")
+    warmup = 600 if form == "output-error" else 0
+    with pytest.warns(RuntimeWarning, match="1 non-finite"):
+        res = PIRecursiveIdentifier(thresholds=model.thresholds, form=form, warmup=warmup).fit(
+            gappy)
+    online = PIRecursiveIdentifier(thresholds=model.thresholds, form=form, warmup=warmup)
+    steps = np.array([online.update(float(a), float(b)) for a, b in zip(rec.u, y, strict=True)])
+    assert np.array_equal(steps, res.history)
+    assert online.e == res.info["prediction_errors"][-1] and online.n_skipped == 1
+
+
 def test_update_one_sample_matches_fit():
     model, u = known_sandwich(u=paper_excitation(1500, FS, seed=12))
     rec = noisy_record(model, u, 1e-3, seed=13)
@@ -358,20 +377,71 @@ def test_structure_validation():
     assert PIStructure(n_operators=3).history == 2
 
 
+@pytest.fixture(scope="module")
+def offset_records():
+    """hystid.testing's independent stage with a sensor offset: identification and held out."""
+    from hystid.testing import as_measured_suite
+
+    suite = {r.name: r for r in as_measured_suite(0, seconds=0.2)}
+    return suite["offset"], suite["offset/heldout"]
+
+
 @pytest.mark.parametrize("method", ["batch", "recursive"])
-def test_pi_sandwich_beats_baselines_on_an_independent_stage(method):
+def test_pi_sandwich_beats_baselines_on_an_independent_stage(method, offset_records):
     """Data from hystid.testing (its own Duhem-like stage, a sensor offset), held out on a record
     of another seed: the PI sandwich must beat a static line and a linear model."""
     import warnings
 
     from hystid.baselines import compare
-    from hystid.testing import as_measured_suite
 
-    suite = {r.name: r for r in as_measured_suite(0, seconds=0.2)}
-    train, held = suite["offset"], suite["offset/heldout"]
+    train, held = offset_records
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = identify_pi(train, method=method)
         row = compare(res.model, train, [held]).rows[0]
     assert row["beats"], row
     assert row["model"] < 0.75 * min(row["static_line"], row["linear"]), row
+
+
+def test_pi_batch_fit_does_not_depend_on_the_units(offset_records):
+    """The offset record in V / um, kV / nm and V/100 / m: the identified models' held-out
+    outputs, in um, agree to 1e-6; the offset is found and the model beats the baselines."""
+    import warnings
+
+    from hystid.baselines import compare, simulate_from_rest
+    from hystid.testing import UNIT_FACTORS, with_units
+
+    train, held = offset_records
+    train = train[:3000]  # 0.1 s: enough to tell, three fits kept short
+    outputs = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for u_unit, y_unit in (("V", "um"), ("kV", "nm"), ("V/100", "m")):
+            res = identify_pi(with_units(train, u=u_unit, y=y_unit), method="batch")
+            in_um = UNIT_FACTORS[y_unit] / UNIT_FACTORS["um"]
+            u = with_units(held, u=u_unit).u
+            outputs[u_unit] = simulate_from_rest(res.model, u, check=False) * in_um
+            assert res.model.offset * in_um == pytest.approx(-0.7, abs=0.1)  # ~5 % of y span
+            assert res.model.units == {"u": u_unit, "y": y_unit}
+        row = compare(res.model, with_units(train, u="V/100", y="m"),
+                      [with_units(held, u="V/100", y="m")]).rows[0]
+    ref = outputs["V"]
+    for unit, y in outputs.items():
+        assert np.max(np.abs(y - ref)) <= 1e-6 * np.max(np.abs(ref)), unit
+    assert row["model"] < 0.5 * min(row["static_line"], row["linear"]), row
+
+
+def test_pi_warm_up_fit_does_not_depend_on_the_units():
+    """The recursion's warm-up fit runs on normalised signals too: the same model (in um)
+    from a record in V / um and in V/100 / m."""
+    model, u = known_sandwich(u=paper_excitation(1500, FS, seed=19))
+    rec = noisy_record(model, u, 1e-3, seed=20)
+    scaled = Record(u=rec.u * 100.0, y=rec.y * 1e-6, fs=FS, name="V/100, m")
+    warm = []
+    for r, thresholds in ((rec, model.thresholds), (scaled, model.thresholds * 100.0)):
+        idf = PIRecursiveIdentifier(thresholds=thresholds, warmup=1000)
+        idf.fit(r)
+        warm.append(idf.warm_result_.model)
+    u_val = paper_excitation(3000, FS, seed=21)
+    y_v, y_m = warm[0].simulate(u_val).y, warm[1].simulate(u_val * 100.0).y * 1e6
+    assert np.max(np.abs(y_m - y_v)) <= 1e-6 * np.max(np.abs(y_v))

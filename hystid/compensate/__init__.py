@@ -15,12 +15,15 @@ What users identify the model for: track a reference with the stage.
 * :func:`closed_loop` -- feed-forward + feedback + stage as a
   :class:`control.InterconnectedSystem`; :func:`closed_loop_response` simulates it with
   python-control, :func:`simulate_closed_loop` runs the same loop compiled.
+* :func:`perturbed_stage` -- a stage whose physical parameters differ from the model's;
+  :func:`margins_on` the margins a design keeps on it.
 * :func:`tracking_metrics` -- maximum and RMS error, hysteresis loop width left;
   :func:`scan_reference` -- triangle and sine scans from rest.
 
 Modules: :mod:`~hystid.compensate.duhem_inverse` (the maths of the per-sample inverse and the
 planner), :mod:`~hystid.compensate.compensator` (the inverse chain), :mod:`~hystid.compensate.
-feedback`, :mod:`~hystid.compensate.closedloop`, :mod:`~hystid.compensate.tracking`.
+feedback`, :mod:`~hystid.compensate.closedloop`, :mod:`~hystid.compensate.tracking`,
+:mod:`~hystid.compensate.robustness`.
 """
 
 from .closedloop import (
@@ -44,18 +47,21 @@ from .compensator import (
     smoothing_model,
 )
 from .feedback import FeedbackDesign, design_feedback, flexure_mode, linear_plant
+from .robustness import PERTURBABLE, LoopMargins, margins_on, perturbed_stage
 from .tracking import ScanReference, TrackingMetrics, scan_reference, tracking_metrics
 
 __all__ = [
     "DEFAULT_PREVIEW",
     "DUHEM_BOUND",
     "NOT_EXACT",
+    "PERTURBABLE",
     "SATURATED",
     "TURNING",
     "ClosedLoopResponse",
     "FeedbackDesign",
     "Feedforward",
     "HysteresisInverse",
+    "LoopMargins",
     "ScanReference",
     "TrackingMetrics",
     "closed_loop",
@@ -67,6 +73,8 @@ __all__ = [
     "inverse",
     "linear_feedforward",
     "linear_plant",
+    "margins_on",
+    "perturbed_stage",
     "scan_reference",
     "simulate_closed_loop",
     "smoothing_model",

@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 from ..options import OptionError, crop, fraction, integer, number, parse_crop, parse_structure
@@ -50,6 +48,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="sampling rate in Hz (for files without a time vector or fs)")
     parser.add_argument("--columns", default=None, metavar="t=1,u=3,y=2",
                         help="where t, u and y are in the files (names or 0-based positions)")
+    parser.add_argument("--units", default=None, metavar="u=V,y=um",
+                        help="units of the input and output, e.g. u=N,y=m (default: those "
+                        "stored in the files, else V and um)")
     parser.add_argument("--model", default=None, metavar="MODEL.json",
                         help="diagnose this saved model instead of identifying one (the "
                         "model.json written by 'hystid identify --out'; an older report.json "
@@ -115,11 +116,23 @@ def _columns(text: str | None) -> dict | None:
         raise _BadInput(f"--columns: {err}") from err
 
 
+def _units(text: str | None) -> dict | None:
+    from ..records import parse_units
+
+    if text is None:
+        return None
+    try:
+        return parse_units(text)
+    except ValueError as err:
+        raise _BadInput(f"--units: {err}") from err
+
+
 def _load(path: str, args, label: str):
     from ..records import Record, RecordError, load_record
 
     try:
-        rec = load_record(path, fs=args.fs, columns=_columns(args.columns))
+        rec = load_record(path, fs=args.fs, columns=_columns(args.columns),
+                          units=_units(args.units))
     except RecordError as err:
         raise _BadInput(str(err)) from err
     try:
@@ -186,7 +199,7 @@ def _check_out(args: argparse.Namespace) -> None:
 
     if args.out is None:
         return
-    inputs = [p for p in (args.train, *args.val, args.model) if p]
+    inputs = [p for p in (args.train, *args.val, *args.repeat, args.model) if p]
     try:
         check_output_dir(args.out, OUTPUT_FILES, inputs=inputs, force=args.force)
     except OutputError as err:
@@ -194,15 +207,13 @@ def _check_out(args: argparse.Namespace) -> None:
 
 
 def _write(out: Path, report: dict, result) -> None:
-    """Write the report, the summary and the figures, each file atomically."""
-    from ..safeio import write_json, write_text
+    """Write the report, the summary and the figures: all of them, or none on a failure."""
+    from ..safeio import atomic_folder, write_json, write_text
 
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", report)
-    write_text(out / "summary.txt", result.summary() + "\n")
-    with tempfile.TemporaryDirectory(dir=out, prefix=".figures.") as tmp:
-        for path in result.plot(tmp):
-            os.replace(path, out / Path(path).name)
+    with atomic_folder(out) as stage:
+        write_json(stage / "report.json", report)
+        write_text(stage / "summary.txt", result.summary() + "\n")
+        result.plot(stage)
 
 
 def run(args: argparse.Namespace) -> int:

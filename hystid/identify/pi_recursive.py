@@ -37,27 +37,31 @@ step that would leave that set is halved until it does not (at most 30 times, th
 
 :func:`fit_pi_output_error` is the off-line reference: output-error least squares
 (``scipy.optimize.least_squares``, exact Jacobian, poles kept inside the circle by reflection
-coefficients, as in the off-line Duhem fit)
-started from a linear fit of the weights. :func:`identify_pi` is the entry point of
-``hystid identify REC --model pi``.
+coefficients) run like the off-line Duhem fit, on the prepared record's normalised signals
+(input less its rest over a quantile, output over its spread) with a sensor offset and several
+starts, so that the identified model does not depend on the units. The warm-up fit is the same
+on the recursion's terms (at rest at ``u = 0``, no offset). :func:`identify_pi` is the entry
+point of ``hystid identify REC --model pi``.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 from scipy.optimize import least_squares
 
-from ..model import InitialCondition
+from ..model import InitialCondition, Structure
 from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds, play
 from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
 from .constraints import Reflections
+from .offline import SCREEN_NFEV, linear_start
+from .prepare import prepare, scales
 from .result import IdentificationResult, converged_at
 
 __all__ = [
@@ -69,6 +73,14 @@ __all__ = [
 ]
 
 FORMS = ("key-term", "output-error")
+#: Starts of the off-line fit polished after the screening (the best ones).
+POLISHED = 2
+#: Ridge on the weights in the off-line fits: the cost is ``sum r^2 + RIDGE m |mu_n|^2`` on
+#: normalised signals (``m`` samples in the cost, ``mu_n`` the weights in normalised units, so
+#: the same in any units). Operators that the input moves only once (on the ramp out of rest)
+#: have nearly collinear outputs; without it their weights drift along a flat valley of the
+#: cost to large alternating values, and where the solver stops there is arbitrary.
+RIDGE = 1e-8
 
 
 # =========================================================================== compiled kernels
@@ -382,6 +394,29 @@ def _rho(n, gamma):
 
 
 @njit(cache=True)
+def _recursion_step(mode, theta, U_, D, lam, gamma, n, layout, r, U, W1, W2, Y, S1, SW2, SY, PH,
+                    SPH, p, SP, k, y_k, K, c, c1, psi_c, psi1, psi, f):
+    # one sample at index k, the n-th of the recursion; returns (e, yhat), updates lam[0]
+    rho_prev = _rho(n - 1, gamma)
+    rho = _rho(n, gamma)
+    if mode == 0:
+        e, lam[0], yhat = _keyterm_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U, W1,
+                                        Y, S1, PH, SPH, p, SP, k, y_k, c1, psi1, psi, K, f)
+    else:
+        e, lam[0], yhat = _minimal_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U, W1,
+                                        W2, Y, S1, SW2, SY, p, SP, k, y_k, False, c, psi_c, psi,
+                                        K, f)
+    return e, yhat
+
+
+@njit(cache=True)
+def _scratch(npar, nc, n1):
+    # work arrays of one recursion step: c, c1, psi_c, psi1, psi, f
+    return (np.empty(max(nc, n1)), np.empty(n1), np.empty(nc), np.empty(n1), np.empty(npar),
+            np.empty(npar))
+
+
+@njit(cache=True)
 def recursion_run(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
                   p, SP, start, ymeas, history, errors, yhats, K):
     """Run the recursion from index ``start`` to the end of the extended arrays.
@@ -389,30 +424,47 @@ def recursion_run(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S
     ``mode`` 0: key-term regressor (measured past outputs); 1: output-error gradient. Row
     ``k - start`` of ``history`` receives theta(k); ``lam[0]`` (Lambda^-1) is updated in place.
     """
-    npar = theta.shape[0]
-    nc = SW2.shape[1]
-    n1 = layout[0] + layout[1]
-    c = np.empty(max(nc, n1))
-    c1 = np.empty(n1)
-    psi_c = np.empty(nc)
-    psi1 = np.empty(n1)
-    psi = np.empty(npar)
-    f = np.empty(npar)
+    c, c1, psi_c, psi1, psi, f = _scratch(theta.shape[0], SW2.shape[1], layout[0] + layout[1])
     for k in range(start, U.shape[0]):
         n = k0 + k - start + 1  # samples since the start of the recursion (1, 2, ...)
-        rho_prev = _rho(n - 1, gamma)
-        rho = _rho(n, gamma)
-        y_k = ymeas[k - start]
-        if mode == 0:
-            e, lam[0], yhat = _keyterm_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U, W1,
-                                            Y, S1, PH, SPH, p, SP, k, y_k, c1, psi1, psi, K, f)
-        else:
-            e, lam[0], yhat = _minimal_step(theta, U_, D, lam[0], rho_prev, rho, layout, r, U,
-                                            W1, W2, Y, S1, SW2, SY, p, SP, k, y_k, False, c,
-                                            psi_c, psi, K, f)
+        e, yhat = _recursion_step(mode, theta, U_, D, lam, gamma, n, layout, r, U, W1, W2, Y,
+                                  S1, SW2, SY, PH, SPH, p, SP, k, ymeas[k - start], K, c, c1,
+                                  psi_c, psi1, psi, f)
         history[k - start, :] = theta
         errors[k - start] = e
         yhats[k - start] = yhat
+
+
+@njit(cache=True)
+def _shift(a):
+    # drop the oldest row of a signal window (a one-row placeholder is left as it is)
+    for i in range(a.shape[0] - 1):
+        a[i] = a[i + 1]
+
+
+@njit(cache=True)
+def recursion_one(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, PH,
+                  SPH, p, SP, u_k, y_k, K, out):
+    """One sample on the windows themselves: the same step as :func:`recursion_run` on a chunk
+    of one sample (the windows shifted by one, ``u_k`` at the end), without the copies.
+
+    ``out`` receives ``(e, yhat)``; ``k0`` is the number of samples before this one.
+    """
+    _shift(U)
+    _shift(W1)
+    _shift(W2)
+    _shift(Y)
+    _shift(S1)
+    _shift(SW2)
+    _shift(SY)
+    _shift(PH)
+    _shift(SPH)
+    last = U.shape[0] - 1
+    U[last] = u_k
+    c, c1, psi_c, psi1, psi, f = _scratch(theta.shape[0], SW2.shape[1], layout[0] + layout[1])
+    out[0], out[1] = _recursion_step(mode, theta, U_, D, lam, gamma, k0 + 1, layout, r, U, W1,
+                                     W2, Y, S1, SW2, SY, PH, SPH, p, SP, last, y_k, K, c, c1,
+                                     psi_c, psi1, psi, f)
 
 
 # =========================================================================== helpers
@@ -474,10 +526,6 @@ def _free_map(layout: np.ndarray, npar: int, nc: int) -> np.ndarray:
         free_gradient(e, layout, psi)
         T[m] = psi
     return T
-
-
-def _record_thresholds(record: Record, n_operators: int) -> np.ndarray:
-    return pi_thresholds(record.u, n_operators)
 
 
 # =========================================================================== recursive
@@ -750,6 +798,8 @@ class PIRecursiveIdentifier(Estimator):
         self._buffers = self._arrays(self._H + self.chunk)
         self._p = np.zeros(s.n_operators)
         self._SP = np.zeros((s.n_operators, _n_full(s)))
+        self._mode = FORMS.index(self.form)
+        self._last = np.zeros(2)  # e, yhat of the last one-sample update
         self._buffer: list[tuple[np.ndarray, np.ndarray]] = []
         self._umin, self._umax = np.inf, -np.inf
         self._ready = True
@@ -858,7 +908,7 @@ class PIRecursiveIdentifier(Estimator):
     def _warm_start(self, u: np.ndarray, y: np.ndarray) -> None:
         """Fit the first samples off-line, then set the recursion's state as if it had run."""
         s = self.structure_
-        res = _fit_output_error(u, y, self.fs, self.thresholds_, s)
+        res = _fit_from_zero(u, y, self.fs, self.thresholds_, s)
         self.warm_result_ = res
         theta = res.model.theta
         yhat, J = pi_output_sensitivities(res.model, u)
@@ -903,12 +953,29 @@ class PIRecursiveIdentifier(Estimator):
         ndarray
             A copy of theta(k), in the order of :attr:`names`.
         """
+        if (self._ready and not self.warming_up and isinstance(u_k, float)
+                and isinstance(y_k, float) and u_k - u_k == 0.0):  # the real-time path
+            return self._update_one(u_k, y_k)
         u, y = sample_arrays(u_k, y_k)
         self._require_start()
         history = np.empty((1, len(self.names)))
         errors, yhats = np.zeros(1), np.zeros(1)
         self._process(u, y, history, errors, yhats)
         return history[0].copy()
+
+    def _update_one(self, u_k: float, y_k: float) -> np.ndarray:
+        """One sample after the warm-up: one compiled call on the signal windows, in place."""
+        U, W1, W2, Y, S1, SW2, SY, PH, SPH = self._windows
+        recursion_one(self._mode, self._theta, self._U, self._D, self.lam, self.gamma, self.k,
+                      self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
+                      self._p, self._SP, u_k, y_k, self.K, self._last)
+        self.k += 1
+        if y_k - y_k != 0.0:
+            self.n_skipped += 1
+        self.e, self.yhat = float(self._last[0]), float(self._last[1])
+        if self._mode == 1:
+            return self._theta.copy()
+        return self._model_theta(self._theta)
 
     def _process(self, u, y, history, errors, yhats, progress=None) -> int:
         """Warm-up and recursion over a block of samples; returns the warm-up samples taken."""
@@ -942,9 +1009,8 @@ class PIRecursiveIdentifier(Estimator):
         return w
 
     def _run(self, arrays, start, k0, y, history, errors, yhats) -> None:
-        mode = FORMS.index(self.form)
         U, W1, W2, Y, S1, SW2, SY, PH, SPH = arrays
-        recursion_run(mode, self._theta, self._U, self._D, self.lam, self.gamma,
+        recursion_run(self._mode, self._theta, self._U, self._D, self.lam, self.gamma,
                       k0, self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
                       self._p, self._SP, start, y, history, errors, yhats, self.K)
 
@@ -1047,17 +1113,204 @@ def _ud_factor(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # =========================================================================== off-line
-def _weights_by_linear_ls(model: PISandwich, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Weights minimising the output error for fixed L1, L2 (y is linear in the weights).
+def _scale_weights(theta: np.ndarray, structure: PIStructure, factor: float) -> np.ndarray:
+    """``theta`` with its weights multiplied by ``factor``.
 
-    Samples with a non-finite ``y`` are left out.
+    With unit-DC-gain L1 and L2, ``w1`` is in input units and ``w2`` in output units, so the
+    weights alone carry units (output per input): with ``u = s_u un`` and ``y = s_y yn`` the
+    thresholds are ``s_u`` times and the weights ``s_y / s_u`` times their normalised values.
     """
-    _, J = pi_output_sensitivities(model, u)
-    seen = np.isfinite(y)
-    A = J[:, model.structure.slices()["mu"]]
-    # the contribution of the weights is exactly A @ mu (L1, L2 fixed, from rest)
-    mu, *_ = np.linalg.lstsq(A[seen], y[seen], rcond=None)
-    return mu
+    out = np.array(theta, dtype=float)
+    out[structure.slices()["mu"]] *= factor
+    return out
+
+
+def _weights_given_blocks(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
+                          r: np.ndarray, structure: PIStructure,
+                          fit_offset: bool) -> tuple[np.ndarray, float]:
+    """``theta`` with its weights (and the offset) set by linear least squares for its L1 and
+    L2: exact, since the output is linear in both."""
+    theta = np.array(theta, dtype=float)
+    mu = structure.slices()["mu"]
+    theta[mu] = 0.0
+    _, J = pi_output_sensitivities(PISandwich(theta, r, structure), un)
+    A = J[rows][:, mu]
+    if fit_offset:
+        A = np.column_stack([A, np.ones(len(rows))])
+    n = structure.n_operators
+    A = np.vstack([A, np.sqrt(RIDGE * len(rows)) * np.eye(n, A.shape[1])])
+    coef, *_ = np.linalg.lstsq(A, np.r_[yn[rows], np.zeros(n)], rcond=None)
+    theta[mu] = coef[:n]
+    return theta, float(coef[-1]) if fit_offset else 0.0
+
+
+def _arx_blocks(un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
+                structure: PIStructure) -> np.ndarray | None:
+    """L1 and L2 of the linear sandwich's ARX fit (:func:`hystid.identify.offline.linear_start`,
+    its monic numerators rescaled to unit DC gain); None when its roots do not split."""
+    s = structure
+    duhem = Structure(n1a=s.n1a, n1b=s.n1b - 1, n2a=s.n2a, n2b=s.n2b - 1, q1=s.q1, q2=s.q2)
+    filled = np.interp(np.arange(len(yn)), rows, yn[rows])
+    lin = linear_start(Record(un, filled, 1.0, name="normalised"), duhem, with_offset=True)
+    if lin is None:
+        return None
+    values = dict(zip(duhem.names, lin[0], strict=True))
+    theta = np.zeros(len(s.names))
+    for block, na, nb in (("1", s.n1a, s.n1b), ("2", s.n2a, s.n2b)):
+        a = np.array([values[f"a{block}{i}"] for i in range(1, na + 1)])
+        c = np.array([values[f"b{block}{j}"] for j in range(1, nb)])
+        lead = (1.0 + a.sum()) / (1.0 + c.sum())
+        for i, v in enumerate(a, start=1):
+            theta[s.names.index(f"a{block}{i}")] = v
+        for j, v in enumerate(c, start=2):
+            theta[s.names.index(f"b{block}{j}")] = lead * v
+    return theta if np.isfinite(theta).all() else None
+
+
+class _NormalisedFit(NamedTuple):
+    """An off-line fit on normalised signals (:func:`_solve_normalised`)."""
+
+    theta: np.ndarray
+    y0: float
+    rms: float
+    nfev: int
+    message: str
+    start: str
+
+    def info(self, r: np.ndarray, u_scale: float, y_scale: float) -> dict[str, Any]:
+        """The fit's report in record units (RMS residual, thresholds, scales)."""
+        return {"rms_residual": self.rms * y_scale, "nfev": self.nfev, "message": self.message,
+                "start": self.start, "thresholds": r.tolist(),
+                "scales": {"u": u_scale, "y": y_scale}}
+
+
+def _solve_normalised(
+    un: np.ndarray, yn: np.ndarray, weight: np.ndarray, r: np.ndarray, structure: PIStructure,
+    theta0: np.ndarray | None, fit_offset: bool, max_nfev: int, tol: float,
+) -> _NormalisedFit:
+    """Output-error least squares on normalised signals, from several starts.
+
+    Minimises ``sum (yhat(k) + y0 - yn(k))^2`` over the samples with ``weight`` (``yhat`` the
+    free run from rest on ``un``, thresholds ``r`` in normalised input units) with
+    :func:`scipy.optimize.least_squares` in reflection coefficients of L1 and L2 and, with
+    ``fit_offset``, the normalised sensor offset ``y0``. The starts (:func:`_starts`) are run
+    for :data:`SCREEN_NFEV` evaluations each; the :data:`POLISHED` best are polished.
+
+    Returns
+    -------
+    _NormalisedFit
+        Normalised parameters and offset, RMS residual and the solver's report.
+    """
+    rows = np.flatnonzero(weight)
+    problem = _PIOutputError(un, yn, rows, r, structure, fit_offset)
+    starts = _starts(un, yn, rows, r, structure, theta0, fit_offset)
+    screened = []
+    for label, (theta, y0) in starts.items():
+        sol = problem.solve(problem.to_z(theta, y0),
+                            SCREEN_NFEV if len(starts) > 1 else max_nfev, tol)
+        screened.append((sol.cost, label, sol))
+    screened.sort(key=lambda item: item[0])
+    polished = []
+    for _, label, sol in screened[:POLISHED]:
+        if len(starts) > 1:
+            sol = problem.solve(sol.x, max_nfev, tol)
+        polished.append((sol.cost, label, sol))
+    _, label, sol = min(polished, key=lambda item: item[0])
+    theta, y0 = problem.split(sol.x)
+    rms = float(np.sqrt(np.mean(sol.fun[: len(rows)] ** 2)))
+    return _NormalisedFit(theta, y0, rms, int(sol.nfev), str(sol.message), label)
+
+
+def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
+            structure: PIStructure, theta0: np.ndarray | None,
+            fit_offset: bool) -> dict[str, tuple[np.ndarray, float]]:
+    """``theta0`` alone when given; else ``L1 = L2 = z^-1`` and the linear sandwich's ARX
+    blocks, each with the weights (and offset) that fit best for its blocks."""
+    if theta0 is not None:
+        if not PISandwich(theta0, r, structure).is_stable():
+            raise ValueError("theta0: the start must have stable L1 and L2")
+        return {"theta0": (theta0, 0.0)}
+    delay = np.zeros(len(structure.names))
+    blocks = {"L1 = L2 = z^-1": delay}
+    arx = _arx_blocks(un, yn, rows, structure)
+    if arx is not None:
+        sl = structure.slices()
+        l1 = np.r_[sl["a1"], sl["b1"]]
+        blocks["ARX"] = arx
+        blocks["L1 = z^-1, ARX L2"] = np.where(np.isin(np.arange(len(arx)), l1), 0.0, arx)
+        blocks["ARX L1, L2 = z^-1"] = np.where(np.isin(np.arange(len(arx)), l1), arx, 0.0)
+    return {label: _weights_given_blocks(theta, un, yn, rows, r, structure, fit_offset)
+            for label, theta in blocks.items()}
+
+
+class _PIOutputError:
+    """The output-error problem on normalised signals, in ``z = [reflection coefficients of
+    L1 and L2 | the other parameters | y0 (with an offset)]``."""
+
+    def __init__(self, un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
+                 structure: PIStructure, fit_offset: bool) -> None:
+        s = self.structure = structure
+        self.un, self.r, self.rows, self.target = un, r, rows, yn[rows]
+        self.fit_offset = fit_offset
+        self.n = len(s.names)
+        sl, index = s.slices(), np.arange(self.n)
+        self.rp = Reflections([index[sl["a1"]], index[sl["a2"]]], self.n)
+        self.ones = np.ones((len(rows), int(fit_offset)))
+        self.mu = index[sl["mu"]]
+        self.ridge = np.sqrt(RIDGE * len(rows))
+        self.ridge_rows = np.zeros((len(self.mu), self.n + int(fit_offset)))
+        self.ridge_rows[np.arange(len(self.mu)), self.mu] = self.ridge
+        self._cache: dict[str, Any] = {}
+
+    def to_z(self, theta: np.ndarray, y0: float) -> np.ndarray:
+        """Search coordinates of a parameter vector and an offset."""
+        return np.r_[self.rp.to_z(theta), [y0] * self.fit_offset]
+
+    def split(self, z: np.ndarray) -> tuple[np.ndarray, float]:
+        """Parameters and offset of ``z``."""
+        return self.rp.to_theta(z[: self.n])[0], float(z[self.n]) if self.fit_offset else 0.0
+
+    def evaluate(self, z: np.ndarray) -> dict[str, Any]:
+        """Residuals and Jacobian at ``z`` (cached for the last ``z``)."""
+        if self._cache.get("z") is None or not np.array_equal(self._cache["z"], z):
+            theta, dtheta = self.rp.to_theta(z[: self.n])
+            with np.errstate(over="ignore", invalid="ignore"):
+                yhat, J = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
+                                                  self.un)
+            y0 = z[self.n] if self.fit_offset else 0.0
+            self._cache = {"z": z.copy(),
+                           "r": np.r_[yhat[self.rows] + y0 - self.target,
+                                      self.ridge * theta[self.mu]],
+                           "J": np.vstack([np.hstack([J[self.rows] @ dtheta, self.ones]),
+                                           self.ridge_rows])}
+        return self._cache
+
+    def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
+        """``least_squares`` from ``z0`` within the reflection bounds."""
+        lo, hi = self.rp.bounds()
+        lo = np.r_[lo, [-np.inf] * self.fit_offset]
+        hi = np.r_[hi, [np.inf] * self.fit_offset]
+        with np.errstate(over="ignore", invalid="ignore"):
+            return least_squares(lambda z: self.evaluate(z)["r"], np.clip(z0, lo, hi),
+                                 jac=lambda z: self.evaluate(z)["J"], bounds=(lo, hi),
+                                 method="trf", ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev,
+                                 x_scale="jac")
+
+
+def _structure_and_thresholds(
+    u: np.ndarray, thresholds: np.ndarray | None, structure: PIStructure | None,
+    n_operators: int,
+) -> tuple[PIStructure, np.ndarray]:
+    """The structure and the thresholds (record units; placed over ``u`` when not given)."""
+    if structure is not None:
+        n_operators = structure.n_operators
+    r = (pi_thresholds(u, n_operators) if thresholds is None
+         else np.asarray(thresholds, dtype=float).ravel())
+    s = structure or PIStructure(n_operators=len(r))
+    if len(r) != s.n_operators:
+        raise ValueError(f"thresholds: expected {s.n_operators} values for the structure, got "
+                         f"{len(r)}")
+    return s, r
 
 
 def fit_pi_output_error(
@@ -1067,31 +1320,50 @@ def fit_pi_output_error(
     *,
     n_operators: int = N_OPERATORS,
     theta0: np.ndarray | None = None,
+    offset: bool = True,
+    skip: int | None = None,
     max_nfev: int = 200,
     tol: float = 1e-8,
     name: str = "identified PI sandwich",
 ) -> IdentificationResult:
     """Identify the PI sandwich off-line by output-error least squares (the reference).
 
-    Minimises ``sum_k (y(k) - yhat(k | theta))^2`` of the free-run simulation from rest with
+    The steps, as in the off-line Duhem fit (:func:`hystid.identify.offline.fit_output_error`):
+    :func:`~hystid.identify.prepare.prepare` the record (excitation check, rest level, robust
+    scales, outliers and saturation left out of the cost, burn-in when it does not start at
+    rest); fit on the input less its rest over its scale and the output over its scale, so that
+    the result does not depend on the units; map the weights and thresholds back and place the
+    model at the record's rest level, sensor offset, input envelope and units.
+
+    The fit minimises ``sum_k (y(k) - yhat(k | theta) - y0)^2`` of the free run from rest with
     :func:`scipy.optimize.least_squares` (trust-region reflective, exact Jacobian), in the
     off-line Duhem fit's search coordinates (:class:`~hystid.identify.constraints.Reflections`):
     the denominators of L1 and L2 as reflection coefficients inside the unit interval, so the
-    model stays stable. The default start is ``L1 = L2 = z^-1`` with the weights fitted by
-    linear least squares (the output is linear in the weights).
+    model stays stable. A small ridge (:data:`RIDGE`, on the normalised weights) keeps the
+    weights of operators the input hardly moves from drifting. The starts: ``L1 = L2 = z^-1``,
+    the linear sandwich's ARX blocks and the two mixtures, each with the weights and the offset
+    fitted by linear least squares (the output is linear in both); each runs for
+    :data:`~hystid.identify.offline.SCREEN_NFEV` evaluations and the :data:`POLISHED` best are
+    polished, as in the off-line Duhem fit.
 
     Parameters
     ----------
     record : Record
-        Input ``u`` and measured output ``y``, starting at rest.
+        Input ``u`` and measured output ``y``, in any units.
     thresholds : array_like, optional
-        Play-operator thresholds; from the record's input range by default.
+        Play-operator thresholds in the record's input units; placed over the record's input
+        range by default (:func:`hystid.pi.pi_thresholds`).
     structure : PIStructure, optional
         Orders and delays (the paper's by default).
     n_operators : int
         Number of operators when neither ``thresholds`` nor ``structure`` say.
     theta0 : array_like, optional
-        Start vector instead of the default.
+        Start vector in record units instead of the default.
+    offset : bool
+        Estimate the sensor offset (default); without it the output is taken as zero at rest.
+    skip : int, optional
+        Leading samples simulated but left out of the cost; by default none for a record that
+        starts at rest, else until the input has swept its range.
     max_nfev : int
         Maximum number of residual evaluations.
     tol : float
@@ -1102,54 +1374,48 @@ def fit_pi_output_error(
     Returns
     -------
     IdentificationResult
-        ``method="pi-batch"``; ``info`` holds the RMS residual and the solver's message.
+        ``method="pi-batch"``; ``info`` holds the RMS residual (record units), the solver's
+        message, the scales, the offset and ``warnings`` (what the preparation found).
     """
-    if structure is not None:
-        n_operators = structure.n_operators
-    r = (np.asarray(thresholds, float) if thresholds is not None
-         else _record_thresholds(record, n_operators))
-    return _fit_output_error(record.u, record.y, record.fs, r, structure, theta0=theta0,
-                             max_nfev=max_nfev, tol=tol, name=name)
+    s, r = _structure_and_thresholds(record.u, thresholds, structure, n_operators)
+    prep = prepare(record, skip=skip)
+    if not offset:
+        prep.y_ref, prep.yn = 0.0, record.y / prep.y_scale
+    su, sy = prep.u_scale, prep.y_scale
+    theta0_n = None if theta0 is None else _scale_weights(
+        np.asarray(theta0, dtype=float).ravel(), s, su / sy)
+    fit = _solve_normalised(prep.un, prep.yn, prep.weight, r / su, s, theta0_n, offset,
+                            max_nfev, tol)
+    model = PISandwich(_scale_weights(fit.theta, s, sy / su), r, s, fs=record.fs, name=name,
+                       u_rest=prep.u_rest, offset=prep.offset(fit.y0), envelope=prep.envelope,
+                       units=record.units)
+    info = {**fit.info(r, su, sy), "offset": model.offset, "at_rest": prep.at_rest,
+            "skip": prep.skip, "warnings": list(prep.notes)}
+    settings = {"n_operators": len(r), "offset": offset, "skip": prep.skip,
+                "max_nfev": max_nfev, "tol": tol, "samples": record.n}
+    return IdentificationResult(model, "pi-batch", settings, info=info)
 
 
-def _fit_output_error(
+def _fit_from_zero(
     u: np.ndarray, y: np.ndarray, fs: float, r: np.ndarray, structure: PIStructure | None,
-    *, theta0: np.ndarray | None = None, max_nfev: int = 200, tol: float = 1e-8,
-    name: str = "identified PI sandwich",
+    *, max_nfev: int = 200, tol: float = 1e-8, name: str = "identified PI sandwich",
 ) -> IdentificationResult:
-    """:func:`fit_pi_output_error` on arrays; samples with a non-finite ``y`` are left out."""
+    """The off-line fit for the recursion's model: at rest at ``u = 0``, no sensor offset.
+
+    Normalised like :func:`fit_pi_output_error` (the input and output over their scales about
+    zero, :func:`~hystid.identify.prepare.scales`); samples with a non-finite ``y`` are left
+    out of the cost.
+    """
     u = np.ascontiguousarray(u, dtype=float)
     y = np.ascontiguousarray(y, dtype=float)
     seen = np.isfinite(y)
     s = structure or PIStructure(n_operators=len(r))
-    sl = s.slices()
-    if theta0 is None:
-        theta = np.zeros(len(s.names))
-        theta[sl["mu"]] = _weights_by_linear_ls(PISandwich(theta, r, s, fs=fs), u, y)
-    else:
-        theta = np.asarray(theta0, dtype=float).ravel()
-    if not PISandwich(theta, r, s, fs=fs).is_stable():
-        raise ValueError("theta0: the start must have stable L1 and L2")
-    index = np.arange(len(s.names))
-    rp = Reflections([index[sl["a1"]], index[sl["a2"]]], len(s.names))
-    cache: dict[str, Any] = {}
-
-    def evaluate(z: np.ndarray) -> dict[str, Any]:
-        if cache.get("z") is None or not np.array_equal(cache["z"], z):
-            theta, dtheta = rp.to_theta(z)
-            with np.errstate(over="ignore", invalid="ignore"):
-                yhat, J = pi_output_sensitivities(PISandwich(theta, r, s, fs=fs), u)
-            cache.update(z=z.copy(), r=yhat[seen] - y[seen], J=J[seen] @ dtheta)
-        return cache
-
-    lo, hi = rp.bounds()
-    with np.errstate(over="ignore", invalid="ignore"):
-        sol = least_squares(lambda z: evaluate(z)["r"], rp.to_z(theta),
-                            jac=lambda z: evaluate(z)["J"], bounds=(lo, hi), method="trf",
-                            ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev, x_scale="jac")
-    model = PISandwich(rp.to_theta(sol.x)[0], r, s, fs=fs, name=name)
-    info = {"rms_residual": float(np.sqrt(np.mean(sol.fun**2))), "nfev": int(sol.nfev),
-            "message": str(sol.message), "thresholds": r.tolist()}
+    su, _, sy = scales(u, y[seen], 0.0)
+    su = su or 1.0
+    with np.errstate(invalid="ignore"):
+        fit = _solve_normalised(u / su, y / sy, seen, r / su, s, None, False, max_nfev, tol)
+    model = PISandwich(_scale_weights(fit.theta, s, sy / su), r, s, fs=fs, name=name)
+    info = fit.info(r, su, sy)
     settings = {"n_operators": len(r), "max_nfev": max_nfev, "tol": tol, "samples": len(u)}
     return IdentificationResult(model, "pi-batch", settings, info=info)
 
@@ -1167,7 +1433,7 @@ def identify_pi(
     Parameters
     ----------
     record : Record
-        Input ``u`` and measured output ``y``, starting at rest.
+        Input ``u`` and measured output ``y`` (starting at rest for ``"recursive"``).
     method : {"recursive", "batch"}
         ``"recursive"``: :class:`PIRecursiveIdentifier` (on-line, the paper's settings);
         ``"batch"``: :func:`fit_pi_output_error` (off-line reference).

@@ -12,6 +12,7 @@ from ..model import DuhemSandwich
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = ["HISTORY_MODES", "HistoryRecorder", "IdentificationResult", "converged_at"]
 
@@ -186,33 +187,51 @@ class IdentificationResult:
         self,
         truth: dict[str, float] | None = None,
         axes: Axes | Sequence[Axes] | np.ndarray | None = None,
-    ) -> np.ndarray:
-        """Plot the parameter history (the paper's Fig. 3); returns the axes.
+    ) -> Figure:
+        """Plot the parameter history (the paper's Fig. 3) and return the figure.
+
+        The figure is built without :mod:`matplotlib.pyplot`: no global figure is opened or
+        left behind. Save it with ``fig.savefig(path)``; a notebook shows it as a cell's value.
 
         Parameters
         ----------
         truth : dict, optional
             True values by name, drawn as dashed lines.
         axes : matplotlib axes, optional
-            One per parameter; new ones by default.
+            One per parameter, in the order of :attr:`names`, all on one figure; by default a
+            new figure with one panel per parameter, sharing the sample axis.
 
         Returns
         -------
-        ndarray of matplotlib.axes.Axes
-            The axes.
-        """
-        import matplotlib.pyplot as plt
+        matplotlib.figure.Figure
+            The figure holding the axes.
 
+        Raises
+        ------
+        ValueError
+            If the method keeps no parameter history, or fewer axes than parameters are given.
+        """
         if self.history is None:
             raise ValueError(f"method {self.method!r} keeps no parameter history")
         names = self.names
-        if axes is None:
-            _, axes = plt.subplots(len(names), 1, sharex=True, figsize=(7, 1.4 * len(names)))
-        axes = np.atleast_1d(axes)
+        axes = _history_axes(len(names)) if axes is None else np.atleast_1d(axes).ravel()
+        if len(axes) < len(names):
+            raise ValueError(f"axes: expected {len(names)} axes (one per parameter: "
+                             f"{', '.join(names)}), got {len(axes)}")
+        samples = (np.arange(len(self.history)) if self.history_index is None
+                   else np.asarray(self.history_index))
         for ax, name, col in zip(axes, names, self.history.T, strict=False):
-            ax.plot(col, lw=0.8)
+            ax.plot(samples, col, lw=0.8)
             if truth and name in truth:
                 ax.axhline(truth[name], color="k", ls="--", lw=0.6)
             ax.set_ylabel(name)
-        axes[-1].set_xlabel("sample k")
-        return axes
+        axes[len(names) - 1].set_xlabel("sample k")
+        return axes[0].figure
+
+
+def _history_axes(count: int) -> np.ndarray:
+    """A new figure (not pyplot's) with ``count`` panels stacked on a shared sample axis."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 1.4 * count), layout="constrained")
+    return fig.subplots(count, 1, sharex=True, squeeze=False)[:, 0]
