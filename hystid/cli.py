@@ -238,10 +238,9 @@ def _method_arg(args: argparse.Namespace) -> str:
     batch_only = (("--skip", getattr(args, "skip", None)),
                   ("--offset", getattr(args, "offset", None)))
     for option, value in batch_only:
-        if value is not None and (model_kind, method) != ("duhem", "batch"):
-            raise CommandError(f"{option} applies to the Duhem sandwich's batch fit only (got "
-                               f"--model {model_kind} --method {method}; expected --model duhem "
-                               f"--method batch, or no {option})")
+        if value is not None and method != "batch":
+            raise CommandError(f"{option} applies to the batch fit only (got --method "
+                               f"{method}; expected --method batch, or no {option})")
     if model_kind == "pi" and getattr(args, "structure", None) is not None:
         raise CommandError("--structure applies to the Duhem sandwich only (got --model pi)")
     return method
@@ -271,15 +270,17 @@ def _identify_record(rec, args, progress: Progress, structure=None):
     from .identify import identify
 
     method = _method_arg(args)
-    if getattr(args, "model", "duhem") == "pi":
-        from .identify.pi_recursive import identify_pi
-
-        return identify_pi(rec, method="batch" if method == "batch" else "recursive")
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", None) != "none"
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
+    if getattr(args, "model", "duhem") == "pi":
+        from .identify.pi_recursive import identify_pi
+
+        if method == "batch":
+            return identify_pi(rec, method="batch", **settings)
+        return identify_pi(rec, method="recursive")
     return identify(rec, method=method, structure=structure, **settings)
 
 

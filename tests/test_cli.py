@@ -264,3 +264,23 @@ def test_units_label_the_report_and_bad_units_are_refused(records, tmp_path, cap
 def test_diagnose_takes_units_too(records, capsys):
     code = exit_code(["diagnose", str(records / "train.csv"), "--units", "u=V,y"])
     assert code == 2 and "--units" in capsys.readouterr().err
+
+
+def test_pi_batch_fit_takes_offset_option(records, tmp_path, capsys):
+    """--offset reaches the PI sandwich's batch fit: 'none' keeps the offset at 0; by default
+    it is estimated (the record is shifted by 2 um, so it must be found)."""
+    from hystid.records import load_record
+
+    rec = load_record(records / "train.csv")
+    path = tmp_path / "shifted.csv"
+    np.savetxt(path, np.column_stack([rec.t, rec.u, rec.y + 2.0]), delimiter=",",
+               header="t,u,y", comments="")
+    reports = {}
+    for offset in ("none", "estimate"):
+        out = tmp_path / offset
+        code, _, err = run(["identify", str(path), "--model", "pi", "--method", "batch",
+                            "--offset", offset, "--quiet", "--out", str(out)], capsys)
+        assert code == 0, err
+        reports[offset] = json.loads((out / "report.json").read_text())
+    assert reports["none"]["offset"] == 0.0
+    assert reports["estimate"]["offset"] == pytest.approx(2.0, abs=0.2)

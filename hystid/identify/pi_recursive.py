@@ -52,6 +52,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from ..model import InitialCondition, Structure
@@ -1217,7 +1218,7 @@ def _solve_normalised(
         polished.append((sol.cost, label, sol))
     _, label, sol = min(polished, key=lambda item: item[0])
     theta, y0 = problem.split(sol.x)
-    rms = float(np.sqrt(np.mean(sol.fun[: len(rows)] ** 2)))
+    rms = float(np.sqrt(np.mean(problem.evaluate(sol.x)["data"] ** 2)))
     return _NormalisedFit(theta, y0, rms, int(sol.nfev), str(sol.message), label)
 
 
@@ -1271,18 +1272,18 @@ class _PIOutputError:
         return self.rp.to_theta(z[: self.n])[0], float(z[self.n]) if self.fit_offset else 0.0
 
     def evaluate(self, z: np.ndarray) -> dict[str, Any]:
-        """Residuals and Jacobian at ``z`` (cached for the last ``z``)."""
+        """Residuals and Jacobian at ``z``, folded (:func:`_folded`), and the data residuals
+        (``data``, unfolded); cached for the last ``z``."""
         if self._cache.get("z") is None or not np.array_equal(self._cache["z"], z):
             theta, dtheta = self.rp.to_theta(z[: self.n])
             with np.errstate(over="ignore", invalid="ignore"):
                 yhat, J = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
                                                   self.un)
             y0 = z[self.n] if self.fit_offset else 0.0
-            self._cache = {"z": z.copy(),
-                           "r": np.r_[yhat[self.rows] + y0 - self.target,
-                                      self.ridge * theta[self.mu]],
-                           "J": np.vstack([np.hstack([J[self.rows] @ dtheta, self.ones]),
-                                           self.ridge_rows])}
+            data = yhat[self.rows] + y0 - self.target
+            r = np.r_[data, self.ridge * theta[self.mu]]
+            J = np.vstack([np.hstack([J[self.rows] @ dtheta, self.ones]), self.ridge_rows])
+            self._cache = {"z": z.copy(), "data": data, **_folded(J, r)}
         return self._cache
 
     def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
@@ -1295,6 +1296,22 @@ class _PIOutputError:
                                  jac=lambda z: self.evaluate(z)["J"], bounds=(lo, hi),
                                  method="trf", ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev,
                                  x_scale="jac")
+
+
+def _folded(J: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
+    """``[J | r]`` folded into its QR triangle ``[R | c; 0 | rho]``: the residuals ``[c, rho]``
+    and the Jacobian ``[R; 0]`` have the norm, gradient and ``J'J`` of the full problem, so
+    ``least_squares`` takes the same steps on a square problem instead of a tall one (its
+    SVD per iteration then costs nothing). A non-finite ``[J | r]`` gives non-finite
+    residuals of the same length (the solver takes that as a failed step)."""
+    A = np.column_stack([J, r])
+    width = A.shape[1]
+    if not np.all(np.isfinite(A)):
+        return {"r": np.full(width, np.nan), "J": np.zeros((width, width - 1))}
+    tri = np.zeros((width, width))
+    R = qr(A, mode="r", check_finite=False)[0]
+    tri[: min(len(R), width)] = R[:width]
+    return {"r": tri[:, -1].copy(), "J": tri[:, :-1].copy()}
 
 
 def _structure_and_thresholds(
