@@ -1033,7 +1033,8 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
         say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
         rf = refit(state.model, tr, state.active + [n], scr[n].starts, base_phi=state.phi,
                    step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
-                   joint_starts=len(scr[n].starts) if n == "delay" else 1)
+                   joint_starts=len(scr[n].starts) if n == "delay" else 1,
+                   profile=scr[n].profile)
         if n == "delay" and all(a == "drift" for a in state.active):
             rf = _delay_as_structure(state, tr, rf, say)
         ev_n = None
