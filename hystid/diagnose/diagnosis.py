@@ -7,6 +7,14 @@ one only when it lowers the held-out error significantly for coloured residuals 
 worth having. Greedy: the best accepted effect (the simplest one that no other beats) joins the
 model, the error is localised again and the remaining candidates are screened against it, until
 none passes.
+
+The drift is a nuisance of every record, re-estimated on each held-out record, while the other
+forms are fixed from the train record. When both pass, they are compared like with like: the
+drift goes first only when the best input-tied form neither explains anything beyond each
+record's own drift (both fitted on the held-out samples) nor predicts the held-out records
+better than a drift scored on samples it was not fitted on (neither fitted on the samples
+scored; :func:`_drift_out_of_sample`). A creep follows the input and is predicted; a drift is
+not.
 """
 
 from __future__ import annotations
@@ -1206,7 +1214,7 @@ def _drift_last(passing: list[str], results: dict, level: float,
         order["text"] = (f"{best} goes before the drift: it predicts the held-out records' "
                          f"slow error better than a drift can ({figures_o})")
     else:
-        order["text"] = (f"the drift goes before {best}: {best} explains nothing beyond each "
+        order["text"] = (f"the drift goes before {best}: {best} explains no more than each "
                          f"record's own drift ({figures_b}) and predicts the held-out records "
                          f"no better than a drift scored out of sample ({figures_o})")
     return (["drift"] if order["drift_first"] else others), order
