@@ -7,6 +7,14 @@ one only when it lowers the held-out error significantly for coloured residuals 
 worth having. Greedy: the best accepted effect (the simplest one that no other beats) joins the
 model, the error is localised again and the remaining candidates are screened against it, until
 none passes.
+
+The drift is a nuisance of every record, re-estimated on each held-out record, while the other
+forms are fixed from the train record. When both pass, they are compared like with like: the
+drift goes first only when the best input-tied form neither explains anything beyond each
+record's own drift (both fitted on the held-out samples) nor predicts the held-out records
+better than a drift scored on samples it was not fitted on (neither fitted on the samples
+scored; :func:`_drift_out_of_sample`). A creep follows the input and is predicted; a drift is
+not.
 """
 
 from __future__ import annotations
@@ -56,6 +64,10 @@ IN_NOMINAL = ("offset",)
 #: The candidates by default: every form that is not part of the nominal model.
 DEFAULT_EFFECTS = tuple(n for n in EFFECT_NAMES if n not in IN_NOMINAL)
 
+
+#: A later round runs only when the reduction it needs leaves the held-out RMS above this share
+#: of the floor (no model explains the sensor noise).
+NOISE_REACH = 0.9
 
 #: Fewest samples in the train part and in the held-out part.
 MIN_TRAIN_SAMPLES = 2000
@@ -587,6 +599,16 @@ def diagnose(
                      and (family_of(n) not in state.families or _extends(n, state.active))]
         if not remaining:
             break
+        if rnd > 1:
+            later = max(min_gap_share, min_gap_share_later) * max(nom.rms_val - floor_rms, 0.0)
+            if state.ev.rms_val - later < NOISE_REACH * floor_rms:
+                # the reduction a further form needs would take the held-out error below the
+                # noise, which no model of the stage explains
+                rounds[-1]["next_round"] = (
+                    f"not run: a further form must lower the held-out RMS by {later:.4g}, from "
+                    f"{state.ev.rms_val:.4g}, below the floor of {floor_rms:.4g}")
+                say(f"round {rnd}: {rounds[-1]['next_round']}")
+                break
         window = state if tr_c is tr else state.on_window(tr_c, ev_c, say)
         drift_result, base = None, window
         if "drift" in remaining:
@@ -646,9 +668,17 @@ def diagnose(
             break
         # a further form of a family already accepted goes first (the first form did not
         # catch the whole effect), a new family next; a record's own drift (re-estimated on
-        # the held-out records themselves) only when it beats the best other form
-        pool = ([n for n in passing if family_of(n) in state.families]
-                or _drift_last(passing, results, level_r, min_reduction))
+        # the held-out records themselves) only when no input-tied form beats it like with
+        # like
+        pool = [n for n in passing if family_of(n) in state.families]
+        if not pool:
+            pool, order = _drift_last(passing, results, level_r, min_reduction)
+            if order:
+                info["drift_order"] = order
+                say(f"round {rnd}: {order['text']}")
+                for n in ("drift", order["form"]):
+                    outcomes[n].message = _join(outcomes[n].message,
+                                                f"round {rnd}: {order['text']}")
         chosen = None
         while pool and chosen is None:
             best = min(pool, key=lambda n: results[n][1]["rms_cand"])
@@ -815,6 +845,9 @@ class _Evaluation:
     scales: tuple[float, float]
     margin_val: float
     finite: bool
+    #: Held-out errors with each record's drift scored out of sample
+    #: (:func:`_drift_out_of_sample`); the errors themselves without the drift.
+    errs_oos: list[np.ndarray] = field(default_factory=list)
 
     @property
     def rms_val(self) -> float:
@@ -841,20 +874,24 @@ class _Evaluator:
         scales = (float(np.max(np.abs(np.diff(w1)))), float(np.max(np.abs(w1))))
         phi_val = np.array(phi, float)
         phi_val[self.drift_slots] = 0.0
-        errs, segs, margin = [], [], 0.0
+        errs, errs_oos, segs, margin = [], [], [], 0.0
         for vd, t0 in zip(self.vds, self.t0s, strict=True):
             w1v, _, yv = simulate_fit_data(m, phi_val, vd)
             sl = vd.weight
             yv = yv.copy()
+            raw = vd.y[sl] - yv[sl]
             if drift:
                 t = np.arange(len(vd.u))[sl] / vd.fs
-                yv[sl] += _drift_fit(t, vd.y[sl] - yv[sl])
+                yv[sl] += _drift_fit(t, raw)
+                errs_oos.append(raw - _drift_out_of_sample(t, raw))
             errs.append(vd.y[sl] - yv[sl])
+            if not drift:
+                errs_oos.append(errs[-1])
             segs.append(Segment(vd.u[sl], vd.y[sl], yv[sl], w1v[sl].copy(), vd.fs, t0))
             margin = max(margin, duhem_margin(m.theta, m.structure, phi_val, w1v[sl]))
         finite = bool(np.isfinite(e_tr).all() and all(np.isfinite(e).all() for e in errs))
         rms_tr = float(np.sqrt(np.mean(e_tr**2)))
-        return _Evaluation(rms_tr, errs, segs, scales, margin, finite)
+        return _Evaluation(rms_tr, errs, segs, scales, margin, finite, errs_oos)
 
 
 def _head(data: FitData, n: int) -> FitData:
@@ -865,12 +902,40 @@ def _head(data: FitData, n: int) -> FitData:
     return FitData(data.u[:n], data.y[:n], data.fs, data.level, weight)
 
 
+def _drift_basis(t: np.ndarray) -> np.ndarray:
+    """Columns ``t, t^2, t^3`` of the drift (zero at the record's start)."""
+    return np.column_stack([t, t * t, t**3])
+
+
 def _drift_fit(t: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Least-squares drift ``d1 t + d2 t^2 + d3 t^3`` of a record's error (the record's own
     drift, zero at its start)."""
-    A = np.column_stack([t, t * t, t**3])
+    A = _drift_basis(t)
     coef = np.linalg.lstsq(A, e, rcond=None)[0]
     return A @ coef
+
+
+#: Contiguous blocks of a held-out record for its drift scored out of sample.
+DRIFT_BLOCKS = 4
+
+
+def _drift_out_of_sample(t: np.ndarray, e: np.ndarray,
+                         blocks: int = DRIFT_BLOCKS) -> np.ndarray:
+    """A record's drift scored on samples it was not fitted on: on each of ``blocks``
+    contiguous blocks, the least-squares drift (:func:`_drift_fit`'s form) of the other blocks.
+
+    A drift is not predictable from the input; a creep is. Fitted on the very samples it is
+    scored on, a drift follows any slow error, a creep's transient too; fitted elsewhere on the
+    record, it extends the record's slow trend and no more.
+    """
+    A = _drift_basis(t)
+    edges = np.linspace(0, len(t), blocks + 1).astype(int)
+    out = np.empty(len(t))
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        rest = np.r_[0:a, b:len(t)]
+        coef = np.linalg.lstsq(A[rest], e[rest], rcond=None)[0]
+        out[a:b] = A[a:b] @ coef
+    return out
 
 
 def _admissibility(model: DuhemSandwich, ev: _Evaluation, vds: list[FitData]) -> list[str]:
@@ -917,7 +982,7 @@ class _Greedy:
         w1, _, yh = simulate_fit_data(self.model, self.phi, tr_c)
         sl = tr_c.weight
         t = np.arange(len(tr_c.u))[sl] / tr_c.fs
-        A = np.column_stack([t, t * t, t**3])
+        A = _drift_basis(t)
         coef = np.linalg.lstsq(A, tr_c.y[sl] - yh[sl], rcond=None)[0]
         start = np.array(self.phi, float)
         start[list(EFFECTS["drift"].slots)] = coef
@@ -1033,7 +1098,8 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
         say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
         rf = refit(state.model, tr, state.active + [n], scr[n].starts, base_phi=state.phi,
                    step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
-                   joint_starts=len(scr[n].starts) if n == "delay" else 1)
+                   joint_starts=len(scr[n].starts) if n == "delay" else 1,
+                   profile=scr[n].profile)
         if n == "delay" and all(a == "drift" for a in state.active):
             rf = _delay_as_structure(state, tr, rf, say)
         ev_n = None
@@ -1101,27 +1167,57 @@ def _delay_as_structure(state: _Greedy, tr: FitData, rf: RefitResult,
 
 
 def _drift_last(passing: list[str], results: dict, level: float,
-                min_reduction: float) -> list[str]:
-    """The passing forms without the drift, unless the drift lowers the held-out error below
-    the best other form's by the same test (its drift is fitted on the held-out records
-    themselves: it must do more than match an input-tied form)."""
+                min_reduction: float) -> tuple[list[str], dict[str, Any] | None]:
+    """Whether a record's own drift goes before the input-tied forms, compared like with like.
+
+    The drift is re-estimated on every held-out record, while an input-tied form is fixed
+    from the train record: scored on the very samples it was fitted on, the drift has an
+    advantage no prediction has. Two fair comparisons of the best input-tied form ``X``:
+
+    * *beyond drift*: ``X`` with each held-out record's own drift as well against the drift
+      alone (both fitted on the held-out samples): ``X`` explains what a drift does not;
+    * *out of sample*: ``X`` against the drift scored on samples it was not fitted on
+      (:func:`_drift_out_of_sample`; neither fitted on the samples scored): ``X`` predicts
+      the slow error that a drift can only fit after the fact (creep follows the input).
+
+    ``X`` goes first when it wins either test (level ``level``, relative reduction
+    ``min_reduction``); the drift goes first otherwise. Returns the pool to choose from and
+    the verdict (``form``, the figures and ``text``), or None when there was nothing to
+    compare.
+    """
     others = [n for n in passing if n != "drift"]
     if "drift" not in passing or not others:
-        return list(passing)
+        return list(passing), None
     best = min(others, key=lambda n: results[n][1]["rms_cand"])
-    drift_errs = results["drift"][2].errs
+    ev_x, ev_d = results[best][2], results["drift"][2]
 
-    def beats(a, b):
-        t = compare_losses(a, b)
-        return t["p_value"] < level and t["rel_reduction"] >= min_reduction
+    def wins(base: list[np.ndarray], cand: list[np.ndarray]) -> tuple[bool, dict]:
+        t = compare_losses(base, cand)
+        return t["p_value"] < level and t["rel_reduction"] >= min_reduction, t
 
-    if not beats(results[best][2].errs, drift_errs):
-        return others
-    # the drift does better; the other form still goes first when, given each record's own
-    # drift as well, it explains what the drift alone does not (an input-tied slow effect)
-    if beats(drift_errs, _beyond_drift(results[best][2])):
-        return others
-    return ["drift"]
+    beyond, tb = wins(ev_d.errs, _beyond_drift(ev_x))
+    predicts, to = wins(ev_d.errs_oos, ev_x.errs)
+    order = {"form": best, "drift_first": not (beyond or predicts),
+             "rms_drift": tb["rms_base"], "rms_drift_out_of_sample": to["rms_base"],
+             "rms_form": to["rms_cand"], "rms_form_beyond_drift": tb["rms_cand"],
+             "p_beyond_drift": tb["p_value"], "p_out_of_sample": to["p_value"]}
+    figures_b = (f"with each held-out record's own drift as well, held-out RMS "
+                 f"{tb['rms_base']:.4g} -> {tb['rms_cand']:.4g} (p = {tb['p_value']:.2g})")
+    figures_o = (f"fitted on the train record alone {to['rms_cand']:.4g} against "
+                 f"{to['rms_base']:.4g} for a drift fitted on the rest of each held-out record "
+                 f"(p = {to['p_value']:.2g}; {tb['rms_base']:.4g} when the drift is scored on "
+                 "the samples it was fitted on)")
+    if beyond:
+        order["text"] = (f"{best} goes before the drift: it explains what each record's own "
+                         f"drift does not ({figures_b})")
+    elif predicts:
+        order["text"] = (f"{best} goes before the drift: it predicts the held-out records' "
+                         f"slow error better than a drift can ({figures_o})")
+    else:
+        order["text"] = (f"the drift goes before {best}: {best} explains no more than each "
+                         f"record's own drift ({figures_b}) and predicts the held-out records "
+                         f"no better than a drift scored out of sample ({figures_o})")
+    return (["drift"] if order["drift_first"] else others), order
 
 
 def _beyond_drift(ev: _Evaluation) -> list[np.ndarray]:

@@ -379,8 +379,8 @@ class _Problem:
     condition-(8) barrier appended; counts its simulations."""
 
     def __init__(self, model: DuhemSandwich, data: FitData, par: Parametrisation,
-                 base_phi: np.ndarray | None) -> None:
-        self.data, self.par, self.base_phi = data, par, base_phi
+                 base_phi: np.ndarray | None, profile: np.ndarray | None = None) -> None:
+        self.data, self.par, self.base_phi, self.profile = data, par, base_phi, profile
         self.y = data.y[data.weight]
         self.work = DuhemSandwich(model.theta.copy(), model.structure, fs=model.fs)
         scale = float(np.std(self.y)) or 1.0
@@ -403,6 +403,9 @@ class _Problem:
         r = yhat[self.data.weight] - self.y
         if not np.all(np.isfinite(r)):
             return np.full(len(self.y) + 1, 1e6)
+        if self.profile is not None:
+            # what the held parameters would absorb, to first order, is left out
+            r = r - self.profile @ (self.profile.T @ r)
         margin = duhem_margin(theta, self.par.structure, phi, w1)
         over = max(0.0, margin - MARGIN_LIMIT) if np.isfinite(margin) else 1e3
         return np.append(r, self.barrier * over)
@@ -450,6 +453,7 @@ def refit(
     max_nfev: int = 20,
     effect_nfev: int = 15,
     joint_starts: int = 1,
+    profile: np.ndarray | None = None,
 ) -> RefitResult:
     """Least-squares refit of the nominal parameters and the active effects' parameters.
 
@@ -481,6 +485,13 @@ def refit(
     joint_starts : int
         How many of the best effect-only solutions the joint stage starts from (a dead time's
         cost has a minimum near every whole sample).
+    profile : ndarray, optional
+        Orthonormal basis (one column per direction, rows the weighted samples of ``data``) of
+        the output directions of the parameters held in the effect-only stage, at ``model``
+        (:func:`hystid.diagnose.screen.screen` computes it): that stage then fits the residual
+        less its projection on them, i.e. with the held parameters' linear response profiled
+        out, so that the new effect does not take the place of what they would absorb (a
+        creep left alone with the nominal parameters held turns into a slow ramp).
 
     Returns
     -------
@@ -498,7 +509,7 @@ def refit(
         par_e = Parametrisation(model, new, duration, step_scale, w1_scale, free_theta=False)
         found = []
         for phi0 in starts:
-            problem = _Problem(model, data, par_e, phi0)
+            problem = _Problem(model, data, par_e, phi0, profile)
             try:
                 sol = _solve(problem, par_e.to_z(model.theta, phi0), effect_nfev)
             except (ValueError, np.linalg.LinAlgError, FloatingPointError) as err:

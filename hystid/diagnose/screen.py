@@ -84,6 +84,10 @@ class ScreenResult:
         Effect vectors to start the refit from, best first.
     message : str
         Why the candidate is not excited, or empty.
+    profile : ndarray or None
+        Orthonormal basis of the output directions of the current model's own parameters
+        (rows: the train samples scored), shared by the candidates of one screen: the refit's
+        effect-only stage profiles them out (:func:`hystid.diagnose.refit.refit`).
     """
 
     name: str
@@ -92,6 +96,7 @@ class ScreenResult:
     excited: bool
     starts: list[np.ndarray] = field(default_factory=list)
     message: str = ""
+    profile: np.ndarray | None = field(default=None, repr=False)
 
 
 def _jacobian(model: DuhemSandwich, phi: np.ndarray, active: Sequence[str], data: FitData,
@@ -306,7 +311,7 @@ def screen(
             f"{name}: the records cannot show it: the model absorbs "
             f"{100 * (1 - sep):.2f} % of its signature; {_HINTS[name]}")
         starts = [s[1] for s in scored[:n_starts + (1 if name == "delay" else 0)]]
-        out[name] = ScreenResult(name, scored[0][0], sep, excited, starts, msg)
+        out[name] = ScreenResult(name, scored[0][0], sep, excited, starts, msg, Q)
         best_dirs[name] = scored[0][2]
     # creep and drift are told apart only by input level changes
     if ("creep" in best_dirs and "drift" in best_dirs
