@@ -213,7 +213,8 @@ def render(payload: dict) -> str:
         f"interleaved timings; load average {before[0]:.1f} before, {after[0]:.1f} after, on "
         f"{payload['cores']} cores:", "",
         table(rows, ["", "serial loop, no Dask", "1 worker", "2 workers"]), "",
-        f"One worker costs {100 * payload['overhead_1_worker_vs_serial']:+.1f} % against the "
+        f"A fleet on one worker takes {abs(100 * payload['overhead_1_worker_vs_serial']):.1f} % "
+        f"{'more' if payload['overhead_1_worker_vs_serial'] > 0 else 'less'} time than the "
         f"plain loop; a local cluster starts, with the kernels loaded on every worker, in "
         + " / ".join(f"{v:.1f} s" for v in startup.values()) + " (1 / 2 workers)."])
 
