@@ -742,7 +742,46 @@ class PIRecursiveIdentifier(Estimator):
         """The current estimate in the model's parameters (:attr:`names`)."""
         if not self._ready:
             return self._model_theta(self._theta_start(len(self.recursion_names)))
-        return self._model_theta(self._theta)
+        return self._to_record(self._model_theta(self._theta))
+
+    def _to_record(self, theta: np.ndarray) -> np.ndarray:
+        """Model parameters (a vector or rows) from the recursion's units to the record's."""
+        return _scale_weights(theta, self.structure_, self._sy / self._su)
+
+    def _unit_factors(self) -> np.ndarray:
+        """Per coordinate of the recursion, its value in record units over its normalised
+        value: the weights (``mu_i``, or ``b2j*mu_i`` in the key-term form) carry ``sy/su``,
+        the rest none."""
+        s = self.structure_
+        d = np.ones(len(self._theta))
+        if self.form == "output-error":
+            d[s.slices()["mu"]] = self._sy / self._su
+        else:
+            i1 = s.n1a + s.n1b - 1
+            d[i1 : i1 + s.n2b * s.n_operators] = self._sy / self._su
+        return d
+
+    @property
+    def K(self) -> np.ndarray:
+        """Gain of the last update in record units (parameter change per unit of ``e``), in
+        the recursion's coordinates (:attr:`recursion_names`)."""
+        self._require_start()
+        return self._unit_factors() * self._K / self._sy
+
+    @property
+    def lam(self) -> float:
+        """Current ``Lambda^-1(k)``, the estimated error variance in output units squared."""
+        self._require_start()
+        return float(self._lam[0] * self._sy**2)
+
+    @property
+    def scales(self) -> tuple[float, float]:
+        """The recursion's units ``(su, sy)``: it runs on ``u / su`` and ``y / sy`` with the
+        weights times ``su / sy``. Set by the warm-up fit (quantile scales of its samples,
+        :func:`~hystid.identify.prepare.scales` about zero); ``(1, 1)`` before, and on a cold
+        start (the record's units)."""
+        self._require_start()
+        return self._su, self._sy
 
     def _structure(self) -> PIStructure:
         if self._ready:
@@ -790,10 +829,12 @@ class PIRecursiveIdentifier(Estimator):
         self._theta = theta
         self._U = np.eye(len(names))
         self._D = np.array(np.broadcast_to(self.P0, (len(names),)), dtype=float)
-        self.K = np.zeros(len(names))
+        self._K = np.zeros(len(names))
         self.e = 0.0
         self.yhat = 0.0
-        self.lam = np.array([self.lambda0])
+        self._lam = np.array([self.lambda0])
+        # the recursion's units: the record's until a warm-up fit sets its scales
+        self._su, self._sy, self._rn = 1.0, 1.0, r
         self._H = max(s.history, s.q2 + s.n2b - 1)
         self._windows = self._arrays(self._H + 1)
         self._buffers = self._arrays(self._H + self.chunk)
@@ -836,9 +877,11 @@ class PIRecursiveIdentifier(Estimator):
 
     @property
     def P(self) -> np.ndarray:
-        """Current covariance matrix ``P(k) = U diag(D) U'`` (kept factored)."""
+        """Current covariance matrix ``P(k) = U diag(D) U'`` (kept factored) in record units,
+        in the recursion's coordinates (:attr:`recursion_names`)."""
         self._require_start()
-        return (self._U * self._D) @ self._U.T
+        d = self._unit_factors()
+        return d[:, None] * ((self._U * self._D) @ self._U.T) * d[None, :]
 
     @property
     def model(self) -> PISandwich:
@@ -909,10 +952,12 @@ class PIRecursiveIdentifier(Estimator):
     def _warm_start(self, u: np.ndarray, y: np.ndarray) -> None:
         """Fit the first samples off-line, then set the recursion's state as if it had run."""
         s = self.structure_
-        res = _fit_from_zero(u, y, self.fs, self.thresholds_, s)
-        self.warm_result_ = res
-        theta = res.model.theta
-        yhat, J = pi_output_sensitivities(res.model, u)
+        fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds_, s)
+        self.warm_result_ = _zero_result(fit, su, sy, self.thresholds_, s, self.fs, len(u))
+        self._su, self._sy, self._rn = su, sy, self.thresholds_ / su
+        u, y = u / su, y / sy
+        theta = fit.theta
+        yhat, J = pi_output_sensitivities(PISandwich(theta, self._rn, s), u)
         seen = np.isfinite(y)
         s2 = max(float(np.mean((y[seen] - yhat[seen]) ** 2)), 1e-30)
         prior = 1.0 / np.broadcast_to(self.P0, theta.shape)
@@ -929,7 +974,7 @@ class PIRecursiveIdentifier(Estimator):
         self._run(arrays, self._H, 0, y, np.empty((n, len(theta))), np.empty(n), np.empty(n))
         self._D = D
         self._theta = theta.copy()
-        self.lam = np.array([s2])
+        self._lam = np.array([s2])
         for dst, src in zip(self._windows, arrays, strict=True):
             if len(dst) > 1:
                 dst[:] = src[-len(dst):]
@@ -967,16 +1012,14 @@ class PIRecursiveIdentifier(Estimator):
     def _update_one(self, u_k: float, y_k: float) -> np.ndarray:
         """One sample after the warm-up: one compiled call on the signal windows, in place."""
         U, W1, W2, Y, S1, SW2, SY, PH, SPH = self._windows
-        recursion_one(self._mode, self._theta, self._U, self._D, self.lam, self.gamma, self.k,
-                      self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
-                      self._p, self._SP, u_k, y_k, self.K, self._last)
+        recursion_one(self._mode, self._theta, self._U, self._D, self._lam, self.gamma, self.k,
+                      self.layout_, self._rn, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
+                      self._p, self._SP, u_k / self._su, y_k / self._sy, self._K, self._last)
         self.k += 1
         if y_k - y_k != 0.0:
             self.n_skipped += 1
-        self.e, self.yhat = float(self._last[0]), float(self._last[1])
-        if self._mode == 1:
-            return self._theta.copy()
-        return self._model_theta(self._theta)
+        self.e, self.yhat = float(self._last[0] * self._sy), float(self._last[1] * self._sy)
+        return self._to_record(self._model_theta(self._theta))
 
     def _process(self, u, y, history, errors, yhats, progress=None) -> int:
         """Warm-up and recursion over a block of samples; returns the warm-up samples taken."""
@@ -996,24 +1039,25 @@ class PIRecursiveIdentifier(Estimator):
             for dst, src in zip(arrays, self._windows, strict=True):
                 if len(src) > 1:
                     dst[:H] = src[1:]
-            arrays[0][H:] = u[a:b]
-            self._run(arrays, H, self.k, y[a:b], raw[a:b], errors[a:b], yhats[a:b])
+            arrays[0][H:] = u[a:b] / self._su
+            self._run(arrays, H, self.k, y[a:b] / self._sy, raw[a:b], errors[a:b], yhats[a:b])
             self.k += b - a
             for dst, src in zip(self._windows, arrays, strict=True):
                 if len(dst) > 1:
                     dst[:] = src[-len(dst):]
             if progress is not None:
                 progress(b, n)
-        if not same:
-            history[w:] = self._model_theta(raw[w:])
+        history[w:] = self._to_record(raw[w:] if same else self._model_theta(raw[w:]))
+        errors[w:] *= self._sy
+        yhats[w:] *= self._sy
         self.e, self.yhat = float(errors[-1]), float(yhats[-1])
         return w
 
     def _run(self, arrays, start, k0, y, history, errors, yhats) -> None:
         U, W1, W2, Y, S1, SW2, SY, PH, SPH = arrays
-        recursion_run(self._mode, self._theta, self._U, self._D, self.lam, self.gamma,
-                      k0, self.layout_, self.thresholds_, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
-                      self._p, self._SP, start, y, history, errors, yhats, self.K)
+        recursion_run(self._mode, self._theta, self._U, self._D, self._lam, self.gamma,
+                      k0, self.layout_, self._rn, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
+                      self._p, self._SP, start, y, history, errors, yhats, self._K)
 
     # ----------------------------------------------------------------- a record
     def fit(
@@ -1089,7 +1133,7 @@ class PIRecursiveIdentifier(Estimator):
         info = {
             "rms_prediction_error_last10": float(np.sqrt(np.mean(tail**2))) if tail.size
             else None,
-            "lambda_inv": float(self.lam[0]),
+            "lambda_inv": float(self.lam),
             "thresholds": self.thresholds_.tolist(),
             "prediction_errors": errors,
             "stable": bool(self.model.is_stable()),
@@ -1115,14 +1159,14 @@ def _ud_factor(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # =========================================================================== off-line
 def _scale_weights(theta: np.ndarray, structure: PIStructure, factor: float) -> np.ndarray:
-    """``theta`` with its weights multiplied by ``factor``.
+    """``theta`` (a vector, or one per row) with its weights multiplied by ``factor``.
 
     With unit-DC-gain L1 and L2, ``w1`` is in input units and ``w2`` in output units, so the
     weights alone carry units (output per input): with ``u = s_u un`` and ``y = s_y yn`` the
     thresholds are ``s_u`` times and the weights ``s_y / s_u`` times their normalised values.
     """
     out = np.array(theta, dtype=float)
-    out[structure.slices()["mu"]] *= factor
+    out[..., structure.slices()["mu"]] *= factor
     return out
 
 
@@ -1423,18 +1467,49 @@ def _fit_from_zero(
     zero, :func:`~hystid.identify.prepare.scales`); samples with a non-finite ``y`` are left
     out of the cost.
     """
+    s = structure or PIStructure(n_operators=len(r))
+    fit, su, sy = _fit_normalised_from_zero(u, y, r, s, max_nfev=max_nfev, tol=tol)
+    return _zero_result(fit, su, sy, r, s, fs, len(u), max_nfev=max_nfev, tol=tol, name=name)
+
+
+def _zero_result(
+    fit: _NormalisedFit, su: float, sy: float, r: np.ndarray, structure: PIStructure, fs: float,
+    samples: int, *, max_nfev: int = 200, tol: float = 1e-8,
+    name: str = "identified PI sandwich",
+) -> IdentificationResult:
+    """The result of :func:`_fit_normalised_from_zero` in record units (weights mapped back)."""
+    model = PISandwich(_scale_weights(fit.theta, structure, sy / su), r, structure, fs=fs,
+                       name=name)
+    settings = {"n_operators": len(r), "max_nfev": max_nfev, "tol": tol, "samples": samples}
+    return IdentificationResult(model, "pi-batch", settings, info=fit.info(r, su, sy))
+
+
+def _zero_scales(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Input and output scales about zero (:func:`~hystid.identify.prepare.scales`) of the
+    samples with a finite output: the recursion's units."""
+    su, _, sy = scales(u, y[np.isfinite(y)], 0.0)
+    return su or 1.0, sy
+
+
+def _fit_normalised_from_zero(
+    u: np.ndarray, y: np.ndarray, r: np.ndarray, structure: PIStructure, *,
+    max_nfev: int = 200, tol: float = 1e-8,
+) -> tuple[_NormalisedFit, float, float]:
+    """:func:`_solve_normalised` at rest at ``u = 0`` without offset, on ``u / su`` and
+    ``y / sy`` (:func:`_zero_scales`); samples with a non-finite ``y`` are left out of the cost.
+
+    Returns
+    -------
+    tuple
+        The normalised fit, ``su`` and ``sy``.
+    """
     u = np.ascontiguousarray(u, dtype=float)
     y = np.ascontiguousarray(y, dtype=float)
-    seen = np.isfinite(y)
-    s = structure or PIStructure(n_operators=len(r))
-    su, _, sy = scales(u, y[seen], 0.0)
-    su = su or 1.0
+    su, sy = _zero_scales(u, y)
     with np.errstate(invalid="ignore"):
-        fit = _solve_normalised(u / su, y / sy, seen, r / su, s, None, False, max_nfev, tol)
-    model = PISandwich(_scale_weights(fit.theta, s, sy / su), r, s, fs=fs, name=name)
-    info = fit.info(r, su, sy)
-    settings = {"n_operators": len(r), "max_nfev": max_nfev, "tol": tol, "samples": len(u)}
-    return IdentificationResult(model, "pi-batch", settings, info=info)
+        fit = _solve_normalised(u / su, y / sy, np.isfinite(y), r / su, structure, None, False,
+                                max_nfev, tol)
+    return fit, su, sy
 
 
 # =========================================================================== entry point
