@@ -445,3 +445,45 @@ def test_pi_warm_up_fit_does_not_depend_on_the_units():
     u_val = paper_excitation(3000, FS, seed=21)
     y_v, y_m = warm[0].simulate(u_val).y, warm[1].simulate(u_val * 100.0).y * 1e6
     assert np.max(np.abs(y_m - y_v)) <= 1e-6 * np.max(np.abs(y_v))
+
+
+def test_pi_recursion_does_not_depend_on_the_units(offset_records):
+    """The recursive identifier (the default of ``hystid identify --model pi``) on the offset
+    record in V / um and in kV / nm: it runs on normalised signals, so the held-out outputs, in
+    um, agree (to the conditioning of the warm-up fit's weights, far below the noise), its
+    estimates, errors and gain come back in record units, and both beat the baselines."""
+    import warnings
+
+    from hystid.baselines import compare, simulate_from_rest
+    from hystid.testing import UNIT_FACTORS, with_units
+
+    train, held = offset_records
+    outputs, rows, idfs = {}, {}, {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for u_unit, y_unit in (("V", "um"), ("kV", "nm")):
+            rec = with_units(train, u=u_unit, y=y_unit)
+            idf = PIRecursiveIdentifier(fs=rec.fs)
+            res = idf.fit(rec)
+            in_um = UNIT_FACTORS[y_unit] / UNIT_FACTORS["um"]
+            h = with_units(held, u=u_unit, y=y_unit)
+            outputs[u_unit] = simulate_from_rest(res.model, h.u, check=False) * in_um
+            row = compare(res.model, rec, [h]).rows[0]
+            rows[u_unit] = {key: row[key] * in_um for key in ("model", "static_line", "linear")}
+            idfs[u_unit] = (idf, res, in_um)
+    ref = outputs["V"]
+    assert np.max(np.abs(outputs["kV"] - ref)) <= 1e-6 * np.max(np.abs(ref))
+    for unit, row in rows.items():
+        assert row["model"] < 0.75 * min(row["static_line"], row["linear"]), (unit, row)
+    (v, res_v, _), (kv, res_kv, in_um) = idfs["V"], idfs["kV"]
+    su_v, sy_v = v.scales
+    su_kv, sy_kv = kv.scales
+    assert su_kv == pytest.approx(su_v * 1e-3, rel=1e-12)
+    assert sy_kv == pytest.approx(sy_v * 1e3, rel=1e-12)
+    # prediction errors, Lambda^-1 and the last gain in the record's units
+    e_v, e_kv = res_v.info["prediction_errors"], res_kv.info["prediction_errors"]
+    seen = np.isfinite(e_v)
+    np.testing.assert_allclose(e_kv[seen] * in_um, e_v[seen], rtol=1e-3,
+                               atol=1e-3 * np.max(np.abs(e_v[seen])))
+    assert kv.lam * in_um**2 == pytest.approx(v.lam, rel=1e-3)
+    assert kv.e * in_um == pytest.approx(v.e, rel=1e-3, abs=1e-6)
