@@ -32,6 +32,15 @@ wrong extrema of ``w1`` in memory. The default therefore warms up: the first sam
 input has swept its range, are fitted off-line and the recursion continues from that estimate
 with ``P`` set to the inverse information of that fit (with the paper's ``P(0)`` as prior).
 
+Units. The recursion runs on normalised signals, like the off-line fit: the warm-up fit's
+input and output scales about zero (:func:`~hystid.identify.prepare.scales` of its samples)
+divide ``u``, ``y`` and the thresholds, so that the weights, ``P``, ``Lambda^-1`` and the
+settings ``P0`` and ``epsilon`` are dimensionless and the identified model is the same in V or
+kV, um or m. Every output (the estimate and its history, the model, :meth:`update`'s return
+value, ``e``, ``yhat``, ``K``, ``P``, ``Lambda^-1``) is mapped back to the record's units: only
+the weights carry units (output per input). A cold start has no samples to take scales from
+and runs in the record's units.
+
 After every update the estimate is kept stable (poles of L1 and L2 inside the unit circle): a
 step that would leave that set is halved until it does not (at most 30 times, then dropped).
 
@@ -585,11 +594,14 @@ class PIRecursiveIdentifier(Estimator):
     n_operators : int
         Number of play operators when neither ``thresholds`` nor ``structure`` say (40).
     P0 : float or array_like
-        Initial covariance ``P(0) = P0 I`` (the paper's 1e6), or its diagonal. After a warm-up
-        it is the prior of the warm-up fit: ``P = (J'J / s^2 + I / P0)^-1``.
+        Initial covariance ``P(0) = P0 I`` (the paper's 1e6), or its diagonal, in the
+        recursion's units (:attr:`scales`: dimensionless after a warm-up). After a warm-up it
+        is the prior of the warm-up fit: ``P = (J'J / s^2 + I / P0)^-1`` on the normalised
+        signals.
     theta0 : float or array_like
         Initial estimate in the recursion's coordinates (:attr:`recursion_names`): one value
-        for every parameter (the paper's 0.001) or a vector.
+        for every parameter (the paper's 0.001) or a vector. Used by a cold start only, where
+        the recursion's units are the record's.
     epsilon : float
         Stop index (1e-4): the recursion has converged once no parameter changes by more than
         ``epsilon`` relative to its value (see :func:`hystid.identify.result.converged_at`).
@@ -599,7 +611,8 @@ class PIRecursiveIdentifier(Estimator):
         setting) forgets, which blows ``P`` up along the weights of operators the input no
         longer moves.
     lambda0 : float
-        Initial ``Lambda^-1`` (estimated error variance, output units squared).
+        Initial ``Lambda^-1`` (estimated error variance) of a cold start, output units
+        squared; a warm-up replaces it by the warm-up fit's residual variance.
     form : {"output-error", "key-term"}
         Regressor ``h(k)``. ``"output-error"`` (default): the gradient of the simulated output
         with respect to the model's own parameters (a recursive prediction-error method).
@@ -626,15 +639,17 @@ class PIRecursiveIdentifier(Estimator):
     theta : ndarray
         Current estimate in the model's parameters (see :attr:`names`).
     P : ndarray
-        Current covariance matrix ``P(k)``.
+        Current covariance matrix ``P(k)``, record units.
     K : ndarray
-        Gain of the last update.
+        Gain of the last update, record units.
     e : float
-        Prediction error of the last update, ``y(k) - yhat(k)``.
+        Prediction error of the last update, ``y(k) - yhat(k)``, output units.
     yhat : float
-        Prediction of the last update.
+        Prediction of the last update, output units.
     lam : float
-        Current ``Lambda^-1(k)``.
+        Current ``Lambda^-1(k)``, output units squared.
+    scales : tuple of float
+        The recursion's units ``(su, sy)``.
     k : int
         Number of samples processed.
 
