@@ -1472,21 +1472,6 @@ def fit_pi_output_error(
     return IdentificationResult(model, "pi-batch", settings, info=info)
 
 
-def _fit_from_zero(
-    u: np.ndarray, y: np.ndarray, fs: float, r: np.ndarray, structure: PIStructure | None,
-    *, max_nfev: int = 200, tol: float = 1e-8, name: str = "identified PI sandwich",
-) -> IdentificationResult:
-    """The off-line fit for the recursion's model: at rest at ``u = 0``, no sensor offset.
-
-    Normalised like :func:`fit_pi_output_error` (the input and output over their scales about
-    zero, :func:`~hystid.identify.prepare.scales`); samples with a non-finite ``y`` are left
-    out of the cost.
-    """
-    s = structure or PIStructure(n_operators=len(r))
-    fit, su, sy = _fit_normalised_from_zero(u, y, r, s, max_nfev=max_nfev, tol=tol)
-    return _zero_result(fit, su, sy, r, s, fs, len(u), max_nfev=max_nfev, tol=tol, name=name)
-
-
 def _zero_result(
     fit: _NormalisedFit, su: float, sy: float, r: np.ndarray, structure: PIStructure, fs: float,
     samples: int, *, max_nfev: int = 200, tol: float = 1e-8,
