@@ -289,6 +289,26 @@ class _RunningQR:
         return tri
 
 
+def triangle_of(A: np.ndarray) -> np.ndarray:
+    """The square QR triangle ``R`` of a tall matrix (``R'R = A'A``), folded block by block.
+
+    Parameters
+    ----------
+    A : ndarray
+        Rows to fold, shape ``(m, width)``.
+
+    Returns
+    -------
+    ndarray
+        Shape ``(width, width)``; zero rows below when ``m < width``.
+    """
+    folded = _RunningQR(A.shape[1])
+    for a in range(0, len(A), SENS_WINDOW):
+        block = A[a: a + SENS_WINDOW]
+        folded.rows(len(block))[:] = block
+    return folded.triangle()
+
+
 class _OutputError:
     """The output-error problem on a prepared record: residuals and Jacobian in ``z``.
 

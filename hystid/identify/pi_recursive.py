@@ -61,7 +61,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
-from scipy.linalg import qr
 from scipy.optimize import least_squares
 
 from ..model import InitialCondition, Structure
@@ -70,7 +69,7 @@ from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
 from .constraints import Reflections
-from .offline import SCREEN_NFEV, linear_start
+from .offline import SCREEN_NFEV, linear_start, triangle_of
 from .prepare import prepare, scales
 from .result import IdentificationResult, converged_at
 
@@ -1367,9 +1366,7 @@ def _folded(J: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
     width = A.shape[1]
     if not np.all(np.isfinite(A)):
         return {"r": np.full(width, np.nan), "J": np.zeros((width, width - 1))}
-    tri = np.zeros((width, width))
-    R = qr(A, mode="r", check_finite=False)[0]
-    tri[: min(len(R), width)] = R[:width]
+    tri = triangle_of(A)
     return {"r": tri[:, -1].copy(), "J": tri[:, :-1].copy()}
 
 
