@@ -301,9 +301,9 @@ def build_cases(work: Path, big: bool = True) -> list[Case]:
     cases.append(Case("model 300 MB", ["simulate", "--model", str(work / "model_big.json"),
                                        "--input", str(rec), "--out", str(work / "sim_big.csv")]))
     pi = {"format": "hystid-model", "version": 1, "kind": "pi", "name": "pi",
-          "structure": {"n_operators": 3, "n1a": 1, "n1b": 0, "n2a": 2, "n2b": 0, "q1": 1,
+          "structure": {"n_operators": 3, "n1a": 1, "n1b": 1, "n2a": 2, "n2b": 1, "q1": 1,
                         "q2": 0},
-          "params": {"p1": 1.0, "p2": 0.5, "p3": 0.2, "a11": -0.5, "a21": -1.6, "a22": 0.92},
+          "params": {"a11": -0.5, "mu1": 1.0, "mu2": 0.5, "mu3": 0.2, "a21": -1.6, "a22": 0.92},
           "thresholds": [0.0, 1e300, 2e300], "fs": 30000.0}
     model_case("PI thresholds 1e300", pi)
 

@@ -54,6 +54,9 @@ class Structure:
             value = getattr(self, key)
             if not isinstance(value, int | np.integer) or value < 0:
                 raise ValueError(f"Structure: {key} must be a non-negative integer, got {value!r}")
+        from .validate import check_structure_size
+
+        check_structure_size(self)  # a delay of 1e9 samples would allocate for minutes
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -510,10 +513,18 @@ class DuhemSandwich(Placed):
         Returns
         -------
         list of str
-            The envelope violations (:meth:`Envelope.violations`) and, when condition (8)
+            Why the model itself is not sound (:func:`hystid.validate.check_model`: an
+            unstable L1 or L2, ``alpha <= 0``, a huge number), the envelope violations
+            (:meth:`Envelope.violations`) and, when condition (8)
             ``alpha |dw1(k)| < 2`` fails at some sample, how often and how far.
         """
+        from .validate import check_model
+
         out = self.envelope.violations(u) if self.envelope is not None else []
+        try:
+            check_model(self)
+        except ValueError as err:
+            out.append(f"the model is not sound: {err}")
         if response is None:
             response = self.simulate(u, check=False)
         if not np.all(np.isfinite(response.y)):

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING, Any
 from .model import DuhemSandwich, Structure
 from .operating import Envelope
 from .safeio import check_output, dumps_strict, write_text
+from .validate import check_model, check_structure_size
 
 if TYPE_CHECKING:  # pragma: no cover
     from .pi import PISandwich
@@ -259,36 +260,59 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
     try:
         if kind == "duhem":
             structure = Structure(**_structure(doc, _DUHEM_KEYS, where))
+            check_structure_size(structure)
             model = DuhemSandwich(params, structure, **common,
                                   rest_memory=_number(doc, "rest_memory", where, default=0.0))
         else:
             from .pi import PISandwich, PIStructure
 
             structure = PIStructure(**_structure(doc, _PI_KEYS, where))
+            check_structure_size(structure)
             thresholds = doc.get("thresholds")
             if not isinstance(thresholds, list):
                 raise ModelFileError(f"{where}: 'thresholds' must be a list of numbers (a PI "
                                      "model's play-operator thresholds)")
             model = PISandwich(params, thresholds, structure, **common)
+        check_model(model)
     except ModelFileError:
         raise
     except (TypeError, ValueError) as err:
         raise ModelFileError(f"{where}: {err}") from err
-    model.provenance = dict(doc.get("provenance") or {})
+    model.provenance = _provenance(doc.get("provenance"), where)
     return model
 
 
+def _provenance(data: Any, where: str) -> dict[str, Any]:
+    """The file's provenance: a mapping (or null), nested at most a few levels."""
+    from .validate import MAX_NESTING, too_deep
+
+    if data is None:
+        return {}
+    if not isinstance(data, Mapping):
+        raise ModelFileError(f"{where}: 'provenance' must be a mapping (hystid version, method, "
+                             f"date, record), got {type(data).__name__} {str(data)[:40]!r}")
+    if too_deep(data):
+        raise ModelFileError(f"{where}: 'provenance' nests deeper than {MAX_NESTING} levels "
+                             "(expected a flat mapping of where the model came from)")
+    return dict(data)
+
+
 def _read_document(where: str) -> dict[str, Any]:
+    from .validate import read_plain_text
+
     try:
-        text = Path(where).read_text(encoding="utf-8")
+        text = read_plain_text(where)
     except FileNotFoundError as err:
         raise ModelFileError(f"{where}: the model file does not exist") from err
     except IsADirectoryError as err:
         raise ModelFileError(f"{where}: is a folder (expected a model file)") from err
-    except (OSError, UnicodeDecodeError) as err:
+    except (OSError, ValueError) as err:  # ValueError: not a plain file, too large, not UTF-8
         raise ModelFileError(f"{where}: cannot read the model file ({err})") from err
     try:
         doc = json.loads(text, parse_constant=_refuse_constant)
+    except RecursionError as err:
+        raise ModelFileError(f"{where}: JSON nested too deeply (expected a model file, whose "
+                             "entries nest a few levels)") from err
     except ValueError as err:
         raise ModelFileError(f"{where}: not a JSON model file ({err})") from err
     if not isinstance(doc, dict):

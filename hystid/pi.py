@@ -442,13 +442,15 @@ class PIStructure:
         for key in ("n1a", "n2a", "q1", "q2"):
             value = getattr(self, key)
             if not isinstance(value, int | np.integer) or value < 0:
-                raise ValueError(
-                    f"PIStructure: {key} must be a non-negative integer, got {value!r}"
-                )
+                raise ValueError(f"PIStructure: {key} must be a non-negative integer, got "
+                                 f"{value!r}")
         for key in ("n_operators", "n1b", "n2b"):
             value = getattr(self, key)
             if not isinstance(value, int | np.integer) or value < 1:
                 raise ValueError(f"PIStructure: {key} must be a positive integer, got {value!r}")
+        from .validate import check_structure_size
+
+        check_structure_size(self)  # a delay of 1e9 samples would allocate for minutes
 
     @property
     def names(self) -> tuple[str, ...]:

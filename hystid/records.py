@@ -1144,7 +1144,7 @@ def _archive_errors() -> tuple[type[BaseException], ...]:
     import zipfile
     import zlib
 
-    return (*_ARCHIVE_ERRORS, zipfile.BadZipFile, zlib.error)
+    return (*_ARCHIVE_ERRORS, zipfile.BadZipFile, zlib.error, RuntimeError, NotImplementedError)
 
 
 def _read_npz(file: str, roles: dict[str, str | int]) -> _Arrays:

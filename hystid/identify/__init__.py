@@ -88,7 +88,10 @@ def identify(
     methods run on the record less its rest level (input) and its output at rest, which is
     taken from the leading rest segment (see :mod:`hystid.identify.prepare`).
     """
-    if method not in METHODS:
+    from ..validate import check_call, check_delays_fit
+
+    check_call(record, structure)
+    if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     selection = None
     if isinstance(structure, str):
@@ -98,6 +101,7 @@ def identify(
 
         structure, selection = select_structure(record)
     need = min_samples(method, structure, **settings)
+    check_delays_fit(structure or Structure(), record.n, f"record {record.name!r}")
     if record.n < need:
         raise ValueError(
             f"record {record.name!r}: {record.n} samples are too few for method={method!r} "

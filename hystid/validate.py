@@ -1,0 +1,233 @@
+"""Checks of what hystid is handed: model files, models and sizes, before any work.
+
+A model file is read only when it is a plain regular file of at most :data:`MAX_MODEL_BYTES`
+(a FIFO, a device such as ``/dev/zero`` or a symbolic link to one would block or never end);
+the model it holds is refused when it could not be simulated soundly: a number beyond
+:data:`MAX_MAGNITUDE` (no unit system puts a stage's parameter there, and the products of two
+such numbers overflow), a pole of L1 or L2 on or outside the unit circle (its output grows
+without bound), ``alpha <= 0`` for the Duhem block (the loop then grows instead of settling),
+or orders and delays beyond :data:`~hystid.options.MAX_ORDER` and
+:data:`~hystid.options.MAX_DELAY`. Each check raises ``ValueError`` (the caller wraps it in its
+own error class) with a message naming the entry and what was expected.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = ["MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING", "check_call", "check_delays_fit",
+           "check_model", "check_structure_size", "read_plain_text", "too_deep"]
+
+#: Largest size of a model file read (a model of the largest structure is a few kB).
+MAX_MODEL_BYTES = 16 << 20
+#: Largest absolute value of a model's parameter, threshold, rest level or offset.
+MAX_MAGNITUDE = 1e100
+#: Deepest nesting of JSON lists and objects read in a model file.
+MAX_NESTING = 50
+#: Largest radius of a pole of L1 or L2 (a pole closer to the unit circle is a drift that does
+#: not settle within any record).
+MAX_POLE_RADIUS = 1.0 - 1e-9
+
+
+def read_plain_text(path: str, what: str = "model file",
+                    limit: int = MAX_MODEL_BYTES) -> str:
+    """Read a plain regular file as UTF-8 text, refusing anything else up front.
+
+    Parameters
+    ----------
+    path : str
+        The file (a symbolic link is followed only to a regular file).
+    what : str
+        What the file is, for messages.
+    limit : int
+        Largest size in bytes.
+
+    Returns
+    -------
+    str
+        The file's text.
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError
+        As :func:`open` would.
+    ValueError
+        For a FIFO, a device, a socket, a file larger than ``limit``, or one that grows past it
+        while read.
+    """
+    info = os.stat(path)
+    if stat.S_ISDIR(info.st_mode):
+        raise IsADirectoryError(path)
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"not a regular file (a FIFO, device or socket); expected a plain "
+                         f"{what}")
+    if info.st_size > limit:
+        raise ValueError(f"{info.st_size:,} bytes (expected a {what} of at most {limit:,} "
+                         "bytes)")
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as handle:
+        if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):  # replaced since the stat
+            raise ValueError(f"not a regular file; expected a plain {what}")
+        data = handle.read(limit + 1)
+    if len(data) > limit:
+        raise ValueError(f"grew past {limit:,} bytes while read (expected a {what} of at most "
+                         f"{limit:,} bytes)")
+    return data.decode("utf-8")
+
+
+def too_deep(value: Any, limit: int = MAX_NESTING) -> bool:
+    """Whether lists and mappings nest deeper than ``limit`` in a parsed JSON value.
+
+    Parameters
+    ----------
+    value : object
+        A value from :func:`json.loads`.
+    limit : int
+        Deepest nesting allowed.
+
+    Returns
+    -------
+    bool
+    """
+    level = [value]
+    for _ in range(limit + 1):
+        level = [v for x in level
+                 for v in (x.values() if isinstance(x, Mapping) else x if isinstance(x, list)
+                           else ())]
+        if not level:
+            return False
+    return True
+
+
+def check_structure_size(structure: Any) -> None:
+    """Orders at most :data:`~hystid.options.MAX_ORDER`, delays at most ``MAX_DELAY``.
+
+    Parameters
+    ----------
+    structure : Structure or PIStructure
+        The structure.
+
+    Raises
+    ------
+    ValueError
+        Naming the key, its value and the range expected.
+    """
+    from .options import MAX_DELAY, MAX_ORDER
+
+    for key, value in vars(structure).items():
+        if key == "f0":
+            continue
+        top = MAX_DELAY if key.startswith("q") else (1000 if key == "n_operators" else MAX_ORDER)
+        if value > top:
+            what = "a delay in samples" if key.startswith("q") else "a count" if \
+                key == "n_operators" else "an order"
+            raise ValueError(f"structure {key}={value} (expected {what} in 0..{top})")
+
+
+def check_delays_fit(structure: Any, n: int, where: str) -> None:
+    """Refuse a structure whose delays and orders reach past a record of ``n`` samples.
+
+    Parameters
+    ----------
+    structure : Structure or PIStructure
+        The structure.
+    n : int
+        Samples of the record.
+    where : str
+        The record, for messages.
+
+    Raises
+    ------
+    ValueError
+        When the longest past the model needs (``q + order``) is not shorter than half the
+        record: the output would not depend on most of the input.
+    """
+    s = vars(structure)
+    longest = max(s.get("q1", 0) + s.get("n1b", 0), s.get("q2", 0) + s.get("n2b", 0),
+                  s.get("n1a", 0), s.get("n2a", 0))
+    if 2 * longest >= n:
+        raise ValueError(f"{where}: the structure's delays and orders reach {longest} samples "
+                         f"into the past, not shorter than half the record's {n} samples "
+                         "(expected delays much shorter than the record)")
+
+
+def _poles_radius(a: np.ndarray) -> float:
+    a = np.asarray(a, dtype=float)
+    if a.size == 0:
+        return 0.0
+    return float(np.max(np.abs(np.roots(np.concatenate([[1.0], a])))))
+
+
+def check_model(model: Any) -> None:
+    """Refuse a model that cannot be simulated soundly (see the module's docstring).
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+
+    Raises
+    ------
+    ValueError
+        Naming the entry and what was expected.
+    """
+    check_structure_size(model.structure)
+    values: Mapping[str, float] = {**model.params, "u_rest": model.u_rest,
+                                   "offset": model.offset}
+    for key, value in values.items():
+        if not (np.isfinite(value) and abs(value) <= MAX_MAGNITUDE):
+            raise ValueError(f"'{key}' is {value!r} (expected a finite number of magnitude at "
+                             f"most {MAX_MAGNITUDE:g})")
+    thresholds = np.asarray(getattr(model, "thresholds", []), dtype=float)
+    if thresholds.size and not np.all(np.abs(thresholds) <= MAX_MAGNITUDE):
+        raise ValueError(f"'thresholds' reach {np.max(np.abs(thresholds)):g} (expected at most "
+                         f"{MAX_MAGNITUDE:g})")
+    if "alpha" in model.params and not model.params["alpha"] > 0:
+        raise ValueError(f"'alpha' is {model.params['alpha']!r} (expected alpha > 0: with "
+                         "alpha <= 0 the Duhem loop grows instead of settling)")
+    for block in ("L1", "L2"):
+        radius = _poles_radius(getattr(model, f"a{block[1]}"))
+        if not radius <= MAX_POLE_RADIUS:
+            raise ValueError(f"{block} has a pole of radius {radius:.6g} (expected every pole "
+                             "strictly inside the unit circle: the block is unstable and its "
+                             "output grows without bound)")
+
+
+def check_call(record: Any, structure: Any = None) -> None:
+    """Refuse what :func:`hystid.identify.identify` cannot take, saying what it takes.
+
+    Parameters
+    ----------
+    record : object
+        Expected a :class:`~hystid.records.Record`.
+    structure : object
+        Expected None, ``"auto"`` or a :class:`~hystid.model.Structure`.
+
+    Raises
+    ------
+    TypeError
+        For a path, an array, None or anything else in place of a record, or a structure of
+        another type.
+    """
+    from .model import Structure
+    from .records import Record
+
+    if not isinstance(record, Record):
+        if isinstance(record, str | os.PathLike):
+            hint = (f"got the path {os.fspath(record)!r}; load it first: "
+                    f"hystid.records.load_record({os.fspath(record)!r}) (add fs=... when the "
+                    "file has no time column)")
+        elif isinstance(record, np.ndarray):
+            hint = (f"got an array of shape {record.shape}; wrap it: "
+                    "hystid.records.Record(u, y, fs)")
+        else:
+            hint = f"got {type(record).__name__}"
+        raise TypeError(f"record: expected a hystid.records.Record, {hint}")
+    if structure is not None and not isinstance(structure, Structure | str):
+        raise TypeError(f"structure: expected a hystid.Structure, 'auto' or None, got "
+                        f"{type(structure).__name__} {structure!r}")
