@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 import time
 import warnings
 from pathlib import Path
-from typing import NoReturn
 
 import numpy as np
 
-from . import __version__
+from . import __version__, cli_support
+from .cli_support import EXIT_BAD_INPUT, CommandError, OneLineParser, Progress
 from .options import MAX_SECONDS, integer, number
 
-EXIT_BAD_INPUT = 2
 #: numpy's floating-point RuntimeWarnings raised while a fit tries a diverging candidate: not
 #: shown by ``identify`` (a result the fit could not trust carries its own warnings).
 NUMERIC_NOISE = r"(overflow|invalid value|divide by zero|underflow) encountered"
@@ -29,65 +27,6 @@ DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensiti
                 ("hystid.identify.online", "rpem_run"), ("hystid.identify.eria", "eria_run"))
 
 
-class CommandError(Exception):
-    """A user-facing error: printed without a traceback, exit status 2."""
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line on stderr (no usage block), status 2."""
-
-    def error(self, message: str) -> NoReturn:
-        """Print ``PROG: error: MESSAGE`` and a pointer to ``--help``, exit with status 2.
-
-        Parameters
-        ----------
-        message : str
-            argparse's message; an option given no value because the value starts with ``-``
-            gets the way to write it (``--crop=-1:2``).
-        """
-        missing = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
-        if missing:
-            option = missing.group(1)
-            message += f" (a value starting with '-' is written {option}=VALUE)"
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-class Progress:
-    """Periodic progress lines on stderr (silent when ``quiet``).
-
-    Parameters
-    ----------
-    quiet : bool
-        Print nothing.
-    every : float
-        Least seconds between two periodic lines.
-    """
-
-    def __init__(self, quiet: bool = False, every: float = 1.0):
-        self.quiet = quiet
-        self.every = every
-        self._last = 0.0
-        self._t0 = time.perf_counter()
-
-    def say(self, message: str) -> None:
-        """Print one line now.
-
-        Parameters
-        ----------
-        message : str
-            The line, printed after the seconds elapsed.
-        """
-        if not self.quiet:
-            print(f"[{time.perf_counter() - self._t0:6.1f} s] {message}", file=sys.stderr)
-
-    def __call__(self, k: int, n: int) -> None:
-        """Print ``k/n`` at most once per ``every`` seconds (and at the end)."""
-        now = time.perf_counter()
-        if k >= n or now - self._last >= self.every:
-            self._last = now
-            self.say(f"sample {k}/{n} ({100.0 * k / max(n, 1):.0f} %)")
-
-
 # --------------------------------------------------------------------------- helpers
 def _load(path: str, fs: float | None, columns: dict | None = None, option: str = "",
           units: dict | None = None):
@@ -95,7 +34,7 @@ def _load(path: str, fs: float | None, columns: dict | None = None, option: str 
     from .records import RecordError, load_record
 
     try:
-        return load_record(path, fs=fs, columns=columns, units=units)
+        return cli_support.remember(load_record(path, fs=fs, columns=columns, units=units), path)
     except RecordError as err:
         raise CommandError(f"{option} {err}" if option else str(err)) from err
 
@@ -427,6 +366,7 @@ def _reference_stage_record(args: argparse.Namespace):
         raise CommandError(f"{' and '.join(missing)} required to simulate the built-in stage "
                            "(or give --model M --input REC)")
     noise = 1e-3 if args.noise is None else args.noise
+    cli_support.check_seconds(args.seconds, 2, 30_000.0)
     return reference_record(args.seconds, seed=args.seed, noise=noise,
                             name=f"reference stage seed {args.seed}")
 
@@ -449,6 +389,7 @@ def _model_record(args: argparse.Namespace, progress: Progress):
     except ModelFileError as err:
         raise CommandError(f"--model {err}") from err
     rec = _load(args.input, args.fs, args.columns, units=args.units)
+    cli_support.check_model_on(model, rec)
     if not np.isclose(rec.fs, model.fs, rtol=1e-9):
         raise CommandError(f"--input {args.input}: sampled at {rec.fs:g} Hz but the model at "
                            f"{model.fs:g} Hz (expected the model's rate)")
@@ -517,7 +458,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         raise CommandError(str(err)) from err
     for w in report["warnings"]:
         if not args.json:
-            print(f"hystid identify: warning: {w}", file=sys.stderr)
+            print(f"hystid identify: warning: {cli_support.for_cli(w)}", file=sys.stderr)
     if args.out:
         from .modelfile import make_provenance
 
@@ -529,13 +470,14 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.json:
         print(dumps_strict(report))
     else:
-        rows = [[k, f"{v:.6g}"] for k, v in report["params"].items()]
-        rows += [[k, f"{report[k]:.6g}"] for k in ("u_rest", "offset")]
+        rows, yu = [[k, f"{v:.6g}"] for k, v in report["params"].items()], rec.units.get("y", "")
+        rows += [[f"{k} [{rec.units.get(x, '')}]", f"{report[k]:.6g}"]
+                 for k, x in (("u_rest", "u"), ("offset", "y"))]
         print(_table(rows, ["parameter", "estimate"]))
         v = report["validation"]
         if v is not None:
             print(f"\nvalidation ({report['validated_on']}): error {v['err_min']:.4g} .. "
-                  f"{v['err_max']:.4g}, RMS {v['rms']:.4g}, fit {v['fit_percent']:.2f} %")
+                  f"{v['err_max']:.4g} {yu}, RMS {v['rms']:.4g} {yu}, fit {v['fit_percent']:.2f} %")
         b = report["baselines"]
         for row in b["rows"]:
             model_rms = "diverged" if row["model"] is None else f"{row['model']:.4g}"
@@ -543,7 +485,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
                   f"{row['static_line']:.4g}, linear model {row['linear']:.4g}"
                   + ("" if row["beats"] else "  -> the hysteresis model does NOT beat them"))
         if b["repeat_floor"] is not None:
-            print(f"repeat floor (no deterministic model does better): {b['repeat_floor']:.4g}")
+            print(f"repeat floor (no deterministic model beats it): {b['repeat_floor']:.4g} {yu}")
         if report["converged_at"] is not None:
             print(f"converged at sample {report['converged_at']}")
     return 0
@@ -626,12 +568,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     int
         The exit status (0).
     """
-    from .identify import METHODS, identify
+    from .identify import METHODS, identify, min_samples
     from .metrics import validate
     from .reference import PAPER_PARAMS, reference_model, reference_record
 
     progress = Progress(args.quiet)
     _check_dir(args.out, args)
+    cli_support.check_seconds(args.seconds, max(min_samples(m) for m in METHODS), 30_000.0)
     truth = reference_model()
     train = reference_record(args.seconds, seed=args.seed, noise=args.noise, name="demo train")
     val = reference_record(args.seconds, seed=args.seed + 1, noise=args.noise, name="demo val")
@@ -762,7 +705,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("record", type=_path, help="record file")
     p.add_argument("--fs", type=_positive(float), help="sampling rate in Hz (if no t column)")
     p.add_argument("--val", type=_path,
-                   help="validation record (default: validate on the record itself)")
+                   help="validation record (default: the last --holdout share of the record)")
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
     p.add_argument("--units", type=_units_arg, metavar="u=V,y=um", help=UNITS_HELP)
@@ -840,7 +783,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except CommandError as err:
-        print(f"hystid {args.command}: error: {err}", file=sys.stderr)
+        print(f"hystid {args.command}: error: {cli_support.for_cli(str(err))}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except OSError as err:  # a full disk, a folder removed meanwhile: no file was half-written
         where = f" ({err.filename})" if err.filename else ""

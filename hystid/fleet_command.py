@@ -15,6 +15,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .options import integer
+
 __all__ = ["configure_parser", "run"]
 
 EXIT_BAD_INPUT = 2
@@ -88,7 +90,7 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="sampling rate in Hz (for files without a time vector or fs)")
     p.add_argument("--columns", type=_columns, default=None, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=integer(0, 2**63 - 1), default=0,
                    help="root seed; each record's seed is drawn from it and its name (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 

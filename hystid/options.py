@@ -204,8 +204,9 @@ def crop(record: Record, span: tuple[float | None, float | None] | None,
     if span is None:
         return record
     start, stop = span
-    i = 0 if start is None else int(round(start * record.fs))
-    j = record.n if stop is None else int(round(stop * record.fs))
+    # clipped before rounding: a time of 1e308 s is past the end, not an overflow
+    i = 0 if start is None else int(round(min(start * record.fs, record.n + 1.0)))
+    j = record.n if stop is None else int(round(min(stop * record.fs, record.n + 1.0)))
     if not 0 <= i < j <= record.n:
         shown = f"{'' if start is None else f'{start:g}'}:{'' if stop is None else f'{stop:g}'}"
         raise OptionError(f"{option} {shown}: record {record.name!r} covers 0..{record.duration:g}"

@@ -561,7 +561,8 @@ def diagnose(
     if not first.finite:
         raise DiagnosisError("the nominal model's simulation diverges on these records (the "
                              "Duhem stability condition (8) fails): scale the input down")
-    say(f"nominal model: train RMS {first.rms_train:.4g}, held-out RMS {first.rms_val:.4g}")
+    yu = (" " + str(train.units.get("y", ""))).rstrip()  # the unit of every RMS said
+    say(f"nominal model: train RMS {first.rms_train:.4g}{yu}, held-out RMS {first.rms_val:.4g}{yu}")
     base_model, first_fit = nominal, None
     # the candidates are refitted with this cost and initial state: so is the base
     say("refitting the nominal model alone (the base the candidates are compared with)")
@@ -576,14 +577,14 @@ def diagnose(
     t_nominal = time.perf_counter() - t_nominal
     nom = ev(base_model, phi0, drift=False) if first_fit is not None else first
     if first_fit is not None:
-        say(f"nominal model refitted: train RMS {nom.rms_train:.4g}, held-out RMS "
-            f"{nom.rms_val:.4g}")
+        say(f"nominal model refitted: train RMS {nom.rms_train:.4g}{yu}, held-out RMS "
+            f"{nom.rms_val:.4g}{yu}")
     admissibility = _admissibility(base_model, nom, vds)
     for m in admissibility:
         say(f"the nominal model is not admissible on the held-out input: {m}")
     where0 = localise(nom.segments)
     floor_rms = max(where0.noise["rms"], repeat or 0.0)
-    say(f"noise floor {where0.noise['rms']:.4g}; " + "; ".join(where0.findings[1:3]))
+    say(f"noise floor {where0.noise['rms']:.4g}{yu} RMS; " + "; ".join(where0.findings[1:3]))
 
     # ----------------------------------------------------------------- greedy rounds
     state = _Greedy(base_model, phi0, nom, where0)
@@ -716,7 +717,7 @@ def diagnose(
                         "p_value": test["p_value"], "rel_reduction": test["rel_reduction"]}
         info.update({"accepted": best, "rms_val_after": ev_best.rms_val})
         rounds.append(info)
-        say(f"round {rnd}: accepted {best}: held-out RMS {ev_best.rms_val:.4g}")
+        say(f"round {rnd}: accepted {best}: held-out RMS {ev_best.rms_val:.4g}{yu}")
 
     # ----------------------------------------------------------------- figures of merit
     nf = float(min(nf_estimates))

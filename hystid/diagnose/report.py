@@ -67,10 +67,10 @@ def summary_text(result: DiagnosisResult) -> str:
         f"Sim-to-real gap diagnosis: {s['train_samples']} train samples, {s['val_samples']} "
         f"held-out samples at {s['fs']:g} Hz",
         f"nominal model: held-out RMS {result.nominal['rms_val']:.4g}{unit} (train "
-        f"{result.nominal['rms_train']:.4g}); noise floor {result.noise_floor_rms:.4g}"
-        + (f"; repeatability {floor['repeat_floor_rms']:.4g}"
+        f"{result.nominal['rms_train']:.4g}{unit}); noise floor {result.noise_floor_rms:.4g}{unit}"
+        + (f"; repeatability {floor['repeat_floor_rms']:.4g}{unit}"
            if floor.get("repeat_floor_rms") is not None else "")
-        + f"; gap {result.nominal['gap']:.4g} to the {floor['kind']} floor",
+        + f"; gap {result.nominal['gap']:.4g}{unit} to the {floor['kind']} floor",
     ]
     if "first_fit" in result.nominal:
         r = result.nominal["first_fit"]

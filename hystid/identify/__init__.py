@@ -101,11 +101,11 @@ def identify(
 
         structure, selection = select_structure(record)
     need = min_samples(method, structure, **settings)
-    check_delays_fit(structure or Structure(), record.n, f"record {record.name!r}")
     if record.n < need:
         raise ValueError(
             f"record {record.name!r}: {record.n} samples are too few for method={method!r} "
             f"(expected at least {need})")
+    check_delays_fit(structure or Structure(), record.n, f"record {record.name!r}")
     if method == "batch":
         if progress is not None:
             progress(0, record.n)

@@ -1,0 +1,184 @@
+"""Pieces of the ``hystid`` command line kept apart from :mod:`hystid.cli`.
+
+The error and progress types every command uses, and the checks a command runs before its
+work: the length of a simulated record, the delays of a model against its input record.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import time
+from typing import NoReturn
+
+#: Exit status of a refused input or a failed write.
+EXIT_BAD_INPUT = 2
+
+__all__ = ["EXIT_BAD_INPUT", "RECORD_FILES", "CommandError", "OneLineParser", "Progress",
+           "check_model_on", "check_seconds", "for_cli", "remember"]
+
+
+class CommandError(Exception):
+    """A user-facing error: printed without a traceback, exit status 2."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (no usage block), status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``PROG: error: MESSAGE`` and a pointer to ``--help``, exit with status 2.
+
+        Parameters
+        ----------
+        message : str
+            argparse's message; an option given no value because the value starts with ``-``
+            gets the way to write it (``--crop=-1:2``).
+        """
+        missing = re.fullmatch(r"argument (--[\w-]+)(?:/\S+)?: expected one argument", message)
+        if missing:
+            option = missing.group(1)
+            message += f" (a value starting with '-' is written {option}=VALUE)"
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class Progress:
+    """Periodic progress lines on stderr (silent when ``quiet``).
+
+    Parameters
+    ----------
+    quiet : bool
+        Print nothing.
+    every : float
+        Least seconds between two periodic lines.
+    """
+
+    def __init__(self, quiet: bool = False, every: float = 1.0):
+        self.quiet = quiet
+        self.every = every
+        self._last = 0.0
+        self._t0 = time.perf_counter()
+
+    def say(self, message: str) -> None:
+        """Print one line now.
+
+        Parameters
+        ----------
+        message : str
+            The line, printed after the seconds elapsed.
+        """
+        if not self.quiet:
+            print(f"[{time.perf_counter() - self._t0:6.1f} s] {message}", file=sys.stderr)
+
+    def __call__(self, k: int, n: int) -> None:
+        """Print ``k/n`` at most once per ``every`` seconds (and at the end)."""
+        now = time.perf_counter()
+        if k >= n or now - self._last >= self.every:
+            self._last = now
+            self.say(f"sample {k}/{n} ({100.0 * k / max(n, 1):.0f} %)")
+
+
+def check_seconds(seconds: float, need: int, fs: float, option: str = "--seconds") -> None:
+    """Refuse a record length that gives fewer than ``need`` samples, before any work.
+
+    Parameters
+    ----------
+    seconds : float
+        The length asked for.
+    need : int
+        Fewest samples the command can use.
+    fs : float
+        Sampling rate in Hz.
+    option : str
+        The option's name, for the message.
+
+    Raises
+    ------
+    CommandError
+        Saying how many samples the length gives and the shortest length that works.
+    """
+    n = int(round(min(seconds * fs, 2.0**62)))
+    if n < need:
+        raise CommandError(f"{option} {seconds:g}: {n} samples at {fs:g} Hz (expected at least "
+                           f"{need} samples: {option} {need / fs:.3g} or more)")
+
+
+def check_model_on(model, rec, option: str = "--model") -> None:
+    """Refuse a model whose delays reach past most of the record it is simulated on.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+    rec : Record
+        The input record.
+    option : str
+        The model's option, for the message.
+
+    Raises
+    ------
+    CommandError
+        When the model's delays and orders are not shorter than half the record.
+    """
+    from .validate import check_delays_fit
+
+    try:
+        check_delays_fit(model.structure, rec.n, f"{option}: on {rec.name!r}")
+    except ValueError as err:
+        raise CommandError(str(err)) from err
+
+
+#: The file each record the command loaded came from, by the record's name.
+RECORD_FILES: dict[str, str] = {}
+
+
+def remember(rec, path: str):
+    """Note the file a record came from (see :func:`for_cli`); return the record.
+
+    Parameters
+    ----------
+    rec : Record
+        The loaded record.
+    path : str
+        Its file.
+
+    Returns
+    -------
+    Record
+        ``rec`` itself.
+    """
+    RECORD_FILES[rec.name] = str(path)
+    return rec
+
+
+def _columns_option(match: re.Match) -> str:
+    pairs = re.findall(r"""['"]?(\w+)['"]?\s*:\s*['"]?([^'",}]+)['"]?""", match.group(1))
+    return "--columns " + ",".join(f"{k}={v.strip()}" for k, v in pairs)
+
+
+def for_cli(message: str) -> str:
+    """An API error message as the command line should say it.
+
+    The Python syntax of a hint (``columns={'u': 1, 'y': 2}``) becomes the option that does
+    the same (``--columns u=1,y=2``), and a record named by its name alone (``record 'rec'``)
+    is also named by the file it was loaded from.
+
+    Parameters
+    ----------
+    message : str
+        The message.
+
+    Returns
+    -------
+    str
+    """
+    message = re.sub(r"columns=\{([^}]*)\}", _columns_option, message)
+    message = message.replace("or a columns= mapping", "or --columns u=NAME,y=NAME")
+    for name, path in RECORD_FILES.items():
+        if path in message:
+            continue
+        found = re.search(r"'(" + re.escape(name) + r"[^']*)'", message)
+        if found:
+            at = found.end()
+            message = f"{message[:at]} (file {path}){message[at:]}"
+    return message
