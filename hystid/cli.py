@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, cli_support
-from .cli_support import EXIT_BAD_INPUT, CommandError, OneLineParser, Progress
+from .cli_support import EXIT_BAD_INPUT, CommandError, OneLineParser, Progress  # noqa: F401
 from .options import MAX_SECONDS, integer, number
 
 #: numpy's floating-point RuntimeWarnings raised while a fit tries a diverging candidate: not
@@ -780,20 +780,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = build_parser(only=_command_word(argv))
     args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except CommandError as err:
-        print(f"hystid {args.command}: error: {cli_support.for_cli(str(err))}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except OSError as err:  # a full disk, a folder removed meanwhile: no file was half-written
-        where = f" ({err.filename})" if err.filename else ""
-        print(f"hystid {args.command}: error: {err.strerror or err}{where}; no file was "
-              "half-written and files that were already there are left as they were",
-              file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        return 130
-
+    return cli_support.run_command(args)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

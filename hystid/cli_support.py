@@ -16,7 +16,7 @@ from typing import NoReturn
 EXIT_BAD_INPUT = 2
 
 __all__ = ["EXIT_BAD_INPUT", "RECORD_FILES", "CommandError", "OneLineParser", "Progress",
-           "check_model_on", "check_seconds", "for_cli", "remember"]
+           "check_model_on", "check_seconds", "for_cli", "remember", "run_command"]
 
 
 class CommandError(Exception):
@@ -182,3 +182,36 @@ def for_cli(message: str) -> str:
             at = found.end()
             message = f"{message[:at]} (file {path}){message[at:]}"
     return message
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run a parsed command: a refused input or a failed write is one line, status 2.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line; ``args.func`` runs the command.
+
+    Returns
+    -------
+    int
+        The command's status; 2 on a :class:`CommandError`, an
+        :class:`~hystid.safeio.OutputError` raised while writing (an output that appeared
+        meanwhile) or an :class:`OSError`; 130 when interrupted.
+    """
+    from . import safeio
+
+    safeio._CLAIMS.clear()  # the outputs of an earlier command run in this process
+    try:
+        return int(args.func(args) or 0)
+    except (CommandError, safeio.OutputError) as err:
+        print(f"hystid {args.command}: error: {for_cli(str(err))}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as err:  # a full disk, a folder removed meanwhile: no file was half-written
+        where = f" ({err.filename})" if err.filename else ""
+        print(f"hystid {args.command}: error: {err.strerror or err}{where}; no file was "
+              "half-written and files that were already there are left as they were",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        return 130

@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from .safeio import OutputError, folder_lock
+
 __all__ = ["KINDS", "RECORD_SUFFIXES", "FailedSeed", "FleetError", "Job", "find_jobs",
            "fleet_client", "map_seeds", "read_results", "result_paths", "run_fleet", "run_job",
            "spawn_seeds"]
@@ -556,20 +558,25 @@ def run_fleet(source: str | os.PathLike[str] | Sequence[Job], out: str | os.Path
     if out.exists() and not out.is_dir():
         raise FleetError(f"--out {out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    rows = _previous_rows(out, kind)
-    prints = {j.name: fingerprint(j, kind, settings) for j in jobs}
-    todo = [j for j in jobs if force or not _is_done(rows.get(j.name), prints[j.name],
-                                                      retry_failed)]
-    tick = _Ticker(len(todo), f"{kind} ({len(jobs) - len(todo)} of {len(jobs)} already done)",
-                   progress)
-    if not todo:
-        tick(0, force=True)
-        return _write_results(list(rows.values()), out, kind)
-    with _client_or(client, workers, scheduler) as cl:
-        futures = {cl.submit(run_job, j, kind, settings, _job_seed(seed, j.name), pure=False,
-                             key=f"hystid-{kind}-{_job_seed(seed, j.name):x}-{i}"): j
-                   for i, j in enumerate(todo)}
-        return _collect(futures, rows, prints, out, kind, tick, write_every)
+    with contextlib.ExitStack() as stack:
+        try:  # a second run writing into the same folder fails instead of overwriting
+            stack.enter_context(folder_lock(out, "--out"))
+        except OutputError as err:
+            raise FleetError(str(err)) from err
+        rows = _previous_rows(out, kind)
+        prints = {j.name: fingerprint(j, kind, settings) for j in jobs}
+        todo = [j for j in jobs if force or not _is_done(rows.get(j.name), prints[j.name],
+                                                          retry_failed)]
+        tick = _Ticker(len(todo), f"{kind} ({len(jobs) - len(todo)} of {len(jobs)} already done)",
+                       progress)
+        if not todo:
+            tick(0, force=True)
+            return _write_results(list(rows.values()), out, kind)
+        with _client_or(client, workers, scheduler) as cl:
+            futures = {cl.submit(run_job, j, kind, settings, _job_seed(seed, j.name), pure=False,
+                                 key=f"hystid-{kind}-{_job_seed(seed, j.name):x}-{i}"): j
+                       for i, j in enumerate(todo)}
+            return _collect(futures, rows, prints, out, kind, tick, write_every)
 
 
 def _is_job_list(source: Any) -> bool:

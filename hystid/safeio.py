@@ -43,6 +43,7 @@ __all__ = [
     "check_output",
     "check_output_dir",
     "dumps_strict",
+    "folder_lock",
     "inside",
     "same_file",
     "strict_json",
@@ -141,6 +142,7 @@ def check_output(
         if not os.access(out, os.W_OK):
             raise OutputError(f"{label}: the file is not writable")
     _check_writable_folder(out.parent, label, create=create_folder)
+    _CLAIMS[_claim_key(out)] = force
     return out
 
 
@@ -258,6 +260,8 @@ def check_output_dir(
             for source in inputs:
                 if same_file(out / name, source):
                     raise OutputError(f"{label}: {name} would be the input file {source}")
+    for name in names:
+        _CLAIMS[_claim_key(out / name)] = force
     return out
 
 
@@ -309,7 +313,7 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
         yield tmp_path
         _fsync(tmp_path)
         _keep_mode(dest, tmp_path)
-        os.replace(tmp_path, dest)
+        _commit(tmp_path, dest)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
@@ -373,16 +377,127 @@ def atomic_folder(folder: PathLike) -> Iterator[Path]:
         for written in files:
             _fsync(written)
             _keep_mode(dest / written.name, written)
-        if exists:
-            for written in files:
-                os.replace(written, dest / written.name)
-            stage.rmdir()
-        else:
+        if not exists:
             os.chmod(stage, 0o777 & ~_umask())
-            os.rename(stage, dest)
+            try:
+                os.rename(stage, dest)  # fails when a folder with files appeared meanwhile
+                return
+            except OSError as err:
+                if not dest.exists():
+                    raise
+                if not dest.is_dir():
+                    raise OutputError(f"{dest}: a file of that name appeared while the command "
+                                      "ran; left as it was, nothing written") from err
+        taken = [p.name for p in files if (dest / p.name).exists()
+                 and not _CLAIMS.get(_claim_key(dest / p.name), True)]
+        if taken:
+            raise OutputError(_appeared(dest / taken[0]))
+        for written in files:
+            _commit(written, dest / written.name)
+        stage.rmdir()
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
+
+
+#: Outputs checked by :func:`check_output` or :func:`check_output_dir` in this process, and
+#: whether each may replace a file (``force``). A file that appears at a path checked as new
+#: while the command runs (another run, the user) is never replaced: the write fails instead.
+_CLAIMS: dict[str, bool] = {}
+
+
+def _claim_key(path: PathLike) -> str:
+    return os.path.abspath(os.fspath(path))
+
+
+def _appeared(dest: Path) -> str:
+    return (f"{dest}: appeared while the command ran (another run writing the same output, or "
+            "a file written there meanwhile); left as it was and nothing written (pass --force "
+            "to replace it, or choose another output)")
+
+
+def _commit(tmp: Path, dest: Path) -> None:
+    """Move a finished file in place: over ``dest`` only when its check allowed replacing.
+
+    A destination checked as new is linked without replacing (:func:`os.link` fails when a
+    file is there), so of two runs writing the same new output one wins and the other fails.
+    """
+    if _CLAIMS.pop(_claim_key(dest), True):
+        os.replace(tmp, dest)
+        return
+    try:
+        os.link(tmp, dest)
+    except FileExistsError as err:
+        raise OutputError(_appeared(dest)) from err
+    except OSError:  # a file system without hard links: claim the name, then move in place
+        try:
+            os.close(os.open(dest, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+        except FileExistsError as err:
+            raise OutputError(_appeared(dest)) from err
+        os.replace(tmp, dest)
+        return
+    os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def folder_lock(folder: PathLike, option: str = "--out") -> Iterator[Path]:
+    """Hold ``folder/.hystid.lock`` while a command writes into ``folder``.
+
+    The lock file is created exclusively and holds the process id; a lock left by a process
+    that no longer runs is taken over.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        An existing folder.
+    option : str
+        How the user named it, for the message.
+
+    Yields
+    ------
+    pathlib.Path
+        The lock file (removed on exit).
+
+    Raises
+    ------
+    OutputError
+        When another running process holds the lock.
+    """
+    lock = Path(folder) / ".hystid.lock"
+    for _ in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            break
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text().strip() or "0")
+            except (OSError, ValueError):
+                pid = 0
+            if pid > 0 and _running(pid):
+                raise OutputError(f"{option} {folder}: another hystid run (process {pid}) is "
+                                  f"writing there (lock {lock}); wait for it to end or choose "
+                                  "another folder") from None
+            with contextlib.suppress(OSError):
+                lock.unlink()  # left by a run that ended without removing it
+    else:  # pragma: no cover - lost the race for a stale lock twice
+        raise OutputError(f"{option} {folder}: another hystid run is writing there")
+    try:
+        os.write(fd, str(os.getpid()).encode())
+        os.close(fd)
+        yield lock
+    finally:
+        with contextlib.suppress(OSError):
+            lock.unlink()
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _fsync(path: Path) -> None:
