@@ -165,7 +165,9 @@ def rest_level(u: np.ndarray) -> tuple[float, bool, int]:
         Median of the leading constant segment (the first sample when there is none).
     at_rest : bool
         True when the record starts with at least :data:`REST_SAMPLES` constant samples, or
-        when its input starts at exactly zero (a generator ramping up from rest).
+        when its input starts at exactly zero or at an end of its range (a generator ramping
+        up from rest; the end of the range is the same test whatever the input's offset, so
+        that shifting the input does not change the fit).
     n_lead : int
         Length of the leading constant segment.
     """
@@ -173,7 +175,9 @@ def rest_level(u: np.ndarray) -> tuple[float, bool, int]:
     moved = np.flatnonzero(np.abs(u - u[0]) > 1e-6 * span)
     n_lead = int(moved[0]) if len(moved) else len(u)
     from_zero = abs(float(u[0])) <= 1e-12 * span
-    return float(np.median(u[:max(n_lead, 1)])), n_lead >= REST_SAMPLES or from_zero, n_lead
+    at_end = min(float(u[0] - np.min(u)), float(np.max(u) - u[0])) <= 1e-9 * span
+    return (float(np.median(u[:max(n_lead, 1)])), n_lead >= REST_SAMPLES or from_zero or at_end,
+            n_lead)
 
 
 def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, float]:
