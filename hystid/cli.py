@@ -207,8 +207,10 @@ def _one_of(names: tuple[str, ...]) -> str:
 def _identify_record(rec, args, progress: Progress, structure=None):
     """Run the chosen model/method on a record; returns the IdentificationResult."""
     from .identify import identify
+    from .validate import check_fit_size
 
     method = _method_arg(args)
+    check_fit_size(rec.n, method, f"record {rec.name!r}")
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", None) != "none"

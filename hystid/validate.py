@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING", "check_call", "check_delays_fit",
+__all__ = ["MAX_BATCH_SAMPLES", "MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING", "check_call",
+           "check_delays_fit", "check_fit_size",
            "check_model", "check_structure_size", "read_plain_text", "too_deep"]
 
 #: Largest size of a model file read (a model of the largest structure is a few kB).
@@ -29,6 +30,10 @@ MAX_MODEL_BYTES = 16 << 20
 MAX_MAGNITUDE = 1e100
 #: Deepest nesting of JSON lists and objects read in a model file.
 MAX_NESTING = 50
+#: Most samples a batch fit takes: its cost grows linearly with the record but with the
+#: hundreds of passes of the optimiser (about 0.3 ms a sample on one core, so 5 min here); a
+#: longer record is refused up front with what to do (the recursive methods run one pass).
+MAX_BATCH_SAMPLES = 1_000_000
 #: Largest radius of a pole of L1 or L2 (a pole closer to the unit circle is a drift that does
 #: not settle within any record).
 MAX_POLE_RADIUS = 1.0 - 1e-9
@@ -231,3 +236,28 @@ def check_call(record: Any, structure: Any = None) -> None:
     if structure is not None and not isinstance(structure, Structure | str):
         raise TypeError(f"structure: expected a hystid.Structure, 'auto' or None, got "
                         f"{type(structure).__name__} {structure!r}")
+
+
+def check_fit_size(n: int, method: str, where: str) -> None:
+    """Refuse a batch fit of more than :data:`MAX_BATCH_SAMPLES` samples, before the work.
+
+    Parameters
+    ----------
+    n : int
+        Samples to fit.
+    method : str
+        The identification method (only ``"batch"`` is limited).
+    where : str
+        The record, for the message.
+
+    Raises
+    ------
+    ValueError
+        Saying how long the fit would take and what to do instead.
+    """
+    if method == "batch" and n > MAX_BATCH_SAMPLES:
+        raise ValueError(
+            f"{where}: {n:,} samples are more than the batch fit takes ({MAX_BATCH_SAMPLES:,}: "
+            f"it would run for about {n * 3e-4 / 60:.0f} min); fit a part of it (--crop "
+            "START:STOP, or record[i:j] from Python), decimate it, or use --method online "
+            "(one pass, linear in the length, with progress)")
