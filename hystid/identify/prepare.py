@@ -34,6 +34,7 @@ import numpy as np
 
 from ..operating import Envelope
 from ..records import Record
+from ..records_checks import record_warnings
 
 __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "check_excitation",
            "prepare", "rest_level", "scales"]
@@ -316,6 +317,7 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     u_rest, at_rest, n_lead = rest_level(u)
     u_scale, y_med, y_scale = scales(u, y, u_rest)
     bad, notes = bad_samples(y)
+    notes += record_warnings(u, y, record.fs)
     y_ref = float(np.median(y[:n_lead][~bad[:n_lead]])) if at_rest and (~bad[:n_lead]).any() \
         else y_med
     if not at_rest:
