@@ -9,6 +9,10 @@ without bound), ``alpha <= 0`` for the Duhem block (the loop then grows instead 
 or orders and delays beyond :data:`~hystid.options.MAX_ORDER` and
 :data:`~hystid.options.MAX_DELAY`. Each check raises ``ValueError`` (the caller wraps it in its
 own error class) with a message naming the entry and what was expected.
+
+Records longer than a method takes in reasonable time and memory (:data:`MAX_BATCH_SAMPLES`
+for the batch fit, :data:`MAX_RECURSIVE_SAMPLES` for the recursive methods) are refused before
+any work, saying what to do instead (fit a part with ``--crop``, decimate, or go on-line).
 """
 
 from __future__ import annotations
@@ -20,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MAX_BATCH_SAMPLES", "MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING", "check_call",
+__all__ = ["MAX_BATCH_SAMPLES", "MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING",
+           "MAX_RECURSIVE_SAMPLES", "check_call",
            "check_delays_fit", "check_fit_size",
            "check_model", "check_structure_size", "read_plain_text", "too_deep"]
 
@@ -34,6 +39,10 @@ MAX_NESTING = 50
 #: hundreds of passes of the optimiser (about 0.3 ms a sample on one core, so 5 min here); a
 #: longer record is refused up front with what to do (the recursive methods run one pass).
 MAX_BATCH_SAMPLES = 1_000_000
+#: Most samples the recursive methods take: one pass, linear in the length (about 12 us a
+#: sample on a loaded 2-core machine with the validation and the baselines, so 40 s), and
+#: the history, the validation and the baselines keep several copies of the record in memory.
+MAX_RECURSIVE_SAMPLES = 3_000_000
 #: Largest radius of a pole of L1 or L2 (a pole closer to the unit circle is a drift that does
 #: not settle within any record).
 MAX_POLE_RADIUS = 1.0 - 1e-9
@@ -239,14 +248,17 @@ def check_call(record: Any, structure: Any = None) -> None:
 
 
 def check_fit_size(n: int, method: str, where: str) -> None:
-    """Refuse a batch fit of more than :data:`MAX_BATCH_SAMPLES` samples, before the work.
+    """Refuse a fit of more samples than the method takes, before the work.
+
+    A batch fit takes at most :data:`MAX_BATCH_SAMPLES` samples, the recursive methods at most
+    :data:`MAX_RECURSIVE_SAMPLES`.
 
     Parameters
     ----------
     n : int
         Samples to fit.
     method : str
-        The identification method (only ``"batch"`` is limited).
+        The identification method.
     where : str
         The record, for the message.
 
@@ -261,3 +273,8 @@ def check_fit_size(n: int, method: str, where: str) -> None:
             f"it would run for about {n * 3e-4 / 60:.0f} min); fit a part of it (--crop "
             "START:STOP, or record[i:j] from Python), decimate it, or use --method online "
             "(one pass, linear in the length, with progress)")
+    if n > MAX_RECURSIVE_SAMPLES:
+        raise ValueError(
+            f"{where}: {n:,} samples are more than hystid identifies in one run "
+            f"({MAX_RECURSIVE_SAMPLES:,} with --method {method}); fit a part of it (--crop "
+            "START:STOP, or record[i:j] from Python) or decimate it to a lower rate first")

@@ -21,7 +21,7 @@ from hystid.records import Record, RecordError, load_record
 from hystid.records_checks import output_bursts, output_is_drift
 from hystid.reference import reference_model, reference_record
 from hystid.safeio import OutputError, check_output, folder_lock, write_text
-from hystid.validate import MAX_BATCH_SAMPLES
+from hystid.validate import MAX_BATCH_SAMPLES, MAX_RECURSIVE_SAMPLES
 
 
 def run(args, capsys):
@@ -237,6 +237,20 @@ def test_long_records_are_refused_before_a_batch_fit(tmp_path, capsys, monkeypat
     rec.save(path)
     code, _, err = run(["identify", path, "--holdout", "0"], capsys)
     assert code == 2 and "--method online" in error_line(err) and str(path) in err
+
+
+def test_very_long_records_are_refused_for_every_method(monkeypatch):
+    n = MAX_RECURSIVE_SAMPLES + 1
+    rec = Record(np.sin(np.arange(n) / 300.0), np.cos(np.arange(n) / 300.0), 30000.0,
+                 name="very long")
+
+    def boom(*args, **kwargs):
+        raise AssertionError("the fit started")
+
+    monkeypatch.setattr("hystid.identify._run_recursive", boom)
+    for method in ("online", "eria", "ekf"):
+        with pytest.raises(ValueError, match="decimate"):
+            identify(rec, method=method)
 
 
 # --------------------------------------------------------------------------- input offset
