@@ -210,7 +210,7 @@ def _identify_record(rec, args, progress: Progress, structure=None):
     from .validate import check_fit_size
 
     method = _method_arg(args)
-    check_fit_size(rec.n, method, f"record {rec.name!r}")
+    check_fit_size(rec.n, "batch" if structure == "auto" else method, f"record {rec.name!r}")
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", None) != "none"

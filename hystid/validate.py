@@ -10,9 +10,11 @@ or orders and delays beyond :data:`~hystid.options.MAX_ORDER` and
 :data:`~hystid.options.MAX_DELAY`. Each check raises ``ValueError`` (the caller wraps it in its
 own error class) with a message naming the entry and what was expected.
 
-Records longer than a method takes in reasonable time and memory (:data:`MAX_BATCH_SAMPLES`
-for the batch fit, :data:`MAX_RECURSIVE_SAMPLES` for the recursive methods) are refused before
-any work, saying what to do instead (fit a part with ``--crop``, decimate, or go on-line).
+The command line refuses records longer than a method takes in reasonable time and memory
+(:data:`MAX_BATCH_SAMPLES` for the batch fit, :data:`MAX_RECURSIVE_SAMPLES` for the recursive
+methods) before any work, saying what to do instead (fit a part with ``--crop``, decimate, or
+go on-line); :func:`hystid.identify.identify` fits what it is given (the benchmarks measure
+long fits on purpose).
 """
 
 from __future__ import annotations
@@ -269,7 +271,7 @@ def check_fit_size(n: int, method: str, where: str) -> None:
     """
     if method == "batch" and n > MAX_BATCH_SAMPLES:
         raise ValueError(
-            f"{where}: {n:,} samples are more than the batch fit takes ({MAX_BATCH_SAMPLES:,}: "
+            f"{where}: {n:,} samples are more than hystid batch-fits ({MAX_BATCH_SAMPLES:,}: "
             f"it would run for about {n * 3e-4 / 60:.0f} min); fit a part of it (--crop "
             "START:STOP, or record[i:j] from Python), decimate it, or use --method online "
             "(one pass, linear in the length, with progress)")

@@ -222,35 +222,25 @@ def test_delays_are_bounded():
         identify(rec, structure=Structure(q1=400))
 
 
-def test_long_records_are_refused_before_a_batch_fit(tmp_path, capsys, monkeypatch):
-    n = MAX_BATCH_SAMPLES + 1
+@pytest.mark.parametrize(("method", "n", "needle"), [
+    ("batch", MAX_BATCH_SAMPLES + 1, "--method online"),
+    ("online", MAX_RECURSIVE_SAMPLES + 1, "decimate"),
+    ("eria", MAX_RECURSIVE_SAMPLES + 1, "decimate"),
+])
+def test_long_records_are_refused_before_the_fit(tmp_path, capsys, monkeypatch, method, n,
+                                                 needle):
     k = np.arange(n)
     rec = Record(np.sin(k / 300.0) + 1.0, np.sin(k / 300.0 - 0.1), 30000.0, name="long")
-
-    def boom(*args, **kwargs):
-        raise AssertionError("the fit started")
-
-    monkeypatch.setattr("hystid.identify.fit_output_error", boom)
-    with pytest.raises(ValueError, match="--crop"):
-        identify(rec, method="batch")
     path = tmp_path / "long.npz"
     rec.save(path)
-    code, _, err = run(["identify", path, "--holdout", "0"], capsys)
-    assert code == 2 and "--method online" in error_line(err) and str(path) in err
-
-
-def test_very_long_records_are_refused_for_every_method(monkeypatch):
-    n = MAX_RECURSIVE_SAMPLES + 1
-    rec = Record(np.sin(np.arange(n) / 300.0), np.cos(np.arange(n) / 300.0), 30000.0,
-                 name="very long")
+    del rec
 
     def boom(*args, **kwargs):
         raise AssertionError("the fit started")
 
-    monkeypatch.setattr("hystid.identify._run_recursive", boom)
-    for method in ("online", "eria", "ekf"):
-        with pytest.raises(ValueError, match="decimate"):
-            identify(rec, method=method)
+    monkeypatch.setattr("hystid.identify.identify", boom)
+    code, _, err = run(["identify", path, "--holdout", "0", "--method", method], capsys)
+    assert code == 2 and needle in error_line(err) and str(path) in err
 
 
 # --------------------------------------------------------------------------- input offset

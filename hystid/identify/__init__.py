@@ -88,10 +88,9 @@ def identify(
     methods run on the record less its rest level (input) and its output at rest, which is
     taken from the leading rest segment (see :mod:`hystid.identify.prepare`).
     """
-    from ..validate import check_call, check_delays_fit, check_fit_size
+    from ..validate import check_call, check_delays_fit
 
     check_call(record, structure)
-    check_fit_size(record.n, "batch" if structure == "auto" else method, f"record {record.name!r}")
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     selection = None
