@@ -226,6 +226,11 @@ def build_cases(work: Path, big: bool = True) -> list[Case]:
                                              "--crop", "0:0.02"], "error"),
         ("fs 1e-300", ["identify", str(rec), "--fs", "1e-300"], "any"),
         ("holdout 0.999", ["identify", str(rec), "--holdout", "0.999"], "error"),
+        ("structure n1a=11", ["identify", str(rec), "--structure", "n1a=11"], "error"),
+        ("fs 0", ["identify", str(rec), "--fs", "0"], "error"),
+        ("identify a folder", ["identify", str(work)], "error"),
+        ("diagnose crop 0:1e308", ["diagnose", str(rec), "--crop", "0:1e308"], "error"),
+        ("diagnose seconds-like crop nan", ["diagnose", str(rec), "--crop", "nan:"], "error"),
     ]
     cases += [Case(n, a, e) for n, a, e in opts]
 
@@ -242,11 +247,17 @@ def build_cases(work: Path, big: bool = True) -> list[Case]:
     with zipfile.ZipFile(work / "bomb.npz", "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("u.npy", b"\x93NUMPY" + b"\0" * (200 << 20))
     (work / "nocol.csv").write_text("t,a,b\n" + "".join(f"{k},{k},{k}\n" for k in range(100)))
+    (work / "inf.csv").write_text("t,u,y\n" + "".join(f"{k},{k % 7},inf\n" for k in range(100)))
+    (work / "huge_values.csv").write_text("t,u,y\n" + "".join(
+        f"{k / 1000},{(k % 17) * 1e300},{(k % 5) * 1e300}\n" for k in range(2000)))
     for name, expect in (("encrypted.npz", "error"), ("method99.npz", "error"),
                          ("method14.npz", "error"), ("empty.csv", "error"),
                          ("header_only.csv", "error"), ("nan.csv", "error"),
-                         ("binary.csv", "error"), ("bomb.npz", "error"), ("nocol.csv", "error")):
+                         ("binary.csv", "error"), ("bomb.npz", "error"), ("nocol.csv", "error"),
+                         ("inf.csv", "error"), ("huge_values.csv", "error")):
         cases.append(Case(f"record {name}", ["identify", str(work / name)], expect))
+    cases.append(Case("record huge_values.csv --model pi",
+                      ["identify", str(work / "huge_values.csv"), "--model", "pi"]))
     fifo = work / "fifo.csv"
     os.mkfifo(fifo)
     cases.append(Case("record FIFO", ["identify", str(fifo)], "error"))
@@ -289,6 +300,20 @@ def build_cases(work: Path, big: bool = True) -> list[Case]:
     model_case("n2a 10000", _model_doc(base, **{"structure.n2a": 10000}))
     model_case("envelope inf", _model_doc(base, **{"envelope.u_max": 1e308}), "any")
     model_case("not json", "{")
+    model_case("params a list", _model_doc(base, params=[1, 2, 3]))
+    model_case("version 2", _model_doc(base, version=2))
+    model_case("kind unknown", _model_doc(base, kind="preisach"))
+    model_case("params nan text", json.dumps(_model_doc(base)).replace(
+        '"alpha": ', '"alpha": NaN, "x": '))
+    delay = work / "model_delay900.json"
+    delay.write_text(json.dumps(_model_doc(base, **{"structure.q1": 900})))
+    _write_csv(work / "short.csv", t[:1000], u[:1000], y[:1000])
+    cases.append(Case("model delay longer than input", [
+        "simulate", "--model", str(delay), "--input", str(work / "short.csv"), "--out",
+        str(work / "sim_delay.csv")]))
+    unstable = work / "model_L2 pole 1.05.json"
+    cases.append(Case("diagnose --model unstable", ["diagnose", str(rec), "--model",
+                                                    str(unstable)]))
     fifo_model = work / "model_fifo.json"
     os.mkfifo(fifo_model)
     cases.append(Case("model FIFO", ["simulate", "--model", str(fifo_model), "--input",
@@ -355,6 +380,8 @@ def build_cases(work: Path, big: bool = True) -> list[Case]:
                 cases.append(Case(f"1e7 samples {name} {method}",
                                   ["identify", str(work / name), "--method", method, *extra],
                                   "any"))
+            cases.append(Case(f"1e7 samples {name} diagnose",
+                              ["diagnose", str(work / name), "--quiet", *extra], "any"))
     return cases
 
 

@@ -133,7 +133,7 @@ RECORD_FILES: dict[str, str] = {}
 
 
 def remember(rec, path: str):
-    """Note the file a record came from (see :func:`for_cli`); return the record.
+    """Note the file a record came from (see :func:`for_cli`), check its sizes, return it.
 
     Parameters
     ----------
@@ -146,8 +146,19 @@ def remember(rec, path: str):
     -------
     Record
         ``rec`` itself.
+
+    Raises
+    ------
+    CommandError
+        When its samples are beyond :data:`hystid.validate.MAX_MAGNITUDE`.
     """
+    from .validate import check_magnitudes
+
     RECORD_FILES[rec.name] = str(path)
+    try:
+        check_magnitudes(rec, str(path))
+    except ValueError as err:
+        raise CommandError(str(err)) from err
     return rec
 
 

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["MAX_BATCH_SAMPLES", "MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING",
-           "MAX_RECURSIVE_SAMPLES", "check_call",
+           "MAX_RECURSIVE_SAMPLES", "check_call", "check_magnitudes",
            "check_delays_fit", "check_fit_size",
            "check_model", "check_structure_size", "read_plain_text", "too_deep"]
 
@@ -229,6 +229,8 @@ def check_call(record: Any, structure: Any = None) -> None:
     TypeError
         For a path, an array, None or anything else in place of a record, or a structure of
         another type.
+    ValueError
+        For a record with values beyond :data:`MAX_MAGNITUDE` (:func:`check_magnitudes`).
     """
     from .model import Structure
     from .records import Record
@@ -244,6 +246,7 @@ def check_call(record: Any, structure: Any = None) -> None:
         else:
             hint = f"got {type(record).__name__}"
         raise TypeError(f"record: expected a hystid.records.Record, {hint}")
+    check_magnitudes(record)
     if structure is not None and not isinstance(structure, Structure | str):
         raise TypeError(f"structure: expected a hystid.Structure, 'auto' or None, got "
                         f"{type(structure).__name__} {structure!r}")
@@ -280,3 +283,27 @@ def check_fit_size(n: int, method: str, where: str) -> None:
             f"{where}: {n:,} samples are more than hystid identifies in one run "
             f"({MAX_RECURSIVE_SAMPLES:,} with --method {method}); fit a part of it (--crop "
             "START:STOP, or record[i:j] from Python) or decimate it to a lower rate first")
+
+
+def check_magnitudes(record: Any, where: str | None = None) -> None:
+    """Refuse a record with samples beyond :data:`MAX_MAGNITUDE` (no sensor reads 1e300).
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    where : str, optional
+        The record, for the message (its name by default).
+
+    Raises
+    ------
+    ValueError
+        Naming the signal, the largest value and the sample.
+    """
+    for label, x in (("u", record.u), ("y", record.y)):
+        k = int(np.argmax(np.abs(x)))
+        if abs(float(x[k])) > MAX_MAGNITUDE:
+            raise ValueError(f"{where or f'record {record.name!r}'}: {label} reaches {x[k]:.4g} "
+                             f"at sample {k} (expected values of magnitude at most "
+                             f"{MAX_MAGNITUDE:g}: squares of such numbers overflow; rescale "
+                             "the record, e.g. to SI or micro units)")

@@ -229,6 +229,7 @@ def run(args: argparse.Namespace) -> int:
     int
         0 on success, 2 for bad input.
     """
+    from ..validate import check_fit_size, check_magnitudes
     from .diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
 
     try:
@@ -236,6 +237,13 @@ def run(args: argparse.Namespace) -> int:
         train = _load(args.train, args, "TRAIN")
         vals = [_load(p, args, f"--val {p}") for p in args.val]
         repeats = [_load(p, args, f"--repeat {p}") for p in args.repeat]
+        try:  # the diagnosis refits the batch fit many times: the batch fit's cap holds
+            for path, rec in zip([args.train, *args.val], [train, *vals], strict=True):
+                check_magnitudes(rec, path)
+            check_fit_size(train.n, "batch", f"TRAIN {args.train}")
+        except ValueError as err:
+            raise _BadInput(str(err).replace(", or use --method online (one pass, linear in "
+                                             "the length, with progress)", "")) from err
         if args.effects is None:
             names, strict = DEFAULT_EFFECTS, False
         else:
