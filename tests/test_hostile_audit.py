@@ -368,3 +368,30 @@ def test_output_burst_and_drift_are_warned_about():
         warnings.simplefilter("ignore", RuntimeWarning)
         result = identify(Record(rec.u, drift, rec.fs), method="online")
     assert any("straight line in time" in w for w in result.info["warnings"])
+
+
+def test_records_of_huge_values_are_refused(tmp_path, capsys):
+    k = np.arange(2000)
+    rec = Record(np.sin(k / 50.0) * 1e300, np.sin(k / 50.0 - 0.2) * 1e299, 1000.0, name="huge")
+    with pytest.raises(ValueError, match="u reaches 1e\\+300"):
+        identify(rec)
+    path = tmp_path / "huge.npz"
+    rec.save(path)
+    for args in (["identify", path], ["identify", path, "--model", "pi"], ["diagnose", path]):
+        code, _, err = run(args, capsys)
+        assert code == 2 and "at most 1e+100" in error_line(err) and str(path) in err
+
+
+def test_diagnose_refuses_a_record_longer_than_the_batch_cap(tmp_path, capsys, monkeypatch):
+    n = MAX_BATCH_SAMPLES + 1
+    rec = Record(np.sin(np.arange(n) / 300.0), np.cos(np.arange(n) / 300.0), 30000.0)
+    path = tmp_path / "long.npz"
+    rec.save(path)
+
+    def boom(*args, **kwargs):
+        raise AssertionError("the diagnosis started")
+
+    monkeypatch.setattr("hystid.diagnose.diagnosis.diagnose", boom)
+    code, _, err = run(["diagnose", path, "--quiet"], capsys)
+    line = error_line(err)
+    assert code == 2 and "--crop" in line and "--method online" not in line
