@@ -214,13 +214,15 @@ def _identify_record(rec, args, progress: Progress, structure=None):
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", None) != "none"
+        settings["say"] = progress.say
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
     if getattr(args, "model", "duhem") == "pi":
         from .identify.pi_recursive import identify_pi
 
         if method == "batch":
-            return identify_pi(rec, method="batch", **settings)
+            return identify_pi(rec, method="batch", offset=settings["offset"],
+                               **({"skip": settings["skip"]} if "skip" in settings else {}))
         return identify_pi(rec, method="recursive")
     return identify(rec, method=method, structure=structure, **settings)
 

@@ -8,6 +8,7 @@ stable and minimum phase, and alpha stays positive (Assumption 1).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -527,6 +528,7 @@ def fit_output_error(
     max_nfev: int = 300,
     tol: float = 1e-12,
     name: str = "identified stage",
+    say: Callable[[str], None] | None = None,
 ) -> IdentificationResult:
     """Identify the sandwich off-line by output-error least squares.
 
@@ -563,6 +565,9 @@ def fit_output_error(
         ``ftol``, ``xtol`` and ``gtol`` of the solver.
     name : str
         Name of the identified model.
+    say : callable, optional
+        Called with a progress line as each start is screened and each of the two best is
+        polished (a fit of a long record runs for minutes).
 
     Returns
     -------
@@ -580,15 +585,17 @@ def fit_output_error(
     problem = _OutputError(prep, structure, x0n, offset and x0 is None, admissible,
                            fit_state=x0 is None)
     starts = _starts(prep, structure, theta0, linear_init)
-    screened = []
-    for label, start in starts.items():
+    screened, say = [], say or (lambda line: None)
+    for i, (label, start) in enumerate(starts.items()):
+        say(f"batch fit of {record.n} samples: start {i + 1} of {len(starts)} ({label})")
         z0 = np.r_[problem.rp.to_z(start[:-1]), start[-1], 0.0]
         sol = problem.solve(z0, SCREEN_NFEV if len(starts) > 1 else max_nfev, tol)
         screened.append((sol.cost, label, sol))
     screened.sort(key=lambda item: item[0])
     polished = []
-    for _, label, sol in screened[:2]:
+    for i, (_, label, sol) in enumerate(screened[:2]):
         if len(starts) > 1:
+            say(f"batch fit: polishing the {'best' if i == 0 else 'second best'} start ({label})")
             sol = problem.solve(sol.x, max_nfev, tol)
         polished.append((sol.cost, label, sol))
     cost, label, sol = min(polished, key=lambda item: item[0])
