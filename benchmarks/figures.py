@@ -167,7 +167,9 @@ def reference_identification(method: str, seed: int = 0, noise: float = 1e-3,
     dict
         ``final_err`` (max relative parameter error; None for the PI sandwich, whose
         parameters are not the stage's), ``val_min``, ``val_max``, ``val_rms`` (um; absent
-        when the model is unstable), ``restarts``, ``seconds``, and for recursive methods
+        when the model is unstable), ``restarts``, ``seconds``, ``converged`` (1.0 when
+        ``final_err`` is finite and under 10 %, else 0.0; None for the PI sandwich), and for
+        recursive methods
         ``to_2pc``, ``to_01pc`` (samples until the error stays within 2 % / 0.1 %),
         ``err_at_1000`` and ``nan``.
     """
@@ -183,6 +185,10 @@ def reference_identification(method: str, seed: int = 0, noise: float = 1e-3,
     row = {"method": method, "seed": seed, "noise_nm": noise * 1e3,
            "seconds": time.perf_counter() - t0, "restarts": res.info.get("n_recoveries", 0),
            "final_err": None if method == "pi" else max_relative_error(res.model.theta)}
+    # converged: a well-conditioned yes/no where final_err is not (a diverging run ends
+    # wherever round-off takes it, which differs from one CPU or instruction set to another)
+    row["converged"] = (None if row["final_err"] is None else
+                        float(bool(np.isfinite(row["final_err"]) and row["final_err"] < 0.1)))
     row["samples_per_s"] = samples / row["seconds"]
     if res.history is not None and method != "pi":
         err = np.max(np.abs(res.history - TRUTH) / np.abs(TRUTH), axis=1)

@@ -59,6 +59,7 @@ def test_every_gate_figure_has_a_baseline_with_a_tolerance():
         assert entry["rtol"] >= 0 and entry["atol"] >= 0, name
 
 
+@pytest.mark.slow
 def test_accuracy_figures_hold_their_baseline():
     baseline_text = gate.BASELINE.read_text()
     findings = gate.check(gate.compute(), gate.load_baseline())
