@@ -54,10 +54,11 @@ def identify(
     method: str = "batch",
     structure: Structure | str | None = None,
     *,
+    model: str = "duhem",
     progress: Callable[[int, int], None] | None = None,
     **settings: Any,
 ) -> IdentificationResult:
-    """Identify the Duhem sandwich from a record.
+    """Identify a sandwich model from a record.
 
     Parameters
     ----------
@@ -70,6 +71,12 @@ def identify(
         Model structure; the paper's experimental one by default; ``"auto"`` chooses orders
         and delays on held-out error (:func:`~hystid.identify.structure.select_structure`,
         its table in ``result.info["structure_selection"]``).
+    model : str
+        The member of the model family (:data:`hystid.identify.members.MEMBERS`): ``"duhem"``
+        (default), ``"pi"``, ``"pi-stage"``, or ``"auto"`` to choose between
+        :data:`~hystid.identify.members.AUTO_CANDIDATES` on data held out inside the record
+        (:func:`~hystid.identify.members.select_member`; batch only, its table in
+        ``result.info["member_selection"]``). ``structure`` applies to the Duhem sandwich.
     progress : callable, optional
         Called as ``progress(k, n)`` while a long run goes on.
     **settings
@@ -90,6 +97,8 @@ def identify(
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if model != "duhem":
+        return _identify_member(record, method, structure, model, progress, settings)
     selection = None
     if isinstance(structure, str):
         if structure != "auto":
@@ -111,6 +120,27 @@ def identify(
     if selection is not None:
         result.info["structure_selection"] = selection
     return result
+
+
+def _identify_member(record: Record, method: str, structure: Any, model: str,
+                     progress: Callable[[int, int], None] | None,
+                     settings: dict) -> IdentificationResult:
+    """``identify`` for a member other than the default Duhem sandwich, or ``"auto"``."""
+    from .members import member, select_member
+
+    if structure is not None:
+        raise ValueError(f"structure: applies to model='duhem' only (got model={model!r}); a "
+                         "member fixes its own structure")
+    if model == "auto":
+        if method != "batch":
+            raise ValueError(f"model='auto' chooses on batch fits (got method={method!r}); "
+                             "pass model='duhem' or 'pi' for an on-line method")
+        return select_member(record, progress=progress, **settings)
+    chosen = member(model)
+    if chosen.kind == "pi" and method not in ("batch", "online"):
+        raise ValueError(f"method: the PI sandwich is identified by 'batch' or 'online' (its "
+                         f"recursive identifier), got {method!r}")
+    return chosen.fit(record, method, progress=progress, **settings)
 
 
 def _run_recursive(record: Record, method: str, structure: Structure | None,
