@@ -423,6 +423,7 @@ double hystid_ff_step(hystid_ff_state *s, double r)
     }
     s->yd = x[HX_FF_OFF_Y + HX_FF_LY - 1 - (HX_FF_Q + HX_FF_P)];
     w1p = x[HX_FF_OFF_W1 + HX_FF_H1 - 1];
+    (void)w1p; /* the Duhem block's state only */
 #if HX_FF_KIND == 0
     {
         int far = 0;

@@ -325,6 +325,7 @@ def c_sources(
     source: str = "",
     compensator: Mapping[str, Any] | None = None,
     rpem_sigma: float | None = None,
+    notes: list[str] | None = None,
 ) -> dict[str, str]:
     """The text of ``hystid_model.h`` and ``hystid_model.c`` for a model.
 
@@ -338,6 +339,9 @@ def c_sources(
         Options of :func:`hystid.compensate.feedforward` for the exported compensator.
     rpem_sigma : float, optional
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
+    notes : list of str, optional
+        Receives what the export leaves out and why (a model whose compensator cannot be
+        built is exported without it, ``HYSTID_NO_FF`` defined).
 
     Returns
     -------
@@ -347,14 +351,24 @@ def c_sources(
     Raises
     ------
     ValueError
-        When the compensator cannot be built for the model (L1 not minimum phase, a PI
-        operator without an exact inverse) or a number is not finite.
+        When the compensator cannot be built with the ``compensator`` options given, or a
+        number is not finite.
     """
     from .. import __version__
 
     duhem = isinstance(model, DuhemSandwich)
     mhead, msrc = _model_part(model)
-    fhead, fsrc = _ff_part(ff_chain(model, **dict(compensator or {})))
+    try:
+        fhead, fsrc = _ff_part(ff_chain(model, **dict(compensator or {})))
+    except ValueError as err:
+        if compensator:  # options asked for explicitly: their error is the answer
+            raise
+        reason = str(err).replace("*/", "* /")
+        fhead = (f"\n/* No feed-forward compensator: {reason}. */\n"
+                 "#define HYSTID_NO_FF 1\n")
+        fsrc = ""
+        if notes is not None:
+            notes.append(f"no feed-forward compensator in the export: {reason}")
     rhead = rsrc = ""
     if duhem:
         rhead, rsrc = _rpem_part(rpem_start(model, rpem_sigma))
@@ -373,7 +387,7 @@ def c_sources(
         helpers = MODEL_COMMON[MODEL_COMMON.index("static double hx_max"):]
     source_text = (banner + '#include <math.h>\n\n#include "hystid_model.h"\n' + helpers
                    + "\n/* ---- the placed model */\n" + msrc
-                   + "\n/* ---- the feed-forward compensator */\n" + fsrc
+                   + ("\n/* ---- the feed-forward compensator */\n" + fsrc if fsrc else "")
                    + ("\n/* ---- the on-line identifier */\n" + rsrc if duhem else ""))
     return {"hystid_model.h": header, "hystid_model.c": source_text}
 
@@ -386,6 +400,7 @@ def export_c(
     source: str = "",
     compensator: Mapping[str, Any] | None = None,
     rpem_sigma: float | None = None,
+    notes: list[str] | None = None,
 ) -> list[Path]:
     """Write ``hystid_model.h`` and ``hystid_model.c`` into a folder.
 
@@ -403,6 +418,8 @@ def export_c(
         Options of :func:`hystid.compensate.feedforward` (see :func:`c_sources`).
     rpem_sigma : float, optional
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
+    notes : list of str, optional
+        Receives what the export leaves out and why (see :func:`c_sources`).
 
     Returns
     -------
@@ -420,7 +437,8 @@ def export_c(
     from ..safeio import check_output_dir, write_text
 
     out = check_output_dir(folder, C_FILES, option="--c", force=force)
-    texts = c_sources(model, source=source, compensator=compensator, rpem_sigma=rpem_sigma)
+    texts = c_sources(model, source=source, compensator=compensator, rpem_sigma=rpem_sigma,
+                      notes=notes)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name in C_FILES:
