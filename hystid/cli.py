@@ -814,8 +814,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         fleet_command.configure_parser(p)
         p.set_defaults(func=fleet_command.run)
 
-    p = sub.add_parser("export", help="a saved model as C99 (model, compensator, RPEM step)",
-                       description="Write a saved model as C99 DIR/hystid_model.h and .c.")
+    p = sub.add_parser("export", help="a saved model as C99 (model, compensator, RPEM step)")
     if only in (None, "export"):
         from .export import command as export_command
 

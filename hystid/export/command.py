@@ -55,6 +55,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The sub-command's parser.
     """
+    parser.description = ("Write a saved model as C99 DIR/hystid_model.h and DIR/hystid_model.c: "
+                          "the placed model's step, the feed-forward compensator's step and "
+                          "the on-line identifier's step (no allocation, only math.h).")
     parser.add_argument("model", metavar="MODEL", help="a saved model file (hystid identify "
                         "--out writes DIR/model.json)")
     parser.add_argument("--c", dest="c_dir", required=True, metavar="DIR",
