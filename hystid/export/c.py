@@ -21,7 +21,7 @@ What each function is:
   earlier (during the first ``HYSTID_FF_DELAY`` calls, the rest command).
 * ``hystid_rpem_step`` -- one sample of the on-line identifier's recursion
   (:func:`hystid.identify.online.rpem_run`), warm-started from the saved model (see
-  :func:`rpem_start`); Duhem models only. The start-up solve of
+  :func:`hystid.export.rpem.rpem_start`); Duhem models only. The start-up solve of
   :class:`~hystid.identify.online.OnlineIdentifier` (a batch fit) is not part of the export.
 """
 
@@ -39,11 +39,13 @@ from ..model import DuhemSandwich
 from ._c_ff import FF_CHAIN, FF_PLANNER
 from ._c_model import DUHEM_STEP, MODEL_COMMON, PI_STEP
 from ._c_rpem import RPEM_STEP
+from .rpem import rpem_start
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..compensate.compensator import _Chain
     from ..identify.online import OnlineIdentifier
     from ..pi import PISandwich
+    from ..records import Record
 
 __all__ = ["C_FILES", "c_sources", "export_c", "ff_chain", "rpem_start"]
 
@@ -195,72 +197,6 @@ def _ff_part(chain: _Chain) -> tuple[str, str]:
     return head, src + FF_CHAIN
 
 
-def rpem_start(model: DuhemSandwich, sigma: float | None = None) -> OnlineIdentifier:
-    """The on-line identifier warm-started from a model: the state ``hystid_rpem_init`` sets.
-
-    The recursion (:func:`hystid.identify.online.rpem_run`) starts at the model's parameters
-    and sensor offset with ``P`` at the identifier's covariance reset (``min(1, trace_max /
-    (npar + 1))`` times the identity), its signal windows at the model's rest and its residual
-    scale at ``sigma``; the other settings are :class:`~hystid.identify.online.OnlineIdentifier`'s
-    defaults. Its input is ``u - model.u_rest``.
-
-    Parameters
-    ----------
-    model : DuhemSandwich
-        The model to start from.
-    sigma : float, optional
-        Initial residual scale (output units): the clipping of step 2 starts at ``clip``
-        times it. By default a thousandth of the output span the model's static line gives
-        over its input envelope (``1e-3`` without an envelope).
-
-    Returns
-    -------
-    OnlineIdentifier
-        Running (its start-up solve skipped), ready for ``rpem_run(ident._buf, ident._ints,
-        u - u_rest, y, ...)``.
-    """
-    from ..identify import online as on
-
-    if not isinstance(model, DuhemSandwich):
-        raise ValueError("the on-line identifier (RPEM) is exported for Duhem models only")
-    if sigma is None:
-        sigma = _default_sigma(model)
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma: expected a positive residual scale, got {sigma!r}")
-    ident = on.OnlineIdentifier(model.structure, model.fs)
-    npar = len(model.theta)
-    ident._est[:npar] = model.theta
-    ident._est[npar] = model.offset
-    preset = ident._sett[on._S_PRESET]
-    ident.P[:] = np.diag([preset] * npar + [preset * ident._sett[on._S_TRACK]])
-    ident._est_good[:] = ident._est
-    ident._P_good[:] = ident.P
-    ident._scal[on._SIG] = sigma
-    ident._scal[on._SHORT] = ident._scal[on._LONG] = sigma**2
-    w = ident.window
-    rest = model.at_rest()
-    U, W1, W2, Yh, Ym = ident._windows[:5]
-    U[:w] = 0.0
-    W1[:w] = 0.0
-    W2[:w] = rest.window("w2", 1)[0]
-    Yh[:w] = Ym[:w] = rest.window("y", 1)[0]
-    ident._ints[on._I_POS] = w
-    ident._running = True
-    ident._verify_at = None
-    ident.u_rest_ = model.u_rest
-    return ident
-
-
-def _default_sigma(model: DuhemSandwich) -> float:
-    env = model.envelope
-    if env is None:
-        return 1e-3
-    gain = model.params["f1"] * (1.0 + np.sum(model.b1)) / (1.0 + np.sum(model.a1)) \
-        * model._l2_gain()
-    value = 1e-3 * abs(gain) * (env.u_max - env.u_min)
-    return float(value) if np.isfinite(value) and value > 0 else 1e-3
-
-
 def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
     """(header text, source text) of the on-line identifier's step."""
     from ..identify import online as on
@@ -325,6 +261,7 @@ def c_sources(
     source: str = "",
     compensator: Mapping[str, Any] | None = None,
     rpem_sigma: float | None = None,
+    rpem_record: Record | None = None,
     notes: list[str] | None = None,
 ) -> dict[str, str]:
     """The text of ``hystid_model.h`` and ``hystid_model.c`` for a model.
@@ -339,6 +276,8 @@ def c_sources(
         Options of :func:`hystid.compensate.feedforward` for the exported compensator.
     rpem_sigma : float, optional
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
+    rpem_record : Record, optional
+        A record of the stage for the on-line identifier's starting information.
     notes : list of str, optional
         Receives what the export leaves out and why (a model whose compensator cannot be
         built is exported without it, ``HYSTID_NO_FF`` defined).
@@ -371,7 +310,7 @@ def c_sources(
             notes.append(f"no feed-forward compensator in the export: {reason}")
     rhead = rsrc = ""
     if duhem:
-        rhead, rsrc = _rpem_part(rpem_start(model, rpem_sigma))
+        rhead, rsrc = _rpem_part(rpem_start(model, rpem_record, rpem_sigma))
     kind = "Duhem" if duhem else "Prandtl-Ishlinskii"
     units = f"u in {model.units.get('u', '?')}, y in {model.units.get('y', '?')}"
     banner = (f"/* Generated by hystid {__version__} (hystid export --c) from "
@@ -400,6 +339,7 @@ def export_c(
     source: str = "",
     compensator: Mapping[str, Any] | None = None,
     rpem_sigma: float | None = None,
+    rpem_record: Record | None = None,
     notes: list[str] | None = None,
 ) -> list[Path]:
     """Write ``hystid_model.h`` and ``hystid_model.c`` into a folder.
@@ -418,6 +358,8 @@ def export_c(
         Options of :func:`hystid.compensate.feedforward` (see :func:`c_sources`).
     rpem_sigma : float, optional
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
+    rpem_record : Record, optional
+        A record of the stage for the on-line identifier's starting information.
     notes : list of str, optional
         Receives what the export leaves out and why (see :func:`c_sources`).
 
@@ -438,7 +380,7 @@ def export_c(
 
     out = check_output_dir(folder, C_FILES, option="--c", force=force)
     texts = c_sources(model, source=source, compensator=compensator, rpem_sigma=rpem_sigma,
-                      notes=notes)
+                      rpem_record=rpem_record, notes=notes)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name in C_FILES:

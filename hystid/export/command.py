@@ -72,6 +72,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rpem-sigma", type=_positive, default=None, metavar="S",
                         help="on-line identifier: initial residual scale in output units "
                         "(default: 1e-3 of the model's output span)")
+    parser.add_argument("--rpem-record", default=None, metavar="REC",
+                        help="on-line identifier: a record of the stage for its starting "
+                        "covariance and residual scale (default: the model on the paper's "
+                        "excitation within its envelope)")
     parser.add_argument("--quiet", action="store_true", help="print nothing on success")
 
 
@@ -96,15 +100,21 @@ def run(args: argparse.Namespace) -> int:
     notes: list[str] = []
     try:
         model = load_model(args.model)
+        record = None
+        if args.rpem_record is not None:
+            from ..records import load_record
+
+            record = load_record(args.rpem_record)
         paths = export_c(model, args.c_dir, force=args.force, source=str(args.model),
-                         compensator=options or None, rpem_sigma=args.rpem_sigma, notes=notes)
+                         compensator=options or None, rpem_sigma=args.rpem_sigma,
+                         rpem_record=record, notes=notes)
     except ModelFileError as err:
         return _fail(str(err))
     except ValueError as err:  # OutputError (a ValueError) and the generator's refusals
         return _fail(str(err))
     except OSError as err:
-        return _fail(f"{err.strerror or err} ({err.filename or args.c_dir}); nothing was "
-                     "half-written")
+        return _fail(f"--c {args.c_dir}: cannot write there ({err.strerror or err}"
+                     f"{f': {err.filename}' if err.filename else ''}); no file was half-written")
     for note in notes:
         print(f"hystid export: note: {note}", file=sys.stderr)
     if not args.quiet:
