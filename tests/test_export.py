@@ -19,7 +19,7 @@ from hystid import DuhemSandwich
 from hystid.cli import main
 from hystid.compensate import feedforward
 from hystid.compensate.compensator import smoothing_model
-from hystid.export import c_sources, export_c, ff_chain, rpem_start
+from hystid.export import c_sources, export_c, ff_chain, ff_options, rpem_start
 from hystid.identify.online import rpem_run
 from hystid.operating import Envelope
 from hystid.pi import PISandwich, PIStructure, pi_thresholds
@@ -198,11 +198,11 @@ def test_model_compensator_and_rpem_match_on_stage_a(tmp_path):
     for rec in (prbn, load_record(STAGE_A / "sine50_1.csv")):
         assert_close(run(exe, "model", rec.u)[:, 0], model.simulate(rec.u, check=False).y)
     sine = load_record(STAGE_A / "sine50_1.csv")
-    r = sine.y[:3_000] - model.offset
-    ff = feedforward(model, r, full_output=True, **options)
+    r = sine.y[:3_000]  # a measured displacement, record units
+    ff = feedforward(model, r - model.offset, full_output=True, **ff_options(model, **options))
     D = ff_chain(model, **options).advance
     out = run(exe, "ff", np.concatenate([r, np.full(D, r[-1])]))
-    assert_close(out[D:, 0], ff.u)
+    assert_close(out[D:, 0], ff.u + model.u_rest)
     assert not np.all(ff.status & 4)  # not simply saturated
     n = 4_000
     ident = rpem_start(model, prbn)
@@ -214,15 +214,16 @@ def test_model_compensator_and_rpem_match_on_stage_a(tmp_path):
 
 # --------------------------------------------------------------------------- compensator
 def _ff_case(model, r, tmp_path, **options):
+    """The C compensator on a reference in record units against
+    ``feedforward(model, r - offset, **ff_options(model, ...)) + u_rest``."""
     exe = build(c_sources(model, compensator=options or None), tmp_path)
-    chain = ff_chain(model, **options)
-    D = chain.advance
-    ff = feedforward(model, r, full_output=True, **options)
+    D = ff_chain(model, **options).advance
+    ff = feedforward(model, r - model.offset, full_output=True, **ff_options(model, **options))
     out = run(exe, "ff", np.concatenate([r, np.full(D, r[-1])]))
     rest = out[:D]
     assert np.all(rest[:, 0] == rest[0, 0])
-    assert_close(out[D:, 0], ff.u)
-    assert_close(out[D:, 1], ff.yd)
+    assert_close(out[D:, 0], ff.u + model.u_rest)
+    assert_close(out[D:, 1], ff.yd + model.offset)
     np.testing.assert_array_equal(out[D:, 2].astype(int), ff.status)
     return ff
 
@@ -253,6 +254,19 @@ def test_ff_step_matches_for_a_pi_model(placed, tmp_path):
     t = np.arange(3_000) / model.fs
     r = 0.9 * (1 - np.cos(2 * np.pi * 25 * t))
     _ff_case(model, r, tmp_path, u_limits=(-20.0, 20.0))
+
+
+def test_ff_limits_default_to_the_envelope_in_record_units():
+    model = placed_duhem()
+    env = model.envelope
+    pad = 0.1 * (env.u_max - env.u_min)
+    low, high = ff_options(model)["u_limits"]
+    assert np.isclose(low + model.u_rest, env.u_min - pad)
+    assert np.isclose(high + model.u_rest, env.u_max + pad)
+    assert ff_options(model, u_limits=(-1.0, 2.0))["u_limits"] == (-1.0 - model.u_rest,
+                                                                   2.0 - model.u_rest)
+    head = c_sources(model)["hystid_model.h"]
+    assert f"#define HYSTID_FF_U_MIN ({env.u_min - pad - model.u_rest + model.u_rest!r})" in head
 
 
 def test_pi_without_inverse_is_exported_without_compensator():

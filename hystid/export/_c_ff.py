@@ -415,13 +415,13 @@ double hystid_ff_step(hystid_ff_state *s, double r)
 #if HX_FF_KIND == 1
     double pinv[HX_FF_NPI], tail, cum;
 #endif
-    hx_ff_push_reference(x, r);
+    hx_ff_push_reference(x, r - HX_FF_R_SHIFT);
     if (s->n < HYSTID_FF_DELAY) {
         /* priming: the first HYSTID_FF_DELAY references are read in, the stage rests */
         s->n += 1;
         return s->u;
     }
-    s->yd = x[HX_FF_OFF_Y + HX_FF_LY - 1 - (HX_FF_Q + HX_FF_P)];
+    s->yd = x[HX_FF_OFF_Y + HX_FF_LY - 1 - (HX_FF_Q + HX_FF_P)] + HX_FF_R_SHIFT;
     w1p = x[HX_FF_OFF_W1 + HX_FF_H1 - 1];
     (void)w1p; /* the Duhem block's state only */
 #if HX_FF_KIND == 0
@@ -500,9 +500,9 @@ double hystid_ff_step(hystid_ff_state *s, double r)
     if (HX_FF_N1B > 0) {
         x[HX_FF_OFF_U + HX_FF_N1B - 1] = u;
     }
-    s->u = u;
+    s->u = u + HX_FF_U_SHIFT;
     s->status = status;
-    return u;
+    return s->u;
 }
 
 double hystid_ff_desired(const hystid_ff_state *s)

@@ -14,11 +14,13 @@ What each function is:
 * ``hystid_model_step`` -- ``model.simulate(u).y`` one sample at a time: the recorded input in
   (record units), the displacement out (record units, the sensor offset included), from rest
   (the Duhem state at the model's ``rest_memory``).
-* ``hystid_ff_step`` -- :func:`hystid.compensate.feedforward` (its defaults, or the options
-  given) one sample at a time. The Python function reads the reference ``advance`` samples
-  ahead (the delays of L1 and L2 and the reversal planner's preview); a causal step cannot, so
-  the C step returns the command for the reference ``HYSTID_FF_DELAY = advance`` samples
-  earlier (during the first ``HYSTID_FF_DELAY`` calls, the rest command).
+* ``hystid_ff_step`` -- :func:`hystid.compensate.feedforward` one sample at a time, in the
+  record's units (the reference less the sensor offset in, the command plus the rest level
+  out; limits from the model's envelope by default, see :func:`ff_options`). The Python
+  function reads the reference ``advance`` samples ahead (the delays of L1 and L2 and the
+  reversal planner's preview); a causal step cannot, so the C step returns the command for
+  the reference ``HYSTID_FF_DELAY = advance`` samples earlier (during the first
+  ``HYSTID_FF_DELAY`` calls, the rest command).
 * ``hystid_rpem_step`` -- one sample of the on-line identifier's recursion
   (:func:`hystid.identify.online.rpem_run`), warm-started from the saved model (see
   :func:`hystid.export.rpem.rpem_start`); Duhem models only. The start-up solve of
@@ -47,7 +49,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..pi import PISandwich
     from ..records import Record
 
-__all__ = ["C_FILES", "c_sources", "export_c", "ff_chain", "rpem_start"]
+__all__ = ["C_FILES", "ENVELOPE_MARGIN", "c_sources", "export_c", "ff_chain", "ff_options",
+           "rpem_start"]
 
 #: The files :func:`export_c` writes.
 C_FILES = ("hystid_model.h", "hystid_model.c")
@@ -118,35 +121,74 @@ def _model_part(model: DuhemSandwich | PISandwich) -> tuple[str, str]:
     return head, src
 
 
-def ff_chain(model: DuhemSandwich | PISandwich, **options: Any) -> _Chain:
-    """The compensator chain :func:`hystid.compensate.feedforward` runs for ``model``.
+#: Share of the identified input span the exported compensator's default limits add at each
+#: end of the model's envelope.
+ENVELOPE_MARGIN = 0.1
+_FF_KEYS = ("u_limits", "reference_model", "reference_lead", "preview", "duhem_bound")
+
+
+def ff_options(model: DuhemSandwich | PISandwich, **options: Any) -> dict[str, Any]:
+    """The keyword arguments of :func:`hystid.compensate.feedforward` the export runs with.
+
+    The exported step works in the record's units: it takes the reference with the sensor
+    offset in and returns the command with the rest level in, i.e. it is
+    ``feedforward(model, r - offset, **ff_options(model)) + u_rest``. So ``u_limits`` given here
+    are in the record's units and returned relative to the rest; by default they are the
+    model's input envelope widened by :data:`ENVELOPE_MARGIN` of its span at each end, or,
+    without an envelope, ``feedforward``'s own default. The other options not given take
+    ``feedforward``'s defaults.
 
     Parameters
     ----------
     model : DuhemSandwich or PISandwich
         The model.
     **options
-        Keyword arguments of :func:`~hystid.compensate.feedforward` (``u_limits``,
-        ``reference_model``, ``reference_lead``, ``preview``, ``duhem_bound``); the ones not
-        given take that function's defaults.
+        ``u_limits`` (record units), ``reference_model``, ``reference_lead``, ``preview``,
+        ``duhem_bound``.
+
+    Returns
+    -------
+    dict
+        All five options, ``u_limits`` relative to the rest level.
+    """
+    from ..compensate import compensator as comp
+
+    unknown = sorted(set(options) - set(_FF_KEYS))
+    if unknown:
+        raise ValueError(f"compensator options: unknown {unknown} (expected {list(_FF_KEYS)})")
+    params = inspect.signature(comp.feedforward).parameters
+    kw = {k: options.get(k, params[k].default) for k in _FF_KEYS}
+    if "u_limits" in options:
+        low, high = (float(v) - model.u_rest for v in options["u_limits"])
+        kw["u_limits"] = (low, high)
+    elif model.envelope is not None:
+        env = model.envelope
+        pad = ENVELOPE_MARGIN * (env.u_max - env.u_min)
+        kw["u_limits"] = (env.u_min - pad - model.u_rest, env.u_max + pad - model.u_rest)
+    return kw
+
+
+def ff_chain(model: DuhemSandwich | PISandwich, **options: Any) -> _Chain:
+    """The compensator chain the exported ``hystid_ff_step`` runs (see :func:`ff_options`).
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+    **options
+        As for :func:`ff_options`.
 
     Returns
     -------
     hystid.compensate.compensator._Chain
-        The arrays of the compiled chain (what the C compensator is generated from).
+        The arrays of the compiled chain of :func:`hystid.compensate.feedforward`.
     """
     from ..compensate import compensator as comp
 
-    params = inspect.signature(comp.feedforward).parameters
-    keys = ("u_limits", "reference_model", "reference_lead", "preview", "duhem_bound")
-    unknown = sorted(set(options) - set(keys))
-    if unknown:
-        raise ValueError(f"compensator options: unknown {unknown} (expected {list(keys)})")
-    kw = {k: options.get(k, params[k].default) for k in keys}
-    return comp._build(model, kind=comp.KIND_DUHEM, **kw)
+    return comp._build(model, kind=comp.KIND_DUHEM, **ff_options(model, **options))
 
 
-def _ff_part(chain: _Chain) -> tuple[str, str]:
+def _ff_part(chain: _Chain, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
     """(header text, source text) of the compensator."""
     from ..compensate import compensator as comp
 
@@ -154,17 +196,17 @@ def _ff_part(chain: _Chain) -> tuple[str, str]:
     kind = int(ispec[comp._KIND])
     if kind not in (comp.KIND_DUHEM, comp.KIND_PI, comp.KIND_LINEAR):
         raise ValueError(f"compensator kind {kind} cannot be exported")
-    rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX]))
+    rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX])) + model.u_rest
     P = int(ispec[comp._P])
-    head = (f"\n/* Feed-forward compensator (hystid.compensate.feedforward). The step takes the "
-            f"reference r(n)\n   and returns the command for r(n - HYSTID_FF_DELAY): the "
-            f"Python compensator reads the\n   reference {chain.advance} samples ahead "
-            f"(delays q1 + q2 = {chain.delay}, planner preview {P}"
-            f"{f', reference lead {chain.lead}' if chain.lead else ''}). */\n"
+    head = (f"\n/* Feed-forward compensator: hystid.compensate.feedforward(model, r - offset) + "
+            f"u_rest, in the\n   record's units. The step takes the reference r(n) and returns "
+            f"the command for\n   r(n - HYSTID_FF_DELAY): the Python compensator reads the "
+            f"reference {chain.advance} samples ahead\n   (delays q1 + q2 = {chain.delay}, "
+            f"planner preview {P}{f', reference lead {chain.lead}' if chain.lead else ''}). */\n"
             + _define("HYSTID_FF_DELAY", chain.advance) + _define("HYSTID_FF_PREVIEW", P)
             + _define("HYSTID_FF_NX", int(ispec[comp._NX]))
-            + _define("HYSTID_FF_U_MIN", float(fpar[comp._UMIN]))
-            + _define("HYSTID_FF_U_MAX", float(fpar[comp._UMAX]))
+            + _define("HYSTID_FF_U_MIN", float(fpar[comp._UMIN]) + model.u_rest)
+            + _define("HYSTID_FF_U_MAX", float(fpar[comp._UMAX]) + model.u_rest)
             + "/* the command returned while the first HYSTID_FF_DELAY references are read in */\n"
             + _define("HYSTID_FF_REST_COMMAND", rest)
             + "typedef struct hystid_ff_state {\n    double x[HYSTID_FF_NX]; /* the Python "
@@ -182,7 +224,8 @@ def _ff_part(chain: _Chain) -> tuple[str, str]:
     src = "".join(_define(f"HX_FF_{n}", int(ispec[getattr(comp, f"_{n}")])) for n in names)
     fnames = ("ALPHA", "F0", "F1", "G0", "BOUND", "UMIN", "UMAX", "B1LEAD", "B2LEAD", "K2", "KH")
     src += "".join(_define(f"HX_FF_{n}", float(fpar[getattr(comp, f"_{n}")])) for n in fnames)
-    src += _define("HX_FF_DM", float(chain.DM))
+    src += _define("HX_FF_DM", float(chain.DM)) + _define("HX_FF_R_SHIFT", model.offset) \
+        + _define("HX_FF_U_SHIFT", model.u_rest)
     arrays = {"a1": chain.a1, "b1t": chain.b1t}
     if int(ispec[comp._L2MODE]) == 1:
         arrays.update(a2=chain.a2, b2t=chain.b2t)
@@ -298,7 +341,7 @@ def c_sources(
     duhem = isinstance(model, DuhemSandwich)
     mhead, msrc = _model_part(model)
     try:
-        fhead, fsrc = _ff_part(ff_chain(model, **dict(compensator or {})))
+        fhead, fsrc = _ff_part(ff_chain(model, **dict(compensator or {})), model)
     except ValueError as err:
         if compensator:  # options asked for explicitly: their error is the answer
             raise

@@ -64,8 +64,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="folder for hystid_model.h and hystid_model.c (created if missing)")
     parser.add_argument("--force", action="store_true", help="replace the two files in DIR")
     parser.add_argument("--u-limits", type=_limits, default=None, metavar="LOW,HIGH",
-                        help="compensator: command limits (default: those of "
-                        "hystid.compensate.feedforward)")
+                        help="compensator: command limits in the record's units (default: the "
+                        "model's input envelope widened by 10%% of its span at each end)")
     parser.add_argument("--preview", type=_samples, default=None, metavar="N",
                         help="compensator: reversal planner preview in samples (default: "
                         "feedforward's)")
