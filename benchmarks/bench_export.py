@@ -163,10 +163,11 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
         t_rpem, _ = c_rate(exe, folder, "rpem", u[:nf], y[:nf], reps=3)
         uu, yy = np.ascontiguousarray(u[:nf] - model.u_rest), np.ascontiguousarray(y[:nf])
 
+        start = rpem_start(model)
+
         def python_rpem() -> None:
-            ident = rpem_start(model)
-            rpem_run(ident._buf, ident._ints, uu, yy, np.empty((nf, len(model.theta))),
-                     np.empty((nf, 7)))
+            rpem_run(start._buf.copy(), start._ints.copy(), uu, yy,
+                     np.empty((nf, len(model.theta))), np.empty((nf, 7)))
 
         python_rpem()
         t_rpem_py = best_time(python_rpem, repeat=3, min_time=0)
