@@ -371,3 +371,26 @@ def test_cli_export_bad_input(case, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("hystid export: error:") and "\n" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_cli_export_options(tmp_path, capsys):
+    model = placed_duhem()
+    model_file = model.save(tmp_path / "model.json")
+    rec = tmp_path / "rec.csv"
+    u = excitation(model, 3_000)
+    y = model.simulate(u, check=False).y
+    rec.write_text("t,u,y\n" + "\n".join(f"{k / model.fs!r},{float(a)!r},{float(b)!r}"
+                                          for k, (a, b) in enumerate(zip(u, y, strict=True))))
+    assert main(["export", str(model_file), "--c", str(tmp_path / "out"), "--u-limits=-6,6",
+                 "--preview", "50", "--rpem-record", str(rec), "--quiet"]) == 0
+    head = (tmp_path / "out" / "hystid_model.h").read_text()
+    assert "#define HYSTID_FF_U_MIN (-6.0)" in head and "#define HYSTID_FF_U_MAX 6.0" in head
+    assert "#define HYSTID_FF_PREVIEW 50" in head
+    src = (tmp_path / "out" / "hystid_model.c").read_text()
+    assert src != c_sources(model, compensator={"u_limits": (-6.0, 6.0), "preview": 50})[
+        "hystid_model.c"]  # the record changed the RPEM's starting covariance
+    for bad in (["--u-limits", "6,-6"], ["--preview", "-1"], ["--rpem-sigma", "0"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["export", str(model_file), "--c", str(tmp_path / "x"), *bad])
+        assert exc.value.code == 2
+    assert not (tmp_path / "x").exists()
