@@ -850,6 +850,13 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
         fleet_command.configure_parser(p)
         p.set_defaults(func=fleet_command.run)
+
+    p = sub.add_parser("export", help="a saved model as C99 (model, compensator, RPEM step)")
+    if only in (None, "export"):
+        from .export import command as export_command
+
+        export_command.configure_parser(p)
+        p.set_defaults(func=export_command.run)
     return parser
 
 
