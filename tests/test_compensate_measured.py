@@ -183,6 +183,16 @@ def test_command_for_a_simulated_displacement_is_near_the_applied_voltage(look_a
     assert lo <= inv.u.min() and inv.u.max() <= hi
 
 
+def test_an_online_identified_model_is_compensated_alike(look_alike):
+    train, held, batch = look_alike
+    online = _quiet(identify, train, method="online").model
+    assert (online.u_rest, online.envelope) == (batch.u_rest, batch.envelope)
+    smoother = hc.smoothing_model(21, online.dt)
+    inv = hc.compensate(online, held.y, reference_model=smoother, warn=False)
+    assert _rms(inv.u - held.u) < 0.15 * _rms(held.u - held.u[0])
+    assert hc.compensate(online, held.y, anchor="reference", warn=False).relative_error < 1e-9
+
+
 def test_units_follow_the_record(look_alike):
     train, held, model = look_alike
     kv = _quiet(identify, with_units(train, u="kV", y="nm")).model
