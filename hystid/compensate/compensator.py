@@ -681,7 +681,8 @@ def feedforward(
     Runs the compensator of :func:`inverse` over ``y_ref`` (with the preview taken from
     ``y_ref`` itself, its last value held at the end) so that ``model.simulate(u).y`` tracks
     ``y_ref`` (or ``M y_ref``). The reference should start at rest (``y_ref[0] = 0``, the stage's
-    state at rest).
+    state at rest). It works on the sandwich's own signals: for a model identified on a record
+    (rest level, sensor offset, envelope, units) use :func:`~hystid.compensate.compensate`.
 
     Parameters
     ----------

@@ -257,8 +257,11 @@ def compensate(
             raise ValueError(f"model: expected an identified sandwich model (no {name!r}), got "
                              f"{model!r}")
     y = finite_signal(y_ref, "y_ref", min_size=2)
-    limits = envelope_limits(model, margin) if u_limits is None else \
-        tuple(float(v) for v in u_limits)
+    try:
+        limits = envelope_limits(model, margin) if u_limits is None else \
+            tuple(float(v) for v in u_limits)
+    except TypeError as err:
+        raise ValueError(f"u_limits: expected (low, high), got {u_limits!r}") from err
     if len(limits) != 2 or not (np.all(np.isfinite(limits)) and limits[0] < limits[1]):
         raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")
     if anchor not in ("model", "reference"):
