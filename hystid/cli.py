@@ -1,4 +1,4 @@
-"""The ``hystid`` command line: demo, simulate, identify, diagnose."""
+"""The ``hystid`` command line: demo, simulate, identify, diagnose, compensate."""
 
 from __future__ import annotations
 
@@ -841,6 +841,16 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
         diagnose_command.configure_parser(p)
         p.set_defaults(func=diagnose_command.run)
+
+    p = sub.add_parser("compensate", help="the command that makes a saved model follow a "
+                       "reference", description="Compute the compensated command (inverse "
+                       "model) for a reference displacement or a scan, in the record's units, "
+                       "and write t,r,u,y_pred to a CSV.")
+    if only in (None, "compensate"):
+        from .compensate import command as compensate_command
+
+        compensate_command.configure_parser(p)
+        p.set_defaults(func=compensate_command.run)
 
     p = sub.add_parser("fleet", help="identify or diagnose many records on Dask",
                        description="Identify or diagnose many records as Dask tasks; one result "
