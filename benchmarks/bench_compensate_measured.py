@@ -67,13 +67,16 @@ def linear_model_inverse(lin: LinearModel, y_des: np.ndarray, dt: float) -> np.n
     return w + lin.u_rest
 
 
-def measure(smooth: int = 21) -> dict:
+def measure(smooth: int = 21, member: str = "auto") -> dict:
     """Identify on ``prbn_1``, compute the commands for the other records and compare.
 
     Parameters
     ----------
     smooth : int
         Length of the lag-free smoother the measured displacement is asked through (0: none).
+    member : str
+        ``model=`` of :func:`hystid.identify.identify` (``"auto"``: what ``hystid identify``
+        chooses by default).
 
     Returns
     -------
@@ -83,7 +86,9 @@ def measure(smooth: int = 21) -> dict:
         (unsmoothed) compensator's, the self-consistency figures and the goals met.
     """
     train = load_record(STAGE_A / f"{TRAIN}.csv")
-    model = identify(train).model
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(train, model=member).model
     s = model.structure
     lin_model = LinearModel.fit(train, s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
     smoother = smoothing_model(smooth, model.dt) if smooth else None
@@ -157,12 +162,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--smooth", type=int, default=21,
                         help="lag-free smoother of the measured displacement, samples (0: none)")
+    parser.add_argument("--model", default="auto",
+                        help="member identified on prbn_1 (default auto, as hystid identify)")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON file (default benchmarks/results/compensate_measured.json)")
     args = parser.parse_args()
     if not STAGE_A.exists():
         raise SystemExit(f"stage A records not found in {STAGE_A} (../shared/data)")
-    payload = measure(args.smooth)
+    payload = measure(args.smooth, args.model)
     print(f"identified on {TRAIN}: {payload['model']}")
     print(f"command limits {payload['u_limits'][0]:.4g} .. {payload['u_limits'][1]:.4g} V "
           f"(envelope + 10 %), reference smoothed over {args.smooth} samples\n")
