@@ -145,24 +145,53 @@ def _identify_member(record: Record, method: str, structure: Any, model: str,
 
 def _run_recursive(record: Record, method: str, structure: Structure | None,
                progress: Callable[[int, int], None] | None, settings: dict) -> IdentificationResult:
-    """A recursive estimator on the record less its rest level, placed back afterwards."""
-    from .prepare import prepare
-
+    """A recursive estimator of the Duhem sandwich, placed (:func:`run_placed`)."""
     if method == "eria":
         from .eria import ERIA as estimator
     elif method == "online":
         from .online import OnlineIdentifier as estimator
     else:
         from .ekf import KalmanIdentifier as estimator
+    return run_placed(record, lambda relative: estimator(structure, record.fs, **settings),
+                      progress)
+
+
+def run_placed(record: Record, make: Callable[[Record], Any],
+               progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
+    """Run a recursive estimator on the record less its rest level and place the model back.
+
+    The estimator sees ``u - u_rest`` and ``y - y_ref`` (the rest level and the output at rest
+    of :func:`~hystid.identify.prepare.prepare`); the model it returns is moved to the
+    record's rest level and sensor offset, given the input envelope and the record's units, as
+    the batch fits place theirs.
+
+    Parameters
+    ----------
+    record : Record
+        Input and measured output, in any units.
+    make : callable
+        ``make(relative_record) -> estimator`` with a ``fit(record, progress=...)`` method.
+    progress : callable, optional
+        ``progress(k, n)`` during the run.
+
+    Returns
+    -------
+    IdentificationResult
+        The placed model; ``info["warnings"]`` adds what the preparation found and whether the
+        model is admissible on the record.
+    """
+    from .prepare import prepare
+
     prep = prepare(record)
     relative = Record(record.u - prep.u_rest, record.y - prep.y_ref, record.fs, record.units,
                       record.name)
-    result = estimator(structure, record.fs, **settings).fit(relative, progress=progress)
+    result = make(relative).fit(relative, progress=progress)
     model = result.model
     model.u_rest, model.offset = prep.u_rest + model.u_rest, prep.y_ref + model.offset
     model.envelope, model.units = prep.envelope, dict(record.units)
-    notes = list(prep.notes) + [f"on the identification record: {w}"
-                                for w in model.admissibility(record.u) if "condition" in w
-                                or "diverged" in w]
+    problems = (model.admissibility(record.u) if hasattr(model, "admissibility")
+                else model.envelope.violations(record.u))
+    notes = list(prep.notes) + [f"on the identification record: {w}" for w in problems
+                                if "condition" in w or "diverged" in w]
     result.info["warnings"] = list(result.info.get("warnings", [])) + notes
     return result

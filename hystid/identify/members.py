@@ -94,8 +94,22 @@ class Member:
         if method == "batch":
             return identify_pi(record, "batch",
                                **{**self.settings, "structure": self.structure, **settings})
-        return identify_pi(record, "recursive", progress=progress,
-                           **{"n_operators": self.structure.n_operators, **settings})
+        return self._online(record, progress, settings)
+
+    def _online(self, record: Record, progress: Callable[[int, int], None] | None,
+                settings: dict[str, Any]) -> IdentificationResult:
+        """The PI member's recursive identifier on the record less its rest, placed back;
+        the thresholds by the member's rule over the fitted samples."""
+        from ..thresholds import RULES
+        from . import run_placed
+        from .pi_recursive import PIRecursiveIdentifier
+        from .prepare import prepare
+
+        rule = self.settings.get("thresholds", "range")
+        r = RULES[rule](record.u[prepare(record).fitted], self.structure.n_operators)
+        return run_placed(record, lambda rel: PIRecursiveIdentifier(
+            **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
+            progress)
 
 
 #: The members, simplest first.
