@@ -129,7 +129,7 @@ def render(payload: dict) -> str:
     for b, v in payload["baselines"].items():
         rows.append([b, *(_nm(x) for x in v), ""])
     rows.append(["repeat floor (offset removed)", *(_nm(f) for f in floor), ""])
-    text = [table(rows, ["held-out RMS [nm], trained on prbn_1", *names, "fit [s]"])]
+    text = [table(rows, ["held-out RMS [nm], trained on prbn_1", *names, "fit [s]"]), ""]
     narx_rms = payload["baselines"].get("NARX (SysIdentPy)")
     if narx_rms is not None:
         for m, e in payload["members"].items():

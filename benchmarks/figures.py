@@ -433,3 +433,35 @@ def tracking_cut(kind: str = "triangle", frequency: float = 10.0, train_seconds:
         out[f"max_{label}"], out[f"rms_{label}"] = float(m.max_error), float(m.rms_error)
     out["cut"] = out["max_none"] / out["max_inverse"]
     return out
+
+
+#: Measured stage A's development records (``../shared/data``; absent on some machines).
+STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
+
+
+def stage_a_default() -> dict:
+    """``identify(prbn_1)`` with the default choice (``model="auto"``), run free on stage A's
+    other records, zeroed on each record's rest output (:func:`hystid.baselines.compare`).
+
+    Returns
+    -------
+    dict
+        ``max_heldout_rms`` (um, the worst record), ``share_under_60pc_linear`` (records where
+        the model's RMS is under 0.6 of the linear model's), ``pi_stage`` (1.0 when the choice
+        is the ``pi-stage`` member); empty when the records are absent.
+    """
+    from hystid.baselines import compare
+    from hystid.identify import identify
+    from hystid.records import load_record
+
+    if not STAGE_A.exists():
+        return {}
+    recs = {p.stem: load_record(p) for p in sorted(STAGE_A.glob("*.csv"))}
+    train = recs.pop("prbn_1")
+    with quiet():
+        res = identify(train, model="auto")
+        rows = compare(res.model, train, list(recs.values())).rows
+    return {"max_heldout_rms": max(r["model"] for r in rows),
+            "share_under_60pc_linear": float(np.mean([r["model"] < 0.6 * r["linear"]
+                                                      for r in rows])),
+            "pi_stage": float(res.info.get("model") == "pi-stage")}
