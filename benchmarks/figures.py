@@ -101,13 +101,17 @@ def samples_to(err: np.ndarray, bound: float) -> int | None:
 
 
 def _identify(record, method: str, **settings):
-    """Identify ``record`` with ``method`` (``"pi"``: the PI sandwich's recursive identifier)."""
+    """Identify ``record`` with ``method`` (``"pi"``: the PI sandwich's recursive identifier;
+    ``"auto"``: the batch fit of the member chosen on held-out data, ``hystid identify``'s
+    default)."""
     from hystid.identify import identify
     from hystid.identify.pi_recursive import identify_pi
 
     with quiet():
         if method == "pi":
             return identify_pi(record, method="recursive", **settings)
+        if method == "auto":
+            return identify(record, model="auto", **settings)
         return identify(record, method=method, **settings)
 
 
