@@ -168,3 +168,35 @@ def test_on_measured_stage_a_the_default_choice_wins_by_far():
     for row in rows:
         assert row["model"] < 0.05, row  # um
         assert row["model"] < 0.6 * row["linear"], row
+
+
+@pytest.mark.parametrize("hysteresis", ["preisach", "maxwell"])
+def test_auto_beats_both_baselines_on_other_hysteresis_operators(hysteresis):
+    """The paper-like stage with a Preisach or a Maxwell-slip loop (written unlike any member),
+    a sensor offset, records cropped so that they do not start at rest: whatever the default
+    chooses beats the static line and the linear model on a record of another seed (on the
+    Maxwell-slip stage by about 40 % only: 61 against 98 nm when this was written)."""
+    from hystid.testing import crop_start, simulate_stage, with_offset
+
+    recs = []
+    for seed in (7, 8):
+        u = paper_excitation_like(seed)
+        sim = simulate_stage(u, 30_000.0, hysteresis=hysteresis, seed=seed)
+        y = sim["y"] + 1e-3 * np.random.default_rng(seed).standard_normal(len(u))
+        recs.append(crop_start(with_offset(Record(u, y, 30_000.0, name=f"{hysteresis} {seed}"),
+                                           -0.7), 0.02))
+    train, held = recs
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = identify(train, model="auto")
+        row = compare(result.model, train, [held]).rows[0]
+    assert result.info["model"] in AUTO_CANDIDATES
+    assert row["beats"], row
+    assert row["model"] < 0.8 * min(row["static_line"], row["linear"]), row
+
+
+def paper_excitation_like(seed: int) -> np.ndarray:
+    """0.2 s of the paper's excitation around 5.3 V, ramped up from rest."""
+    from hystid.reference import paper_excitation
+
+    return paper_excitation(6000, 30_000.0, seed=seed)
