@@ -1299,8 +1299,12 @@ def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
         blocks["ARX"] = arx
         blocks["L1 = z^-1, ARX L2"] = np.where(np.isin(np.arange(len(arx)), l1), 0.0, arx)
         blocks["ARX L1, L2 = z^-1"] = np.where(np.isin(np.arange(len(arx)), l1), arx, 0.0)
+    unique: dict[str, np.ndarray] = {}  # a structure without free L1 terms makes mixtures twins
+    for label, theta in blocks.items():
+        if not any(np.array_equal(theta, other) for other in unique.values()):
+            unique[label] = theta
     return {label: _weights_given_blocks(theta, un, yn, rows, r, structure, fit_offset)
-            for label, theta in blocks.items()}
+            for label, theta in unique.items()}
 
 
 class _PIOutputError:
