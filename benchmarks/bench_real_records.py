@@ -5,7 +5,9 @@ simulated on from the identification part), the as-measured suite of the indepen
 simulator (``hystid.testing.as_measured_suite``: offset, units, not at rest, 10 kHz, outlier,
 end glitch, each with a held-out record of another seed), a stage-A look-alike (10 kHz, Bouc-Wen
 hysteresis, -100..+74 V, offset, rest at a level, flexure mode) and the Bouc-Wen benchmark
-(train.h5 -> each test signal). Time per fit is compared with the single-start fit in the same
+(train.h5 -> each test signal). Methods: ``auto`` (the member of the model family that
+``hystid identify`` chooses by default), ``batch`` and ``online`` (the Duhem sandwich). Time per
+fit is compared with the single-start fit in the same
 process (``linear_init=False, offset=False``: one start, no offset).
 
     python benchmarks/bench_real_records.py [--quick]
@@ -76,7 +78,8 @@ LABELS = {
 }
 
 
-def measure(quick: bool = False, methods: tuple[str, ...] = ("batch", "online")) -> dict:
+def measure(quick: bool = False,
+            methods: tuple[str, ...] = ("auto", "batch", "online")) -> dict:
     """Identify every record set with each method and score it against the baselines.
 
     Parameters
@@ -175,7 +178,9 @@ def render(payload: dict) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="measured piezo and suite only")
-    parser.add_argument("--methods", default="batch,online")
+    parser.add_argument("--methods", default="auto,batch,online",
+                        help="auto: the member hystid identify chooses; batch / online: the "
+                             "Duhem sandwich")
     args = parser.parse_args()
     payload = measure(args.quick, tuple(args.methods.split(",")))
     print(render(payload))

@@ -101,13 +101,17 @@ def samples_to(err: np.ndarray, bound: float) -> int | None:
 
 
 def _identify(record, method: str, **settings):
-    """Identify ``record`` with ``method`` (``"pi"``: the PI sandwich's recursive identifier)."""
+    """Identify ``record`` with ``method`` (``"pi"``: the PI sandwich's recursive identifier;
+    ``"auto"``: the batch fit of the member chosen on held-out data, ``hystid identify``'s
+    default)."""
     from hystid.identify import identify
     from hystid.identify.pi_recursive import identify_pi
 
     with quiet():
         if method == "pi":
             return identify_pi(record, method="recursive", **settings)
+        if method == "auto":
+            return identify(record, model="auto", **settings)
         return identify(record, method=method, **settings)
 
 
@@ -167,7 +171,9 @@ def reference_identification(method: str, seed: int = 0, noise: float = 1e-3,
     dict
         ``final_err`` (max relative parameter error; None for the PI sandwich, whose
         parameters are not the stage's), ``val_min``, ``val_max``, ``val_rms`` (um; absent
-        when the model is unstable), ``restarts``, ``seconds``, and for recursive methods
+        when the model is unstable), ``restarts``, ``seconds``, ``converged`` (1.0 when
+        ``final_err`` is finite and under 10 %, else 0.0; None for the PI sandwich), and for
+        recursive methods
         ``to_2pc``, ``to_01pc`` (samples until the error stays within 2 % / 0.1 %),
         ``err_at_1000`` and ``nan``.
     """
@@ -183,6 +189,10 @@ def reference_identification(method: str, seed: int = 0, noise: float = 1e-3,
     row = {"method": method, "seed": seed, "noise_nm": noise * 1e3,
            "seconds": time.perf_counter() - t0, "restarts": res.info.get("n_recoveries", 0),
            "final_err": None if method == "pi" else max_relative_error(res.model.theta)}
+    # converged: a well-conditioned yes/no where final_err is not (a diverging run ends
+    # wherever round-off takes it, which differs from one CPU or instruction set to another)
+    row["converged"] = (None if row["final_err"] is None else
+                        float(bool(np.isfinite(row["final_err"]) and row["final_err"] < 0.1)))
     row["samples_per_s"] = samples / row["seconds"]
     if res.history is not None and method != "pi":
         err = np.max(np.abs(res.history - TRUTH) / np.abs(TRUTH), axis=1)
@@ -427,3 +437,35 @@ def tracking_cut(kind: str = "triangle", frequency: float = 10.0, train_seconds:
         out[f"max_{label}"], out[f"rms_{label}"] = float(m.max_error), float(m.rms_error)
     out["cut"] = out["max_none"] / out["max_inverse"]
     return out
+
+
+#: Measured stage A's development records (``../shared/data``; absent on some machines).
+STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
+
+
+def stage_a_default() -> dict:
+    """``identify(prbn_1)`` with the default choice (``model="auto"``), run free on stage A's
+    other records, zeroed on each record's rest output (:func:`hystid.baselines.compare`).
+
+    Returns
+    -------
+    dict
+        ``max_heldout_rms`` (um, the worst record), ``share_under_60pc_linear`` (records where
+        the model's RMS is under 0.6 of the linear model's), ``pi_stage`` (1.0 when the choice
+        is the ``pi-stage`` member); empty when the records are absent.
+    """
+    from hystid.baselines import compare
+    from hystid.identify import identify
+    from hystid.records import load_record
+
+    if not STAGE_A.exists():
+        return {}
+    recs = {p.stem: load_record(p) for p in sorted(STAGE_A.glob("*.csv"))}
+    train = recs.pop("prbn_1")
+    with quiet():
+        res = identify(train, model="auto")
+        rows = compare(res.model, train, list(recs.values())).rows
+    return {"max_heldout_rms": max(r["model"] for r in rows),
+            "share_under_60pc_linear": float(np.mean([r["model"] < 0.6 * r["linear"]
+                                                      for r in rows])),
+            "pi_stage": float(res.info.get("model") == "pi-stage")}

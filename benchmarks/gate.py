@@ -52,7 +52,12 @@ GROUPS: dict[str, Callable[[], dict]] = {
     "wrong_basin": functools.partial(figures.wrong_basin, range(3)),
     "withheld": functools.partial(figures.withheld_effects, in_form=2, cross_form=2, clean=1),
     "tracking": figures.tracking_cut,
+    "stage_a": figures.stage_a_default,
 }
+
+#: Groups that read ``../shared/data``: their figures are checked by a test of their own, which
+#: skips with the reason where the data is absent.
+NEEDS_SHARED_DATA = ("stage_a",)
 
 
 @dataclass(frozen=True)
@@ -69,6 +74,8 @@ class Spec:
         Default tolerance (the baseline file's own values win once written).
     what : str
         What the figure is, for the baseline file and the messages.
+    why : str
+        Why the tolerance is what it is (how the figure moves from machine to machine).
     """
 
     name: str
@@ -76,6 +83,7 @@ class Spec:
     rtol: float
     atol: float
     what: str
+    why: str = ""
 
     @property
     def group(self) -> str:
@@ -88,43 +96,74 @@ class Spec:
         return self.name.rsplit("/", 1)[1]
 
 
+#: Why each kind of tolerance is what it is (the baseline file and the README repeat it).
+WHY = {
+    "param": "a converged fit: the estimate moves with round-off (BLAS, instruction set, "
+             "thread count) by far less than 50 %; atol covers errors near zero",
+    "rms": "a held-out RMS of a converged fit sits at the noise floor; 5 % covers round-off "
+           "and a changed local optimum of equal quality",
+    "samples": "a count of samples: 25 % covers a start-up that crosses 2 % a few steps later",
+    "verdict": "a yes/no or a share of runs: well conditioned, any change is a real change",
+    "diverges": "ERIA as published diverges; where it ends is chaotic and differs between "
+                "CPUs, so only whether it converged is gated, never its final value",
+    "ratio": "a ratio of two tracking errors of one compensated run: 10 % covers round-off",
+    "measured": "a fit on a measured record: 10 % covers round-off and another local optimum "
+                "of equal quality (the records never change)",
+}
+
+
 def _specs() -> list[Spec]:
     out = []
     for m in figures.METHODS:
         g = f"reference/{m}"
-        if m != "pi":
-            out.append(Spec(f"{g}/final_err", "lower", 1.0 if m == "eria" else 0.5,
-                            2e-4, f"{m}: max relative parameter error, reference stage"))
+        if m == "eria":
+            out.append(Spec(f"{g}/converged", "higher", 0.0, 0.0,
+                            "eria: converged to within 10 % (1) or not (0), reference stage",
+                            WHY["diverges"]))
+        elif m != "pi":
+            out.append(Spec(f"{g}/final_err", "lower", 0.5, 2e-4,
+                            f"{m}: max relative parameter error, reference stage", WHY["param"]))
         if m != "eria":
             out.append(Spec(f"{g}/val_rms", "lower", 0.05, 0.0,
-                            f"{m}: held-out RMS (um), reference stage"))
+                            f"{m}: held-out RMS (um), reference stage", WHY["rms"]))
     out.append(Spec("reference/online/to_2pc", "lower", 0.25, 0.0,
-                    "online: samples until the estimate stays within 2 %"))
+                    "online: samples until the estimate stays within 2 %", WHY["samples"]))
     for g in GROUPS:
         if g.startswith("as_measured/"):
             case = g.split("/")[2]
             out.append(Spec(f"{g}/heldout_rms", "lower", 0.05, 0.0,
-                            f"held-out RMS in the record's output unit, as measured: {case}"))
+                            f"held-out RMS in the record's output unit, as measured: {case}",
+                            WHY["rms"]))
             if case != "10kHz":
                 out.append(Spec(f"{g}/param_err", "lower", 0.5, 5e-4,
-                                f"max relative parameter error, as measured: {case}"))
+                                f"max relative parameter error, as measured: {case}",
+                                WHY["param"]))
+    verdicts = [
+        ("wrong_basin/rate", "lower", "on-line start-up in a wrong basin, share of 18 runs"),
+        ("withheld/in-form.top1_accuracy", "higher", "withheld effect top-1, in-form"),
+        ("withheld/cross-form.top1_accuracy", "higher", "withheld effect top-1, cross-form"),
+        ("withheld/in-form.false_acceptance_clean", "lower",
+         "effect accepted on a clean record, in-form"),
+        ("withheld/cross-form.false_acceptance_clean", "lower",
+         "effect accepted on a clean record, cross-form"),
+        ("withheld/cross-form.wrong_acceptance", "lower", "wrong family accepted, cross-form"),
+    ]
+    out.append(Spec("wrong_basin/worst_err", "lower", 0.5, 1e-3,
+                    "on-line start-up: worst final parameter error of 18 runs", WHY["param"]))
+    out += [Spec(name, better, 0.0, 0.0, what, WHY["verdict"]) for name, better, what in verdicts]
+    out.append(Spec("tracking/cut", "higher", 0.1, 0.0,
+                    "max tracking error without / with the feed-forward inverse, 10 Hz triangle",
+                    WHY["ratio"]))
     out += [
-        Spec("wrong_basin/rate", "lower", 0.0, 0.0,
-             "on-line start-up in a wrong basin, share of 18 runs"),
-        Spec("wrong_basin/worst_err", "lower", 0.5, 1e-3,
-             "on-line start-up: worst final parameter error of 18 runs"),
-        Spec("withheld/in-form.top1_accuracy", "higher", 0.0, 0.0,
-             "withheld effect top-1, in-form"),
-        Spec("withheld/cross-form.top1_accuracy", "higher", 0.0, 0.0,
-             "withheld effect top-1, cross-form"),
-        Spec("withheld/in-form.false_acceptance_clean", "lower", 0.0, 0.0,
-             "effect accepted on a clean record, in-form"),
-        Spec("withheld/cross-form.false_acceptance_clean", "lower", 0.0, 0.0,
-             "effect accepted on a clean record, cross-form"),
-        Spec("withheld/cross-form.wrong_acceptance", "lower", 0.0, 0.0,
-             "wrong family accepted, cross-form"),
-        Spec("tracking/cut", "higher", 0.1, 0.0,
-             "max tracking error without / with the feed-forward inverse, 10 Hz triangle"),
+        Spec("stage_a/max_heldout_rms", "lower", 0.1, 0.0,
+             "measured stage A, default identify on prbn_1: worst held-out RMS (um) of the "
+             "other five records", WHY["measured"]),
+        Spec("stage_a/share_under_60pc_linear", "higher", 0.0, 0.0,
+             "measured stage A: share of held-out records under 0.6x the linear model",
+             WHY["verdict"]),
+        Spec("stage_a/pi_stage", "higher", 0.0, 0.0,
+             "measured stage A: the default choice is the pi-stage member (1) or not (0)",
+             WHY["verdict"]),
     ]
     return out
 
@@ -297,7 +336,7 @@ def write_baseline(values: dict[str, float | None], path: Path = BASELINE) -> No
         s = specs[name]
         prev = old.get(name, {})
         figs[name] = {"value": value, "better": s.better, "rtol": prev.get("rtol", s.rtol),
-                      "atol": prev.get("atol", s.atol), "what": s.what}
+                      "atol": prev.get("atol", s.atol), "what": s.what, "why": s.why}
     payload = {"about": "Accuracy gate of hystid: figures for fixed seeds (benchmarks/gate.py). "
                         "A figure regresses when it is worse than 'value' by more than "
                         "max(atol, rtol * |value|). Rewrite the values with "
@@ -326,7 +365,10 @@ def render(figures_: dict) -> str:
                      ("any change" if allowed == 0 else
                       "-" if allowed is None else f"{'+' if e['better'] == 'lower' else '-'}"
                       f"{allowed:.2g}")])
-    return table(rows, ["figure", "what", "baseline", "fails when worse by more than"])
+    reasons = dict.fromkeys(e["why"] for e in figures_.values() if e.get("why"))
+    why = "".join(f"\n- {r}" for r in reasons)
+    return (table(rows, ["figure", "what", "baseline", "fails when worse by more than"])
+            + ("\n\nWhy the tolerances are what they are:" + why if why else ""))
 
 
 def report(findings: list[Finding]) -> str:
@@ -347,19 +389,25 @@ def main() -> None:
                         help="also write the figures computed now to this file")
     args = parser.parse_args()
     t0 = time.perf_counter()
-    values = compute(progress=True)
+    absent = [] if figures.STAGE_A.exists() else list(NEEDS_SHARED_DATA)
+    if absent:
+        print(f"not computed (no {figures.STAGE_A}): {', '.join(absent)}")
+    values = compute([s.name for s in SPECS if s.group not in absent], progress=True)
     print(f"{len(values)} figures in {time.perf_counter() - t0:.0f} s")
     if args.json is not None:
         args.json.write_text(json.dumps(values, indent=2) + "\n")
     if args.update:
-        write_baseline(values)
+        kept = {k: e["value"] for k, e in (load_baseline() if BASELINE.exists() else {}).items()
+                if k.rsplit("/", 1)[0] in absent}  # figures not computed here stay as they are
+        write_baseline({**kept, **values})
         print(f"wrote {BASELINE}")
         return
     try:
         baseline = load_baseline()
     except ValueError as err:
         sys.exit(str(err))
-    findings = check(values, baseline)
+    findings = check(values, {k: v for k, v in baseline.items()
+                              if k.rsplit("/", 1)[0] not in absent})
     print(report(findings))
     if any(f.status in ("regressed", "missing") for f in findings):
         sys.exit(1)

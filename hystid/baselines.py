@@ -242,6 +242,52 @@ def repeat_floor(records: Sequence[Record]) -> float:
     return float(np.mean(pairs))
 
 
+#: How a held-out record's output zero is set (:func:`compare`'s ``zero``).
+ZEROS = ("rest", "model")
+#: Fewest samples of a leading rest segment that :func:`rest_zero` reads a zero from.
+MIN_REST = 20
+
+
+def rest_zero(yhat: np.ndarray, rec: Record) -> float:
+    """The constant that puts a prediction on a record's own output at rest.
+
+    A sensor's zero moves between records (4-27 nm on stage A, see the data's README) and no
+    input-driven model can know it; what a user has before a scan is the output at rest.
+    This is the median of ``y - yhat`` over the record's leading rest segment (0 when the
+    record does not start at rest): added to ``yhat`` it zeroes the prediction on the record's
+    rest output, as a NARX started from the record's first samples is. A rest segment shorter
+    than :data:`MIN_REST` samples (or 1 % of the record) is no rest to read a zero from.
+
+    Parameters
+    ----------
+    yhat : ndarray
+        A prediction of the record's output.
+    rec : Record
+        The record.
+
+    Returns
+    -------
+    float
+        The constant, in the output's units.
+    """
+    from .identify.prepare import rest_level
+
+    _, at_rest, n_lead = rest_level(rec.u)
+    if not at_rest or n_lead < max(MIN_REST, 0.01 * rec.n):
+        return 0.0
+    d = rec.y[:n_lead] - yhat[:n_lead]
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if d.size else 0.0
+
+
+def _scored(p: np.ndarray, rec: Record, k: int, zeroed: bool) -> float:
+    """RMS of a prediction against a record from sample ``k`` (``inf`` when not finite)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = p[k:] + (rest_zero(p, rec) if zeroed else 0.0) - rec.y[k:]
+        r = float(np.sqrt(np.mean(e ** 2)))
+    return r if np.isfinite(r) else float("inf")
+
+
 @dataclass
 class BaselineComparison:
     """Held-out RMS of a model and of the baselines, record by record.
@@ -250,14 +296,17 @@ class BaselineComparison:
     ----------
     rows : list of dict
         One per record: ``record``, ``model``, ``static_line``, ``linear`` (RMS in output
-        units), ``beats`` (the model beats both baselines on it) and ``samples`` (how many
-        samples were scored).
+        units, each prediction zeroed as :attr:`zero` says), ``model_as_placed`` (the model's
+        RMS with its identified offset), ``beats`` (the model beats both baselines on it) and
+        ``samples`` (how many samples were scored).
     static_line : StaticLine
     linear : LinearModel
     floor : float or None
         The repeat floor when repeats were given.
     notes : list of str
         Sentences about the comparison (printed under the table).
+    zero : {"rest", "model"}
+        How the predictions were zeroed (:func:`compare`).
     """
 
     rows: list[dict[str, Any]]
@@ -265,6 +314,7 @@ class BaselineComparison:
     linear: LinearModel
     floor: float | None = None
     notes: list[str] = field(default_factory=list)
+    zero: str = "rest"
 
     @property
     def beats_baselines(self) -> bool:
@@ -281,7 +331,7 @@ class BaselineComparison:
         """
         rows = [{k: (v if not isinstance(v, float) or np.isfinite(v) else None)
                  for k, v in r.items()} for r in self.rows]
-        return {"rows": rows, "beats_baselines": self.beats_baselines,
+        return {"rows": rows, "beats_baselines": self.beats_baselines, "zero": self.zero,
                 "repeat_floor": self.floor, "notes": list(self.notes),
                 "static_line": {"gain": self.static_line.gain, "offset": self.static_line.offset},
                 "linear": {"a": self.linear.a.tolist(), "b": self.linear.b.tolist(),
@@ -313,7 +363,7 @@ class BaselineComparison:
 
 def compare(model: Any, train: Record, records: Sequence[Record],
             orders: tuple[int, int, int] | None = None,
-            repeats: Sequence[Record] | None = None) -> BaselineComparison:
+            repeats: Sequence[Record] | None = None, zero: str = "rest") -> BaselineComparison:
     """Fit the baselines on ``train`` and validate them and ``model`` on ``records``.
 
     Parameters
@@ -333,11 +383,18 @@ def compare(model: Any, train: Record, records: Sequence[Record],
         (``n1a + n2a``, ``n1b + n2b``, ``q1 + q2``).
     repeats : sequence of Record, optional
         Records of one input, for :func:`repeat_floor`.
+    zero : {"rest", "model"}
+        ``"rest"`` (default): every prediction, the model's and the baselines', is put on the
+        held-out record's own output at rest (:func:`rest_zero`; the sensor's zero moves
+        between records, and the repeat floor leaves it out too); ``"model"``: the offsets
+        identified on ``train``.
 
     Returns
     -------
     BaselineComparison
     """
+    if zero not in ZEROS:
+        raise ValueError(f"zero: expected one of {', '.join(ZEROS)}, got {zero!r}")
     if orders is None:
         s = model.structure
         orders = (s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
@@ -353,17 +410,19 @@ def compare(model: Any, train: Record, records: Sequence[Record],
         with np.errstate(over="ignore", invalid="ignore"):
             yhat = simulate_from_rest(model, rec.u, check=False)
         y = rec.y[k:]
-        rms = float(np.sqrt(np.mean((yhat[k:] - y) ** 2)))
-        rms = rms if np.isfinite(rms) else float("inf")
-        r_line = float(np.sqrt(np.mean((line.predict(rec.u)[k:] - y) ** 2)))
-        r_lin = float(np.sqrt(np.mean((linear.predict(rec.u)[k:] - y) ** 2)))
+
+        zeroed = zero == "rest"
+        rms = _scored(yhat, rec, k, zeroed)
+        r_line = _scored(line.predict(rec.u), rec, k, zeroed)
+        r_lin = _scored(linear.predict(rec.u), rec, k, zeroed)
         beats = rms < min(r_line, r_lin)
         label = rec.name if not k else f"{rec.name} [{k}:]"
         rows.append({"record": label, "model": rms, "static_line": r_line, "linear": r_lin,
-                     "beats": bool(beats), "samples": int(y.size)})
+                     "model_as_placed": _scored(yhat, rec, k, False), "beats": bool(beats),
+                     "samples": int(y.size)})
         if not beats:
             notes.append(f"on {label!r} the hysteresis model ({rms:.4g}) does not beat "
                          f"the {'static line' if r_line <= r_lin else 'linear model'} "
                          f"({min(r_line, r_lin):.4g})")
     floor = repeat_floor(repeats) if repeats else None
-    return BaselineComparison(rows, line, linear, floor, notes)
+    return BaselineComparison(rows, line, linear, floor, notes, zero)

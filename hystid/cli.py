@@ -1,4 +1,4 @@
-"""The ``hystid`` command line: demo, simulate, identify, diagnose."""
+"""The ``hystid`` command line: demo, simulate, identify, diagnose, compensate."""
 
 from __future__ import annotations
 
@@ -161,27 +161,47 @@ def _holdout_fraction(text: str) -> float:
 
 
 #: Methods of each hysteresis block (``--model``) that keep a parameter history.
+#: The members of the model family (``hystid.identify.members.MEMBERS``; a test keeps the two
+#: equal, so that the parser does not import the models).
+MODEL_NAMES = ("duhem", "pi", "pi-stage")
 _HISTORY_METHODS = {"duhem": ("online", "eria", "ekf"), "pi": ("online", "eria")}
+
+
+def _model_arg(args: argparse.Namespace) -> str:
+    """The ``--model`` of ``identify``: as given, else ``auto`` for a batch fit that no other
+    option ties to the Duhem sandwich (``--structure``, an on-line ``--method``)."""
+    model = getattr(args, "model", None)
+    if model is None:
+        tied = (getattr(args, "structure", None) is not None
+                or args.method not in (None, "batch") or getattr(args, "history", None))
+        model = "duhem" if tied else "auto"
+        args.model = model
+    return model
 
 
 def _method_arg(args: argparse.Namespace) -> str:
     """The ``--method`` of ``identify`` checked against ``--model`` and ``--history``."""
-    model_kind = getattr(args, "model", "duhem")
-    method = args.method or ("batch" if model_kind == "duhem" else "online")
-    if model_kind == "pi" and method == "ekf":
-        raise CommandError("--method ekf: the PI sandwich is identified by 'online' (its "
+    model_kind = _model_arg(args)
+    family = "pi" if model_kind.startswith("pi") else "duhem"
+    method = args.method or ("online" if model_kind == "pi" else "batch")
+    if family == "pi" and method in ("ekf", "eria"):
+        raise CommandError(f"--method {method}: the PI sandwich is identified by 'online' (its "
                            "recursive identifier) or 'batch' (expected one of these)")
-    if getattr(args, "history", None) and method not in _HISTORY_METHODS[model_kind]:
+    if model_kind == "auto" and method != "batch":
+        raise CommandError(f"--model auto chooses on batch fits (got --method {method}; "
+                           "expected --model duhem or pi for an on-line method)")
+    if getattr(args, "history", None) and method not in _HISTORY_METHODS[family]:
         raise CommandError(f"--history: method {method!r} keeps no parameter history "
-                           f"(expected --method {_one_of(_HISTORY_METHODS[model_kind])})")
+                           f"(expected --method {_one_of(_HISTORY_METHODS[family])})")
     batch_only = (("--skip", getattr(args, "skip", None)),
                   ("--offset", getattr(args, "offset", None)))
     for option, value in batch_only:
         if value is not None and method != "batch":
             raise CommandError(f"{option} applies to the batch fit only (got --method "
                                f"{method}; expected --method batch, or no {option})")
-    if model_kind == "pi" and getattr(args, "structure", None) is not None:
-        raise CommandError("--structure applies to the Duhem sandwich only (got --model pi)")
+    if model_kind != "duhem" and getattr(args, "structure", None) is not None:
+        raise CommandError(f"--structure applies to the Duhem sandwich only (got --model "
+                           f"{model_kind})")
     return method
 
 
@@ -214,17 +234,12 @@ def _identify_record(rec, args, progress: Progress, structure=None):
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", None) != "none"
-        settings["say"] = progress.say
+        if _model_arg(args) == "duhem":  # the PI batch fit keeps its own settings
+            settings["say"] = progress.say
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
-    if getattr(args, "model", "duhem") == "pi":
-        from .identify.pi_recursive import identify_pi
-
-        if method == "batch":
-            return identify_pi(rec, method="batch", offset=settings["offset"],
-                               **({"skip": settings["skip"]} if "skip" in settings else {}))
-        return identify_pi(rec, method="recursive")
-    return identify(rec, method=method, structure=structure, **settings)
+    return identify(rec, method=method, structure=structure, model=_model_arg(args),
+                    **settings)
 
 
 def _structure_arg(args):
@@ -259,7 +274,7 @@ def _split_for_validation(rec, val, args):
 
 def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dict, np.ndarray,
                                                                               object]:
-    from .baselines import compare, simulate_from_rest
+    from .baselines import compare, rest_zero, simulate_from_rest
     from .metrics import validate
 
     target = val if val is not None else rec
@@ -267,6 +282,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         yhat = simulate_from_rest(result.model, target.u, check=False)
+        yhat = yhat + rest_zero(yhat, target)  # as compare() scores it: see its zero=
     problems = result.model.admissibility(target.u) if hasattr(result.model, "admissibility") \
         else (result.model.envelope.violations(target.u) if result.model.envelope else [])
     baselines = compare(result.model, rec, [(target, k) if k is not None else target],
@@ -282,7 +298,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         warnings_.append("the model diverges on the validation input; its figures are not "
                          "reported")
     return {
-        "model": getattr(args, "model", "duhem"),
+        "model": result.info.get("model", getattr(args, "model", None) or "duhem"),
         "method": result.method,
         "params": result.params,
         "u_rest": getattr(result.model, "u_rest", 0.0),
@@ -293,6 +309,8 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         "validated_on": ("validation record" if getattr(args, "val", None) else
                          f"held-out end of the record (samples {k}..{target.n - 1})" if k
                          else "identification record"),
+        "zeroed_on": "the output at rest at the start of the validated record (a sensor's zero "
+                     "moves between records)",
         "baselines": baselines.to_dict(),
         "beats_baselines": baselines.beats_baselines,
         "warnings": warnings_,
@@ -478,6 +496,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         rows += [[f"{k} [{rec.units.get(x, '')}]", f"{report[k]:.6g}"]
                  for k, x in (("u_rest", "u"), ("offset", "y"))]
         print(_table(rows, ["parameter", "estimate"]))
+        _print_choice(result.info.get("member_selection"), rec.units.get("y", ""))
         v = report["validation"]
         if v is not None:
             print(f"\nvalidation ({report['validated_on']}): error {v['err_min']:.4g} .. "
@@ -493,6 +512,21 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if report["converged_at"] is not None:
             print(f"converged at sample {report['converged_at']}")
     return 0
+
+
+def _print_choice(selection: dict | None, unit: str) -> None:
+    """The member choice of ``--model auto``: every candidate and baseline on the held-out
+    end of the identification record."""
+    if not selection:
+        return
+    rows = [[c["member"], str(c["n_params"]), f"{c['heldout_rms']:.4g} {unit}",
+             "chosen" if c["chosen"] else ""] for c in selection["candidates"]]
+    rows += [[b.replace("_", " "), "", f"{v:.4g} {unit}", "baseline"]
+             for b, v in selection["baselines"].items()]
+    print(f"\nmodel choice (held-out samples {selection['holdout_from']}.."
+          f"{selection['holdout_to'] - 1} of the identification record; a richer member must "
+          f"be {100 * selection['margin']:.0f} % better):")
+    print(_table(rows, ["member", "parameters", "held-out RMS", ""]))
 
 
 def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
@@ -713,9 +747,12 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--columns", type=_columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
     p.add_argument("--units", type=_units_arg, metavar="u=V,y=um", help=UNITS_HELP)
-    p.add_argument("--model", choices=("duhem", "pi"), default="duhem", help="hysteresis block")
+    p.add_argument("--model", choices=("auto", *MODEL_NAMES), default=None,
+                   help="member of the model family (default: auto, the simplest member that "
+                   "no richer one beats on the record's held-out end; duhem when --structure "
+                   "or an on-line --method is given)")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
-                   help="estimator (default: batch for duhem, recursive for pi)")
+                   help="estimator (default: batch; online for --model pi)")
     p.add_argument("--structure", default=None, metavar="auto|n1a=1,n2a=2,...",
                    help="model structure: keys n1a, n1b, n2a, n2b, q1, q2, f0 (the paper's "
                    "experimental one by default), or 'auto' to choose on held-out error")
@@ -752,6 +789,16 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         diagnose_command.configure_parser(p)
         p.set_defaults(func=diagnose_command.run)
 
+    p = sub.add_parser("compensate", help="the command that makes a saved model follow a "
+                       "reference", description="Compute the compensated command (inverse "
+                       "model) for a reference displacement or a scan, in the record's units, "
+                       "and write t,r,u,y_pred to a CSV.")
+    if only in (None, "compensate"):
+        from .compensate import command as compensate_command
+
+        compensate_command.configure_parser(p)
+        p.set_defaults(func=compensate_command.run)
+
     p = sub.add_parser("fleet", help="identify or diagnose many records on Dask",
                        description="Identify or diagnose many records as Dask tasks; one result "
                        "row per record (CSV and Parquet), resumable.")
@@ -760,6 +807,13 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
         fleet_command.configure_parser(p)
         p.set_defaults(func=fleet_command.run)
+
+    p = sub.add_parser("export", help="a saved model as C99 (model, compensator, RPEM step)")
+    if only in (None, "export"):
+        from .export import command as export_command
+
+        export_command.configure_parser(p)
+        p.set_defaults(func=export_command.run)
     return parser
 
 

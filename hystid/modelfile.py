@@ -30,6 +30,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -134,7 +135,8 @@ def model_document(
     Parameters
     ----------
     model : DuhemSandwich or PISandwich
-        The model.
+        The model (or a diagnosed ``AugmentedSandwich``: the nominal model's document with
+        its ``effects``).
     provenance : mapping, optional
         See :func:`make_provenance`; one with only hystid's version and the date by default.
 
@@ -144,6 +146,11 @@ def model_document(
     """
     from dataclasses import asdict
 
+    effects = _effects_of(model)
+    if effects is not None:  # the nominal model's document with the effects switched on
+        doc = model_document(model.model, provenance)
+        doc["effects"] = effects
+        return doc
     kind = _kind_of(model)
     structure = asdict(model.structure)
     doc: dict[str, Any] = {
@@ -210,6 +217,38 @@ def save_model(
     return out
 
 
+def _effects_of(model: Any) -> dict[str, dict[str, float]] | None:
+    """The effects of a diagnosed model (an ``AugmentedSandwich``), else None."""
+    from .diagnose.effects import AugmentedSandwich  # the diagnosis' model extensions
+
+    if not isinstance(model, AugmentedSandwich):
+        return None
+    return {name: {k: float(v) for k, v in p.items()} for name, p in model.effects.items()}
+
+
+def _with_effects(model: DuhemSandwich, effects: Any, where: str) -> Any:
+    """The model with the file's ``effects`` switched on (an ``AugmentedSandwich``)."""
+    if effects is None or effects == {}:
+        return model
+    ok = isinstance(effects, Mapping) and all(
+        isinstance(p, Mapping) and all(isinstance(v, int | float) and not isinstance(v, bool)
+                                       and math.isfinite(v) for v in p.values())
+        for p in effects.values())
+    if not ok:
+        raise ModelFileError(f"{where}: 'effects' must map effect names to mappings of "
+                             "parameter names to finite numbers")
+    from .diagnose.effects import EFFECTS, AugmentedSandwich
+
+    unknown = sorted(set(effects) - set(EFFECTS))
+    if unknown:
+        raise ModelFileError(f"{where}: unknown effect(s) {', '.join(unknown)} (expected some "
+                             f"of {', '.join(EFFECTS)})")
+    try:
+        return AugmentedSandwich(model, effects, name=model.name)
+    except (TypeError, ValueError, KeyError) as err:
+        raise ModelFileError(f"{where}: 'effects': {err}") from err
+
+
 def _kind_of(model: Any) -> str:
     if isinstance(model, DuhemSandwich):
         return "duhem"
@@ -234,7 +273,9 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
     -------
     DuhemSandwich or PISandwich
         The model, with its structure, parameters, sampling rate, rest level, offset, envelope
-        and units. The file's provenance is in the model's ``provenance`` attribute.
+        and units. The file's provenance is in the model's ``provenance`` attribute. A Duhem
+        model file with ``effects`` (written by ``hystid diagnose --out``) gives the
+        :class:`~hystid.diagnose.effects.AugmentedSandwich` with those effects on.
 
     Raises
     ------
@@ -279,6 +320,9 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
     except (TypeError, ValueError) as err:
         raise ModelFileError(f"{where}: {err}") from err
     model.provenance = _provenance(doc.get("provenance"), where)
+    if kind == "duhem":
+        model = _with_effects(model, doc.get("effects"), where)
+        model.provenance = _provenance(doc.get("provenance"), where)
     return model
 
 

@@ -10,7 +10,9 @@
 Each ``p_i`` is a backlash (play) operator of threshold ``r_i``; the hysteresis block is their
 weighted sum. This module holds
 
-* :func:`pi_thresholds` -- the threshold placement rule, ``r_i = i/N (max - min)/2``;
+* :func:`pi_thresholds` -- the paper's threshold placement rule, ``r_i = i/N (max - min)/2``
+  (with :func:`hystid.thresholds.swing_thresholds`, the fits' default, in
+  :mod:`hystid.thresholds`);
 * :func:`play_operator` and :func:`pi_operator` -- compiled eq. (30) on a whole signal;
 * :func:`pi_inverse_parameters` -- the exact inverse PI operator (thresholds and weights);
 * :func:`pi_block` / :func:`pi_inverse_block` -- both as discrete ``control.NonlinearIOSystem``
@@ -43,6 +45,7 @@ from .operating import Envelope, Placed, warn_admissibility
 from .poly import is_stable
 from .response import SandwichResponse
 from .signals import finite_signal
+from .thresholds import pi_thresholds
 
 __all__ = [
     "PISandwich",
@@ -64,38 +67,6 @@ N_OPERATORS = 40
 
 
 # =========================================================================== thresholds
-def pi_thresholds(
-    u: np.ndarray | Sequence[float] | tuple[float, float], n_operators: int = N_OPERATORS
-) -> np.ndarray:
-    """Thresholds of the play operators from an input range.
-
-    The rule: ``r_i = i / N * (max(u) - min(u)) / 2`` for ``i = 0 .. N-1``. The first operator
-    (``r_0 = 0``) is the identity, the last one still moves on an input swinging over the whole
-    range. With the PI sandwich's unit-DC-gain ``L1`` the input range is the range of ``w1`` in
-    steady state.
-
-    Parameters
-    ----------
-    u : array_like
-        Input samples, or a ``(min, max)`` pair.
-    n_operators : int
-        Number of play operators ``N`` (40 in the paper).
-
-    Returns
-    -------
-    ndarray
-        ``N`` thresholds, strictly increasing from 0.
-    """
-    if int(n_operators) != n_operators or n_operators < 1:
-        raise ValueError(f"n_operators: expected a positive integer, got {n_operators!r}")
-    u = finite_signal(np.ravel(u), "u (input samples or a (min, max) pair)", min_size=1)
-    span = float(u.max() - u.min())
-    if not span > 0:
-        raise ValueError(f"u: the input range is empty (min = max = {u.min():g})")
-    n = int(n_operators)
-    return np.arange(n) / n * span / 2.0
-
-
 def _check_thresholds(r, name: str = "thresholds") -> np.ndarray:
     r = np.ascontiguousarray(np.asarray(r, dtype=float).ravel())
     if r.size == 0 or not np.all(np.isfinite(r)) or np.any(r < 0):

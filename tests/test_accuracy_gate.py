@@ -59,9 +59,11 @@ def test_every_gate_figure_has_a_baseline_with_a_tolerance():
         assert entry["rtol"] >= 0 and entry["atol"] >= 0, name
 
 
-def test_accuracy_figures_hold_their_baseline():
+def _check_figures(shared: bool) -> None:
+    names = [s.name for s in gate.SPECS if (s.group in gate.NEEDS_SHARED_DATA) == shared]
     baseline_text = gate.BASELINE.read_text()
-    findings = gate.check(gate.compute(), gate.load_baseline())
+    baseline = {k: v for k, v in gate.load_baseline().items() if k in names}
+    findings = gate.check(gate.compute(names), baseline)
     assert gate.BASELINE.read_text() == baseline_text  # never written by the test
     bad = [f.message() for f in findings if f.status in ("regressed", "missing", "new")]
     assert not bad, "accuracy regressed (python benchmarks/gate.py --update to accept a " \
@@ -72,4 +74,17 @@ def test_accuracy_figures_hold_their_baseline():
 
         warnings.warn("figures improved beyond their tolerance; update the baseline with "
                       "'python benchmarks/gate.py --update':\n" + "\n".join(improved),
-                      stacklevel=1)
+                      stacklevel=2)
+
+
+@pytest.mark.slow
+def test_accuracy_figures_hold_their_baseline():
+    _check_figures(shared=False)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not gate.figures.STAGE_A.exists(),
+                    reason=f"measured stage A not found at {gate.figures.STAGE_A} "
+                    "(../shared/data beside the checkout)")
+def test_measured_stage_a_figures_hold_their_baseline():
+    _check_figures(shared=True)

@@ -10,6 +10,9 @@ What users identify the model for: track a reference with the stage.
   its exact inverse PI operator.
 * :func:`feedforward` -- the same compensator, compiled, over a whole reference;
   :func:`linear_feedforward` the uncompensated baseline.
+* :func:`compensate` -- compensation from a placed (identified) model: reference and command
+  in the record's units, limits from the model's envelope, L2 inverted by its stable inverse
+  (:func:`stable_inverse`), warnings where the model is not admissible.
 * :func:`design_feedback` -- integral (+P) control with a notch at the flexure mode, designed
   on the identified linear part with stated margins.
 * :func:`closed_loop` -- feed-forward + feedback + stage as a
@@ -21,7 +24,10 @@ What users identify the model for: track a reference with the stage.
   :func:`scan_reference` -- triangle and sine scans from rest.
 
 Modules: :mod:`~hystid.compensate.duhem_inverse` (the maths of the per-sample inverse and the
-planner), :mod:`~hystid.compensate.compensator` (the inverse chain), :mod:`~hystid.compensate.
+planner), :mod:`~hystid.compensate.compensator` (the inverse chain),
+:mod:`~hystid.compensate.linear_parts` (the linear blocks' inversion, reference models),
+:mod:`~hystid.compensate.placed` (compensation in the record's units),
+:mod:`~hystid.compensate.command` (``hystid compensate``), :mod:`~hystid.compensate.
 feedback`, :mod:`~hystid.compensate.closedloop`, :mod:`~hystid.compensate.tracking`,
 :mod:`~hystid.compensate.robustness`.
 """
@@ -47,6 +53,8 @@ from .compensator import (
     smoothing_model,
 )
 from .feedback import FeedbackDesign, design_feedback, flexure_mode, linear_plant
+from .linear_parts import StableInverse, stable_inverse
+from .placed import Compensation, CompensationWarning, compensate, envelope_limits
 from .robustness import PERTURBABLE, LoopMargins, margins_on, perturbed_stage
 from .tracking import ScanReference, TrackingMetrics, scan_reference, tracking_metrics
 
@@ -58,15 +66,20 @@ __all__ = [
     "SATURATED",
     "TURNING",
     "ClosedLoopResponse",
+    "Compensation",
+    "CompensationWarning",
     "FeedbackDesign",
     "Feedforward",
     "HysteresisInverse",
     "LoopMargins",
     "ScanReference",
+    "StableInverse",
     "TrackingMetrics",
     "closed_loop",
     "closed_loop_response",
+    "compensate",
     "design_feedback",
+    "envelope_limits",
     "feedforward",
     "flexure_mode",
     "hysteresis_gain",
@@ -78,5 +91,6 @@ __all__ = [
     "scan_reference",
     "simulate_closed_loop",
     "smoothing_model",
+    "stable_inverse",
     "tracking_metrics",
 ]

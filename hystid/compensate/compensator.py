@@ -53,9 +53,17 @@ from numba.core.dispatcher import Dispatcher
 
 from ..model import DuhemSandwich
 from ..pi import play
-from ..poly import roots_inside
 from ..signals import finite_signal
 from .duhem_inverse import check_bound, duhem_forward, plan_step
+from .linear_parts import (
+    _linear_parts,
+    _min_phase,
+    _pi_parts,
+    _reference_model,
+    dc_delay,
+    hysteresis_gain,
+    smoothing_model,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..pi import PISandwich
@@ -330,160 +338,28 @@ class _Chain:
     def prime_args(self):
         return (self.ispec, self.fpar, self.a2, self.b2t, self.AM, self.BM, self.CM, self.DM)
 
-    def initial_state(self, y_ref: np.ndarray | None = None) -> np.ndarray:
+    def initial_state(self, y_ref: np.ndarray | None = None, rest: float = 0.0) -> np.ndarray:
+        """At rest (the hysteresis block's output at ``rest``, ``w1 = 0``), primed on ``y_ref``.
+
+        ``rest`` is only meaningful with L2 left out (``l2_identity``): the reference lines
+        then hold ``w2`` and start settled at ``rest``, like the Duhem state.
+        """
         x = np.zeros(int(self.ispec[_NX]))
+        if rest:
+            if self.ispec[_KIND] != KIND_DUHEM or self.ispec[_NM] or self.ispec[_N2A] \
+                    or self.ispec[_N2B] or self.ispec[_Q2]:
+                raise ValueError("rest: a remembered hysteresis state needs the Duhem inverse "
+                                 "with L2 left out of the chain")
+            x[self.ispec[_OFF_Y]:self.ispec[_OFF_U]] = rest  # y_M and w2d lines; u, w1: 0
+            x[self.ispec[_OFF_H]] = rest
         if y_ref is not None:
             head = _pad_hold(np.asarray(y_ref, float), self.advance)[: self.advance]
             chain_prime(x, np.ascontiguousarray(head), *self.prime_args())
         return x
 
 
-def _min_phase(poly: np.ndarray, label: str) -> None:
-    if not roots_inside(poly):
-        raise ValueError(
-            f"model: {label} is not minimum phase (a zero on or outside the unit circle); "
-            "its inverse would be unstable (Assumption 1)"
-        )
-
-
-def _reference_model(reference_model, dt: float):
-    """``(l2mode, AM, BM, CM, DM)`` for None / 'exact' / a discrete SISO LTI system."""
-    empty = (np.zeros((0, 0)), np.zeros(0), np.zeros(0), 0.0)
-    if reference_model is None:
-        return 0, *empty
-    if isinstance(reference_model, str):
-        if reference_model != "exact":
-            raise ValueError(
-                f"reference_model: expected None, 'exact' or a discrete transfer function, "
-                f"got {reference_model!r}"
-            )
-        return 1, *empty
-    if not isinstance(reference_model, ct.LTI) or reference_model.ninputs != 1 \
-            or reference_model.noutputs != 1:
-        raise ValueError(
-            f"reference_model: expected None, 'exact' or a SISO control.TransferFunction / "
-            f"StateSpace, got {reference_model!r}"
-        )
-    if not reference_model.dt or not np.isclose(float(reference_model.dt), dt):
-        raise ValueError(
-            f"reference_model: must be discrete with dt = {dt:g} s like the model, "
-            f"got dt = {reference_model.dt!r}"
-        )
-    ss = reference_model if isinstance(reference_model, ct.StateSpace) else \
-        ct.tf2ss(reference_model, method="scipy")
-    A, B, C, D = (np.asarray(m, float) for m in (ss.A, ss.B, ss.C, ss.D))
-    if A.size and np.max(np.abs(np.linalg.eigvals(A))) >= 1.0:
-        raise ValueError("reference_model: must be stable (poles inside the unit circle)")
-    return 1, A, B[:, 0].copy(), C[0].copy(), float(D[0, 0])
-
-
-def dc_delay(reference_model: ct.LTI | str | None) -> int:
-    """The reference model's group delay at DC, rounded to samples (0 for None / 'exact').
-
-    For ``M(z) = N(z) / D(z)`` it is ``D'(1)/D(1) - N'(1)/N(1)``; a linear-phase FIR smoother
-    of length ``L`` has ``(L - 1) / 2``.
-
-    Parameters
-    ----------
-    reference_model : None, str or control.LTI
-        As for :func:`inverse`.
-
-    Returns
-    -------
-    int
-        The delay in samples (negative delays count as 0).
-    """
-    if reference_model is None or isinstance(reference_model, str):
-        return 0
-    tf = reference_model if isinstance(reference_model, ct.TransferFunction) else \
-        ct.ss2tf(reference_model)
-    num = np.asarray(tf.num[0][0], float)
-    den = np.asarray(tf.den[0][0], float)
-    n1, d1 = np.polyval(num, 1.0), np.polyval(den, 1.0)
-    if n1 == 0 or d1 == 0:
-        raise ValueError("reference_model: needs a finite non-zero static gain")
-    tau = np.polyval(np.polyder(den), 1.0) / d1 - np.polyval(np.polyder(num), 1.0) / n1
-    return max(int(round(tau)), 0)
-
-
-def smoothing_model(samples: int, dt: float) -> ct.TransferFunction:
-    """A linear-phase smoother for references with corners (triangles): a Hann-window FIR.
-
-    With ``reference_model=smoothing_model(L, dt)`` the compensator asks for ``y`` equal to the
-    reference smoothed over ``L`` samples, *without* lag: the smoother's delay ``(L-1)/2`` is
-    taken from the preview (``reference_lead``). A triangle's corners then stay within reach
-    of the hysteresis inverse (an exact inverse of L2 at a sharp corner would ask ``w2`` for a
-    reversal of a few nanometres that eq. 7 cannot make).
-
-    Parameters
-    ----------
-    samples : int
-        Odd window length ``L >= 3``.
-    dt : float
-        Sampling period in seconds.
-
-    Returns
-    -------
-    control.TransferFunction
-        Unit static gain, ``(L-1)/2`` samples of delay.
-    """
-    if int(samples) != samples or samples < 3 or samples % 2 == 0:
-        raise ValueError(f"samples: expected an odd window length >= 3, got {samples!r}")
-    L = int(samples)
-    h = np.hanning(L + 2)[1:-1]
-    h /= h.sum()
-    den = np.zeros(L)
-    den[0] = 1.0
-    return ct.tf(h, den, dt, inputs="y_ref", outputs="y_M", name="smoother")
-
-
-def _pi_parts(model):
-    from ..pi import pi_inverse_parameters
-
-    if not model.is_invertible():
-        raise ValueError(
-            "model: the PI operator has no exact inverse (first weight or a partial sum of "
-            "the weights is not positive)"
-        )
-    r_inv, mu_inv = pi_inverse_parameters(model.thresholds, model.mu)
-    return model.thresholds.copy(), model.mu.copy(), r_inv, mu_inv
-
-
-def _linear_parts(model):
-    """``(a1, b1lead, b1tail, q1, a2, b2lead, b2tail, q2)`` of either sandwich class."""
-    s = model.structure
-    if isinstance(model, DuhemSandwich):
-        return model.a1, 1.0, model.b1, s.q1, model.a2, 1.0, model.b2, s.q2
-    b1, b2 = model.b1, model.b2
-    return model.a1, float(b1[0]), b1[1:], s.q1, model.a2, float(b2[0]), b2[1:], s.q2
-
-
-def hysteresis_gain(model: DuhemSandwich | PISandwich) -> float:
-    """Slope of the hysteresis block's central (anhysteretic) line, ``dw2/dw1``.
-
-    ``f1`` for the Duhem block (its ascending and descending branches are
-    ``w2 = f1 w1 -+ (f1 - g0) / alpha``); for a PI block the secant of the loading curve over the
-    largest threshold.
-
-    Parameters
-    ----------
-    model : DuhemSandwich or PISandwich
-        The identified stage.
-
-    Returns
-    -------
-    float
-        The slope ``dw2/dw1`` of the central line.
-    """
-    if isinstance(model, DuhemSandwich):
-        return float(model.params["f1"])
-    r, mu = model.thresholds, model.mu
-    a = float(r[-1] + (r[1] - r[0] if len(r) > 1 else 1.0))
-    return float(np.sum(mu * np.maximum(a - r, 0.0)) / a)
-
-
 def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
-           reference_lead: int | None = None) -> _Chain:
+           reference_lead: int | None = None, l2_identity: bool = False) -> _Chain:
     if not hasattr(model, "structure") or not hasattr(model, "L1"):
         raise ValueError(f"model: expected a DuhemSandwich or PISandwich, got {model!r}")
     umin, umax = (float(v) for v in u_limits)
@@ -514,6 +390,8 @@ def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
     if reference_lead and (reference_model is None or isinstance(reference_model, str)):
         raise ValueError("reference_lead: only meaningful with a reference model M (its delay)")
     a1, b1lead, b1t, q1, a2, b2lead, b2t, q2 = _linear_parts(model)
+    if l2_identity:  # L2 inverted outside the chain: its reference is w2 itself
+        a2, b2lead, b2t, q2 = np.zeros(0), 1.0, np.zeros(0), 0
     _min_phase(np.r_[b1lead, b1t], "L1")
     l2mode, AM, BM, CM, DM = _reference_model(reference_model, model.dt)
     if l2mode == 1:
@@ -776,10 +654,12 @@ class Feedforward:
         return (self.status & NOT_EXACT) == 0
 
 
-def _run(chain: _Chain, y_ref: np.ndarray) -> Feedforward:
-    x = chain.initial_state(y_ref)
-    rs = _pad_hold(y_ref, chain.advance)[chain.advance:]
-    n = len(rs)
+def _run(chain: _Chain, y_ref: np.ndarray, n: int | None = None,
+         rest: float = 0.0) -> Feedforward:
+    """Run the chain over ``y_ref`` (``n`` samples; ``y_ref`` may run further, for the preview)."""
+    n = len(y_ref) if n is None else n
+    x = chain.initial_state(y_ref, rest)
+    rs = _pad_hold(y_ref, chain.advance)[chain.advance:chain.advance + n]
     u, yd, status = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
     chain_run(x, np.ascontiguousarray(rs), *chain.args(), u, yd, status)
     return Feedforward(u, yd, status, chain.preview, chain.delay)
@@ -801,7 +681,8 @@ def feedforward(
     Runs the compensator of :func:`inverse` over ``y_ref`` (with the preview taken from
     ``y_ref`` itself, its last value held at the end) so that ``model.simulate(u).y`` tracks
     ``y_ref`` (or ``M y_ref``). The reference should start at rest (``y_ref[0] = 0``, the stage's
-    state at rest).
+    state at rest). It works on the sandwich's own signals: for a model identified on a record
+    (rest level, sensor offset, envelope, units) use :func:`~hystid.compensate.compensate`.
 
     Parameters
     ----------

@@ -22,8 +22,8 @@ __all__ = ["EXIT_BAD_INPUT", "OUTPUT_FILES", "configure_parser", "run"]
 
 EXIT_BAD_INPUT = 2
 #: Files ``--out`` receives.
-OUTPUT_FILES = ("report.json", "summary.txt", "error_time.png", "spectrum.png", "branch.png",
-                "gap.png", "correlation.png")
+OUTPUT_FILES = ("report.json", "summary.txt", "model.json", "error_time.png", "spectrum.png",
+                "branch.png", "gap.png", "correlation.png")
 
 _fraction = fraction
 _positive = number(0.0, strict_minimum=True)
@@ -206,13 +206,16 @@ def _check_out(args: argparse.Namespace) -> None:
         raise _BadInput(str(err)) from err
 
 
-def _write(out: Path, report: dict, result) -> None:
-    """Write the report, the summary and the figures: all of them, or none on a failure."""
+def _write(out: Path, report: dict, result, final, summary: str, provenance: dict) -> None:
+    """Write the report, the summary, the model and the figures: all of them, or none on a
+    failure."""
+    from ..modelfile import save_model
     from ..safeio import atomic_folder, write_json, write_text
 
     with atomic_folder(out) as stage:
         write_json(stage / "report.json", report)
-        write_text(stage / "summary.txt", result.summary() + "\n")
+        write_text(stage / "summary.txt", summary + "\n")
+        save_model(final.model, stage / "model.json", provenance=provenance)
         result.plot(stage)
 
 
@@ -231,6 +234,7 @@ def run(args: argparse.Namespace) -> int:
     """
     from ..validate import check_fit_size, check_magnitudes
     from .diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
+    from .final_model import final_model
 
     try:
         _check_out(args)
@@ -258,6 +262,9 @@ def run(args: argparse.Namespace) -> int:
             repeats=repeats, time_budget=args.time_budget,
             require_excitation=strict, progress=not args.quiet,
         )
+        say = None if args.quiet else (lambda m: print(f"hystid diagnose: {m}",
+                                                       file=sys.stderr, flush=True))
+        final = final_model(result, train, vals, progress=say)
     except (_BadInput, DiagnosisError) as err:
         print(f"hystid diagnose: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -265,10 +272,15 @@ def run(args: argparse.Namespace) -> int:
     report["records"] = {"train": train.name, "val": [v.name for v in vals],
                          "repeat": [r.name for r in repeats],
                          "units": train.units, "u_scale": args.u_scale, "crop": args.crop}
+    report["final_model"] = final.to_dict()
+    summary = "\n".join([result.summary(), "", *final.summary_lines(train.units.get("y", ""))])
     if args.out:
+        from ..modelfile import make_provenance
+
         out = Path(args.out)
+        provenance = make_provenance("diagnose", args.train, {"model": final.chosen})
         try:
-            _write(out, report, result)
+            _write(out, report, result, final, summary, provenance)
         except OSError as err:
             print(f"hystid diagnose: error: --out {out}: {err}", file=sys.stderr)
             return EXIT_BAD_INPUT
@@ -277,7 +289,7 @@ def run(args: argparse.Namespace) -> int:
 
         print(dumps_strict(report))
     else:
-        print(result.summary())
+        print(summary)
         if args.out:
-            print(f"\nfigures and report written to {args.out}")
+            print(f"\nfigures, report and model.json ({final.chosen}) written to {args.out}")
     return 0

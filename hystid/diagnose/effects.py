@@ -473,8 +473,34 @@ class AugmentedSandwich:
         """Sampling rate in Hz."""
         return self.model.fs
 
+    @property
+    def structure(self):
+        """The nominal model's structure."""
+        return self.model.structure
+
+    @property
+    def u_rest(self) -> float:
+        """The nominal model's rest level (record units)."""
+        return self.model.u_rest
+
+    @property
+    def offset(self) -> float:
+        """The nominal model's sensor offset (record units)."""
+        return self.model.offset
+
+    @property
+    def envelope(self):
+        """The input envelope the nominal model was identified on (or None)."""
+        return self.model.envelope
+
+    @property
+    def units(self) -> dict[str, str]:
+        """Units of the input and output."""
+        return self.model.units
+
     def simulate(
-        self, u: np.ndarray | Sequence[float], x0: InitialCondition | None = None
+        self, u: np.ndarray | Sequence[float], x0: InitialCondition | None = None,
+        check: bool = False,
     ) -> SandwichResponse:
         """Simulate from the past ``x0`` (at rest by default); ``t = 0`` at the first sample.
 
@@ -487,6 +513,9 @@ class AugmentedSandwich:
             Input samples.
         x0 : InitialCondition, optional
             Past relative to the rest (at rest by default).
+        check : bool
+            Warn (:class:`~hystid.operating.AdmissibilityWarning`) where the input leaves the
+            nominal model's envelope.
 
         Returns
         -------
@@ -494,6 +523,10 @@ class AugmentedSandwich:
             ``t, u, w1, w2, y``; ``w2`` is the Duhem output before creep. Unpacks as ``t, y``.
         """
         u = finite_signal(u, "u")
+        if check and self.envelope is not None:
+            from ..operating import warn_admissibility
+
+            warn_admissibility(self.envelope.violations(u), self.name)
         m = self.model
         ws = _Workspace(u - m.u_rest, _history(m), x0)
         w1, w2, y = ws.run(m.theta, m.structure.layout, self.phi, m.dt)

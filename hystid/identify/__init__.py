@@ -54,10 +54,11 @@ def identify(
     method: str = "batch",
     structure: Structure | str | None = None,
     *,
+    model: str = "duhem",
     progress: Callable[[int, int], None] | None = None,
     **settings: Any,
 ) -> IdentificationResult:
-    """Identify the Duhem sandwich from a record.
+    """Identify a sandwich model from a record.
 
     Parameters
     ----------
@@ -70,6 +71,12 @@ def identify(
         Model structure; the paper's experimental one by default; ``"auto"`` chooses orders
         and delays on held-out error (:func:`~hystid.identify.structure.select_structure`,
         its table in ``result.info["structure_selection"]``).
+    model : str
+        The member of the model family (:data:`hystid.identify.members.MEMBERS`): ``"duhem"``
+        (default), ``"pi"``, ``"pi-stage"``, or ``"auto"`` to choose between
+        :data:`~hystid.identify.members.AUTO_CANDIDATES` on data held out inside the record
+        (:func:`~hystid.identify.members.select_member`; batch only, its table in
+        ``result.info["member_selection"]``). ``structure`` applies to the Duhem sandwich.
     progress : callable, optional
         Called as ``progress(k, n)`` while a long run goes on.
     **settings
@@ -93,6 +100,8 @@ def identify(
     check_call(record, structure)
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if model != "duhem":
+        return _identify_member(record, method, structure, model, progress, settings)
     selection = None
     if isinstance(structure, str):
         if structure != "auto":
@@ -117,26 +126,76 @@ def identify(
     return result
 
 
+def _identify_member(record: Record, method: str, structure: Any, model: str,
+                     progress: Callable[[int, int], None] | None,
+                     settings: dict) -> IdentificationResult:
+    """``identify`` for a member other than the default Duhem sandwich, or ``"auto"``."""
+    from .members import member, select_member
+
+    if structure is not None:
+        raise ValueError(f"structure: applies to model='duhem' only (got model={model!r}); a "
+                         "member fixes its own structure")
+    if model == "auto":
+        if method != "batch":
+            raise ValueError(f"model='auto' chooses on batch fits (got method={method!r}); "
+                             "pass model='duhem' or 'pi' for an on-line method")
+        return select_member(record, progress=progress, **settings)
+    chosen = member(model)
+    if chosen.kind == "pi" and method not in ("batch", "online"):
+        raise ValueError(f"method: the PI sandwich is identified by 'batch' or 'online' (its "
+                         f"recursive identifier), got {method!r}")
+    return chosen.fit(record, method, progress=progress, **settings)
+
+
 def _run_recursive(record: Record, method: str, structure: Structure | None,
                progress: Callable[[int, int], None] | None, settings: dict) -> IdentificationResult:
-    """A recursive estimator on the record less its rest level, placed back afterwards."""
-    from .prepare import prepare
-
+    """A recursive estimator of the Duhem sandwich, placed (:func:`run_placed`)."""
     if method == "eria":
         from .eria import ERIA as estimator
     elif method == "online":
         from .online import OnlineIdentifier as estimator
     else:
         from .ekf import KalmanIdentifier as estimator
+    return run_placed(record, lambda relative: estimator(structure, record.fs, **settings),
+                      progress)
+
+
+def run_placed(record: Record, make: Callable[[Record], Any],
+               progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
+    """Run a recursive estimator on the record less its rest level and place the model back.
+
+    The estimator sees ``u - u_rest`` and ``y - y_ref`` (the rest level and the output at rest
+    of :func:`~hystid.identify.prepare.prepare`); the model it returns is moved to the
+    record's rest level and sensor offset, given the input envelope and the record's units, as
+    the batch fits place theirs.
+
+    Parameters
+    ----------
+    record : Record
+        Input and measured output, in any units.
+    make : callable
+        ``make(relative_record) -> estimator`` with a ``fit(record, progress=...)`` method.
+    progress : callable, optional
+        ``progress(k, n)`` during the run.
+
+    Returns
+    -------
+    IdentificationResult
+        The placed model; ``info["warnings"]`` adds what the preparation found and whether the
+        model is admissible on the record.
+    """
+    from .prepare import prepare
+
     prep = prepare(record)
     relative = Record(record.u - prep.u_rest, record.y - prep.y_ref, record.fs, record.units,
                       record.name)
-    result = estimator(structure, record.fs, **settings).fit(relative, progress=progress)
+    result = make(relative).fit(relative, progress=progress)
     model = result.model
     model.u_rest, model.offset = prep.u_rest + model.u_rest, prep.y_ref + model.offset
     model.envelope, model.units = prep.envelope, dict(record.units)
-    notes = list(prep.notes) + [f"on the identification record: {w}"
-                                for w in model.admissibility(record.u) if "condition" in w
-                                or "diverged" in w]
+    problems = (model.admissibility(record.u) if hasattr(model, "admissibility")
+                else model.envelope.violations(record.u))
+    notes = list(prep.notes) + [f"on the identification record: {w}" for w in problems
+                                if "condition" in w or "diverged" in w]
     result.info["warnings"] = list(result.info.get("warnings", [])) + notes
     return result

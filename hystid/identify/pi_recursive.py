@@ -67,6 +67,7 @@ from ..model import InitialCondition, Structure
 from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds, play
 from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
+from ..thresholds import RULES
 from .base import Estimator, record_signals, sample_arrays
 from .constraints import Reflections
 from .offline import SCREEN_NFEV, linear_start, triangle_of
@@ -1298,8 +1299,12 @@ def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
         blocks["ARX"] = arx
         blocks["L1 = z^-1, ARX L2"] = np.where(np.isin(np.arange(len(arx)), l1), 0.0, arx)
         blocks["ARX L1, L2 = z^-1"] = np.where(np.isin(np.arange(len(arx)), l1), arx, 0.0)
+    unique: dict[str, np.ndarray] = {}  # a structure without free L1 terms makes mixtures twins
+    for label, theta in blocks.items():
+        if not any(np.array_equal(theta, other) for other in unique.values()):
+            unique[label] = theta
     return {label: _weights_given_blocks(theta, un, yn, rows, r, structure, fit_offset)
-            for label, theta in blocks.items()}
+            for label, theta in unique.items()}
 
 
 class _PIOutputError:
@@ -1371,14 +1376,22 @@ def _folded(J: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def _structure_and_thresholds(
-    u: np.ndarray, thresholds: np.ndarray | None, structure: PIStructure | None,
+    u: np.ndarray, thresholds: np.ndarray | str | None, structure: PIStructure | None,
     n_operators: int,
 ) -> tuple[PIStructure, np.ndarray]:
-    """The structure and the thresholds (record units; placed over ``u`` when not given)."""
+    """The structure and the thresholds (record units): given, or placed over ``u`` by a rule
+    of :data:`hystid.thresholds.RULES` (the paper's ``"range"`` when None)."""
     if structure is not None:
         n_operators = structure.n_operators
-    r = (pi_thresholds(u, n_operators) if thresholds is None
-         else np.asarray(thresholds, dtype=float).ravel())
+    if thresholds is None:
+        thresholds = "range"
+    if isinstance(thresholds, str):
+        if thresholds not in RULES:
+            raise ValueError(f"thresholds: expected an array or one of {', '.join(RULES)}, "
+                             f"got {thresholds!r}")
+        r = RULES[thresholds](u, n_operators)
+    else:
+        r = np.asarray(thresholds, dtype=float).ravel()
     s = structure or PIStructure(n_operators=len(r))
     if len(r) != s.n_operators:
         raise ValueError(f"thresholds: expected {s.n_operators} values for the structure, got "
@@ -1388,7 +1401,7 @@ def _structure_and_thresholds(
 
 def fit_pi_output_error(
     record: Record,
-    thresholds: np.ndarray | None = None,
+    thresholds: np.ndarray | str = "swing",
     structure: PIStructure | None = None,
     *,
     n_operators: int = N_OPERATORS,
@@ -1423,9 +1436,11 @@ def fit_pi_output_error(
     ----------
     record : Record
         Input ``u`` and measured output ``y``, in any units.
-    thresholds : array_like, optional
-        Play-operator thresholds in the record's input units; placed over the record's input
-        range by default (:func:`hystid.pi.pi_thresholds`).
+    thresholds : array_like or {"swing", "range"}
+        Play-operator thresholds in the record's input units, or the rule that places them
+        over the fitted samples (:mod:`hystid.thresholds`): ``"swing"`` (default) within the
+        largest swing between two reversals of the input, so that every operator is reversed
+        at least once; ``"range"`` the paper's, over the input's range.
     structure : PIStructure, optional
         Orders and delays (the paper's by default).
     n_operators : int
@@ -1450,8 +1465,8 @@ def fit_pi_output_error(
         ``method="pi-batch"``; ``info`` holds the RMS residual (record units), the solver's
         message, the scales, the offset and ``warnings`` (what the preparation found).
     """
-    s, r = _structure_and_thresholds(record.u, thresholds, structure, n_operators)
     prep = prepare(record, skip=skip)
+    s, r = _structure_and_thresholds(record.u[prep.fitted], thresholds, structure, n_operators)
     if not offset:
         prep.y_ref, prep.yn = 0.0, record.y / prep.y_scale
     su, sy = prep.u_scale, prep.y_scale

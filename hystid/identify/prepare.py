@@ -99,6 +99,13 @@ class Prepared:
     notes: list[str] = field(default_factory=list)
 
     @property
+    def fitted(self) -> slice:
+        """The span of samples the fit scores: from the burn-in to the end, less a wrapped last
+        sample."""
+        n = len(self.weight)
+        return slice(self.skip, n - (0 if self.weight[-1] else 1))
+
+    @property
     def y0_start(self) -> float:
         """Start value of the normalised offset: the output at rest (0 by construction)."""
         return 0.0
@@ -345,6 +352,7 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
         raise IdentificationDataError(
             f"record {record.name!r}: only {int(weight.sum())} of {len(u)} samples are usable "
             f"({'; '.join(notes)})")
-    fitted = slice(skip, len(u) - (0 if weight[-1] else 1))
-    return Prepared(record, u_rest, u_scale, y_ref, y_scale, (u - u_rest) / u_scale,
-                    (y - y_ref) / y_scale, weight, at_rest, skip, Envelope.of(u[fitted]), notes)
+    prep = Prepared(record, u_rest, u_scale, y_ref, y_scale, (u - u_rest) / u_scale,
+                    (y - y_ref) / y_scale, weight, at_rest, skip, Envelope.of(u[:1]), notes)
+    prep.envelope = Envelope.of(u[prep.fitted])
+    return prep

@@ -1,0 +1,241 @@
+"""C export speed: the generated C steps against the compiled Python, in the same process.
+
+The model is exported (``hystid.export.c_sources``), compiled with the system C compiler
+(``-std=c99 -O2``) together with a small timing driver, and run on the paper's excitation; the
+same input goes through ``model.simulate`` (numba) in this process. Reported: samples per second
+of ``hystid_model_step`` (goal: at least one million), of ``model.simulate``, their ratio, the
+largest relative difference of the outputs, and the C rates of the compensator and of the
+on-line identifier's step.
+
+Usage: python benchmarks/bench_export.py [--quick] [--samples N] [--out FILE.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import shutil
+import subprocess
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+from _common import best_time, table, write_json
+
+from hystid.compensate import feedforward
+from hystid.export import c_sources, ff_chain, rpem_start
+from hystid.identify.online import rpem_run
+from hystid.reference import paper_excitation, reference_model
+
+GOAL = 1e6  # C model steps per second
+
+DRIVER = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "hystid_model.h"
+
+static double buf[2 * 4000000];
+
+int main(int argc, char **argv)
+{
+    long n, k, rep, reps;
+    double best = 1e300, sum = 0.0, t;
+    clock_t t0;
+    FILE *f;
+    if (argc < 4) {
+        return 2;
+    }
+    n = atol(argv[3]);
+    reps = atol(argv[4]);
+    f = fopen(argv[2], "rb");
+    if (f == NULL || n > 4000000 || fread(buf, sizeof(double), 2 * (size_t)n, f)
+                                     != 2 * (size_t)n) {
+        return 3;
+    }
+    fclose(f);
+    for (rep = 0; rep < reps; rep++) {
+        sum = 0.0;
+        if (strcmp(argv[1], "model") == 0) {
+            static hystid_model_state s;
+            t0 = clock();
+            hystid_model_init(&s);
+            for (k = 0; k < n; k++) {
+                sum += hystid_model_step(&s, buf[k]);
+            }
+#ifndef HYSTID_NO_FF
+        } else if (strcmp(argv[1], "ff") == 0) {
+            static hystid_ff_state s;
+            t0 = clock();
+            hystid_ff_init(&s);
+            for (k = 0; k < n; k++) {
+                sum += hystid_ff_step(&s, buf[k]);
+            }
+#endif
+#ifndef HYSTID_NO_RPEM
+        } else if (strcmp(argv[1], "rpem") == 0) {
+            static hystid_rpem_state s;
+            t0 = clock();
+            hystid_rpem_init(&s);
+            for (k = 0; k < n; k++) {
+                hystid_rpem_step(&s, buf[k], buf[n + k]);
+            }
+            sum = hystid_rpem_theta(&s)[0];
+#endif
+        } else {
+            return 2;
+        }
+        t = (double)(clock() - t0) / CLOCKS_PER_SEC;
+        if (t < best) {
+            best = t;
+        }
+    }
+    printf("%.17g %.17g\n", best, sum);
+    return 0;
+}
+"""
+
+
+def compile_export(model, folder: Path) -> Path:
+    """Export ``model`` into ``folder`` and build the timing driver; returns the program."""
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        raise SystemExit("bench_export: no C compiler (cc or gcc) on PATH")
+    for name, text in c_sources(model).items():
+        (folder / name).write_text(text)
+    (folder / "bench.c").write_text(DRIVER)
+    exe = folder / "bench"
+    subprocess.run([cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-I", str(folder),
+                    str(folder / "hystid_model.c"), str(folder / "bench.c"), "-o", str(exe),
+                    "-lm"], check=True)
+    return exe
+
+
+def c_rate(exe: Path, folder: Path, mode: str, u: np.ndarray, y: np.ndarray,
+           reps: int) -> tuple[float, float]:
+    """Best seconds of ``len(u)`` C steps over ``reps`` runs, and the run's checksum."""
+    data = folder / f"{mode}.bin"
+    np.concatenate([u, y]).astype("<f8").tofile(data)
+    out = subprocess.run([str(exe), mode, str(data), str(len(u)), str(reps)],
+                         capture_output=True, text=True, check=True).stdout.split()
+    return float(out[0]), float(out[1])
+
+
+def measure(quick: bool = False, samples: int | None = None) -> dict:
+    """Time the C steps and ``model.simulate`` on the reference stage.
+
+    Parameters
+    ----------
+    quick : bool
+        300 000 samples instead of 3 000 000.
+    samples : int, optional
+        Samples per run (overrides ``quick``; at most 4 000 000).
+
+    Returns
+    -------
+    dict
+        Samples per second, ratio, agreement.
+    """
+    n = min(samples or (300_000 if quick else 3_000_000), 4_000_000)
+    model = reference_model()
+    u = np.tile(paper_excitation(30_000, seed=0), n // 30_000 + 1)[:n]
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        exe = compile_export(model, folder)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            y = model.simulate(u, check=False).y
+            t_py = best_time(lambda: model.simulate(u, check=False), repeat=5, min_time=0)
+        t_c, checksum = c_rate(exe, folder, "model", u, y, reps=5)
+        # the C driver sums its outputs in order: so does cumsum (equal sums: equal samples,
+        # barring compensating differences)
+        agree = abs(checksum - float(np.cumsum(y)[-1])) / float(np.sum(np.abs(y)))
+        nf = min(n, 300_000)
+        t = np.arange(nf) / model.fs
+        r = 3.5 * (1 - np.cos(2 * np.pi * 20 * t))
+        t_ff, _ = c_rate(exe, folder, "ff", r, r, reps=3)
+        feedforward(model, r[:1000])
+        t_ff_py = best_time(lambda: feedforward(model, r), repeat=3, min_time=0)
+        t_rpem, _ = c_rate(exe, folder, "rpem", u[:nf], y[:nf], reps=3)
+        uu, yy = np.ascontiguousarray(u[:nf] - model.u_rest), np.ascontiguousarray(y[:nf])
+
+        start = rpem_start(model)
+
+        def python_rpem() -> None:
+            rpem_run(start._buf.copy(), start._ints.copy(), uu, yy,
+                     np.empty((nf, len(model.theta))), np.empty((nf, 7)))
+
+        python_rpem()
+        t_rpem_py = best_time(python_rpem, repeat=3, min_time=0)
+    c_rate_model = n / t_c
+    py_rate = n / t_py
+    return {"samples": n, "goal_c_samples_per_s": GOAL,
+            "c_model_samples_per_s": c_rate_model, "python_simulate_samples_per_s": py_rate,
+            "ratio_c_vs_python": c_rate_model / py_rate,
+            "c_ff_samples_per_s": nf / t_ff, "python_ff_samples_per_s": nf / t_ff_py,
+            "ff_preview": ff_chain(model).preview,
+            "c_rpem_samples_per_s": nf / t_rpem, "python_rpem_samples_per_s": nf / t_rpem_py,
+            "checksum_relative_difference": agree,
+            "meets_goal": bool(c_rate_model >= GOAL)}
+
+
+def render(payload: dict) -> str:
+    """The figures as Markdown.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+        A table.
+    """
+    rows = [
+        ["C hystid_model_step", f"{payload['c_model_samples_per_s']:.3g}",
+         f"{payload['ratio_c_vs_python']:.2g}x numba"],
+        ["numba model.simulate (same process)", f"{payload['python_simulate_samples_per_s']:.3g}",
+         "1"],
+        [f"C hystid_ff_step (preview {payload['ff_preview']})",
+         f"{payload['c_ff_samples_per_s']:.3g}",
+         f"{payload['c_ff_samples_per_s'] / payload['python_ff_samples_per_s']:.2g}x "
+         "feedforward"],
+        ["C hystid_rpem_step", f"{payload['c_rpem_samples_per_s']:.3g}",
+         f"{payload['c_rpem_samples_per_s'] / payload['python_rpem_samples_per_s']:.2g}x "
+         "rpem_run"],
+    ]
+    goal = "met" if payload["meets_goal"] else "NOT met"
+    return (table(rows, ["step", "samples/s", "ratio"])
+            + f"\n\n{payload['samples']} samples of the reference stage; goal "
+              f"{payload['goal_c_samples_per_s']:.0e} C model samples/s: {goal}; the sums of "
+              f"the C and Python outputs differ by "
+              f"{payload['checksum_relative_difference']:.1e} of sum |y| (the tests compare "
+              "sample by sample).")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="300 000 samples")
+    parser.add_argument("--samples", type=int, default=None, help="samples per run")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="JSON file (default benchmarks/results/export.json)")
+    args = parser.parse_args()
+    payload = measure(args.quick, args.samples)
+    print(render(payload))
+    if args.out is None:
+        path = write_json("export", payload)
+    else:
+        path = args.out
+        doc = {"machine": {"python": platform.python_version(), "cpu": platform.processor()},
+               **payload}
+        path.write_text(json.dumps(doc, indent=2))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,160 @@
+"""Measured stage A: every member of the model family against the baselines and a generic NARX.
+
+Identified on ``prbn_1`` (the whole record, default options of each member), run free from rest
+on every other record of ``../shared/data/real/stageA/``. Every prediction, the models', the
+static line's, the linear model's and the NARX's, is put on each record's own output at rest
+(:func:`hystid.baselines.rest_zero`: the sensor's zero moves between records); the models'
+figures with the offset identified on ``prbn_1`` are given as well. The floor of each input is
+the repeat-to-repeat RMS of its two records with their means removed
+(:func:`hystid.baselines.repeat_floor`). The speed of ``model="auto"`` is a ratio to the default
+Duhem fit timed in the same process, on the same record.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_stage_a.py [--members duhem,pi-stage,auto]
+
+The NARX column needs the ``bench`` extra (SysIdentPy); without it the column is left out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+from pathlib import Path
+
+import narx
+import numpy as np
+from _common import table, write_json
+
+from hystid.baselines import LinearModel, StaticLine, compare, repeat_floor, rest_zero
+from hystid.identify import identify
+from hystid.records import load_record
+
+#: The README blocks this script renders (see ``benchmarks/readme.py``).
+README_BLOCKS = {"stage-a": "render"}
+COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_stage_a.py"
+
+STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
+TRAIN = "prbn_1"
+INPUTS = ("prbn", "sine50", "tri50")
+MEMBERS = ("duhem", "pi", "pi-stage", "auto")
+
+
+def records() -> dict:
+    """Stage A's records by name (empty when the shared data is absent)."""
+    if not STAGE_A.exists():
+        return {}
+    return {f"{i}_{r}": load_record(STAGE_A / f"{i}_{r}.csv") for i in INPUTS for r in (1, 2)}
+
+
+def _rms(p: np.ndarray, rec) -> float:
+    e = p + rest_zero(p, rec) - rec.y
+    r = float(np.sqrt(np.mean(e ** 2)))
+    return r if np.isfinite(r) else float("inf")
+
+
+def measure(members: tuple[str, ...] = MEMBERS) -> dict:
+    """Fit each member on ``prbn_1`` and score it, the baselines and the NARX on the others.
+
+    Parameters
+    ----------
+    members : tuple of str
+        ``model=`` values of :func:`hystid.identify.identify`.
+
+    Returns
+    -------
+    dict
+        ``records`` (held-out names), ``floors`` (per input, um), ``baselines`` (per baseline,
+        RMS per record), ``members`` (per member: RMS per record zeroed at rest and as placed,
+        seconds, chosen member for ``auto``) and ``speed`` (``auto`` / default seconds).
+    """
+    recs = records()
+    if not recs:
+        return {"error": f"{STAGE_A} is absent"}
+    train = recs[TRAIN]
+    held = [r for n, r in recs.items() if n != TRAIN]
+    names = [r.name for r in held]
+    floors = {i: repeat_floor([recs[f"{i}_1"], recs[f"{i}_2"]]) for i in INPUTS}
+    line, linear = StaticLine.fit(train), LinearModel.fit(train, 3, 3, 1)
+    base = {"static line": [_rms(line.predict(r.u), r) for r in held],
+            "linear (3rd order)": [_rms(linear.predict(r.u), r) for r in held]}
+    if narx.available():
+        t0 = time.perf_counter()
+        model = narx.NARX.fit(train)
+        base["NARX (SysIdentPy)"] = [_rms(model.predict(r), r) for r in held]
+        base_seconds = time.perf_counter() - t0
+    else:
+        base_seconds = None
+    out = {}
+    for m in members:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t0 = time.perf_counter()
+            res = identify(train, model=m)
+            seconds = time.perf_counter() - t0
+            rows = compare(res.model, train, held).rows
+        out[m] = {"rms": [r["model"] for r in rows], "as_placed": [r["model_as_placed"]
+                                                                   for r in rows],
+                  "seconds": seconds, "chosen": res.info.get("model", m),
+                  "selection": res.info.get("member_selection")}
+    speed = (out["auto"]["seconds"] / out["duhem"]["seconds"]
+             if "auto" in out and "duhem" in out else None)
+    return {"train": TRAIN, "records": names, "floors": floors, "baselines": base,
+            "narx_seconds": base_seconds, "members": out, "speed_auto_over_duhem": speed}
+
+
+def _nm(v: float) -> str:
+    return "diverged" if v is None or not np.isfinite(v) else f"{1e3 * v:.0f}"
+
+
+def render(payload: dict) -> str:
+    """Held-out RMS in nm per record: members, baselines, NARX and the floor, as Markdown.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+    """
+    if "error" in payload:
+        return f"Not measured: {payload['error']}."
+    names = payload["records"]
+    floor = [payload["floors"][n.rsplit("_", 1)[0]] for n in names]
+    rows = []
+    for m, e in payload["members"].items():
+        label = f"`{m}`" + (f" (chose `{e['chosen']}`)" if m == "auto" else "")
+        rows.append([label, *(_nm(v) for v in e["rms"]), f"{e['seconds']:.1f}"])
+    for b, v in payload["baselines"].items():
+        rows.append([b, *(_nm(x) for x in v), ""])
+    rows.append(["repeat floor (offset removed)", *(_nm(f) for f in floor), ""])
+    text = [table(rows, ["held-out RMS [nm], trained on prbn_1", *names, "fit [s]"]), ""]
+    narx_rms = payload["baselines"].get("NARX (SysIdentPy)")
+    if narx_rms is not None:
+        for m, e in payload["members"].items():
+            wins = sum(a < b for a, b in zip(e["rms"], narx_rms, strict=True))
+            text.append(f"- `{m}` beats the NARX on {wins} of {len(names)} records.")
+    for m, e in payload["members"].items():
+        ratio = [a / f for a, f in zip(e["rms"], floor, strict=True)]
+        text.append(f"- `{m}`: {min(ratio):.1f}-{max(ratio):.1f}x the repeat floor; with the "
+                    f"offset identified on prbn_1 instead of each record's rest output "
+                    f"{_nm(min(e['as_placed']))}-{_nm(max(e['as_placed']))} nm.")
+    if payload.get("speed_auto_over_duhem"):
+        text.append(f"- `auto` takes {payload['speed_auto_over_duhem']:.1f}x the default Duhem "
+                    "fit's time on prbn_1 (20 001 samples, one process).")
+    return "\n".join(text)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--members", default=",".join(MEMBERS))
+    args = parser.parse_args()
+    payload = measure(tuple(args.members.split(",")))
+    print(render(payload))
+    print(f"\nwritten {write_json('stage_a', payload)}")
+
+
+if __name__ == "__main__":
+    main()

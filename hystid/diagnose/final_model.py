@@ -1,0 +1,200 @@
+"""The diagnosis ends in a model: the nominal one with its accepted effects, or another member.
+
+After the rounds of :func:`~hystid.diagnose.diagnosis.diagnose`, the candidates for the
+hysteresis itself are the other members of the model family
+(:data:`hystid.identify.members.MEMBERS`: a PI operator between a static L1 and a third-order
+L2, ...). Each is identified on the train record and every candidate - the nominal model, the
+nominal model with the accepted effects (:class:`~hystid.diagnose.effects.AugmentedSandwich`)
+and the members - is run free on the held-out records and scored alike
+(:func:`hystid.baselines.compare`'s rule: each prediction zeroed on the record's own output at
+rest). The model with the lowest mean held-out RMS is the diagnosis' model: ``hystid diagnose
+--out DIR`` writes it as ``DIR/model.json`` and the report's ``final_model`` gives its held-out
+error and the share of the gap between the nominal model and the floor it closes. When a member
+wins, the verdict says that the hysteresis operator itself is what the nominal model gets wrong.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..baselines import rest_zero, simulate_from_rest
+from ..records import Record
+
+__all__ = ["FINAL_MEMBERS", "FinalModel", "final_model"]
+
+#: The members tried as the hysteresis itself (besides the nominal Duhem sandwich).
+FINAL_MEMBERS = ("pi-stage",)
+#: A candidate replaces a simpler one only when it is better by more than this share.
+MARGIN = 0.1
+
+
+@dataclass
+class FinalModel:
+    """The diagnosis' model and how every candidate did on the held-out records.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per candidate: ``candidate``, ``what``, ``rms`` (per held-out record, output
+        units), ``mean_rms`` and ``gap_closed`` (share of the nominal model's gap to the floor).
+    chosen : str
+        The candidate kept.
+    model : object
+        Its model (a sandwich, or an :class:`~hystid.diagnose.effects.AugmentedSandwich`).
+    floor : float
+        The floor the gap is measured to (output units).
+    verdict : str
+        One sentence: what the diagnosis ends in and why.
+    records : list of str
+        Names of the held-out records.
+    """
+
+    rows: list[dict[str, Any]]
+    chosen: str
+    model: Any
+    floor: float
+    verdict: str
+    records: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain, JSON-ready form.
+
+        Returns
+        -------
+        dict
+        """
+        chosen = next(r for r in self.rows if r["candidate"] == self.chosen)
+        return {"chosen": self.chosen, "heldout_rms": chosen["mean_rms"],
+                "gap_closed": chosen["gap_closed"], "floor": self.floor,
+                "verdict": self.verdict, "records": list(self.records),
+                "candidates": [dict(r) for r in self.rows]}
+
+    def summary_lines(self, unit: str = "") -> list[str]:
+        """Lines for the diagnosis' summary.
+
+        Parameters
+        ----------
+        unit : str
+            The output's unit.
+
+        Returns
+        -------
+        list of str
+        """
+        lines = ["model the diagnosis ends in (mean held-out RMS, each record zeroed on its "
+                 "rest output):"]
+        for r in self.rows:
+            mark = "  <- model.json" if r["candidate"] == self.chosen else ""
+            lines.append(f"  {r['candidate']:<28} {r['mean_rms']:.4g} {unit}, "
+                         f"{100 * r['gap_closed']:.0f} % of the gap to the floor "
+                         f"({self.floor:.4g} {unit}){mark}")
+        lines.append(self.verdict)
+        return lines
+
+
+def _predict(model: Any, u: np.ndarray) -> np.ndarray:
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")
+        return simulate_from_rest(model, u, check=False)
+
+
+def _scores(model: Any, held: Sequence[tuple[Record, int]]) -> list[float]:
+    out = []
+    for rec, k in held:
+        p = _predict(model, rec.u)
+        e = (p + rest_zero(p, rec) - rec.y)[k:]
+        r = float(np.sqrt(np.mean(e ** 2)))
+        out.append(r if np.isfinite(r) else float("inf"))
+    return out
+
+
+def final_model(
+    result: Any,
+    train: Record,
+    vals: Sequence[Record],
+    *,
+    members: Sequence[str] = FINAL_MEMBERS,
+    margin: float = MARGIN,
+    holdout: float = 0.4,
+    progress: Callable[[str], None] | None = None,
+) -> FinalModel:
+    """Score the nominal model, the nominal model with its effects and the members; keep one.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        From :func:`~hystid.diagnose.diagnosis.diagnose` (its ``model``, ``augmented``,
+        ``accepted`` and ``floor``).
+    train : Record
+        The train record.
+    vals : sequence of Record
+        Held-out records; without them the members are fitted on the train record's first
+        ``1 - holdout`` and every candidate is scored on the rest.
+    members : sequence of str
+        Members of :data:`hystid.identify.members.MEMBERS` tried as the hysteresis.
+    margin : float
+        Share by which a candidate must beat the simpler ones to be kept (the nominal model,
+        then the nominal model with effects, then the members in the order given).
+    holdout : float
+        Share of the train record held out when there are no held-out records.
+    progress : callable, optional
+        ``progress(message)`` before each fit.
+
+    Returns
+    -------
+    FinalModel
+    """
+    from ..identify import identify
+    from ..identify.members import member
+
+    say = progress or (lambda message: None)
+    if vals:
+        fit_on, held = train, [(v, 0) for v in vals]
+    else:
+        k = int(round((1.0 - holdout) * train.n))
+        fit_on, held = train[:k], [(train, k)]
+    candidates: list[tuple[str, str, Any]] = [("nominal", "the nominal model", result.model)]
+    if result.accepted:
+        candidates.append((f"nominal + {' + '.join(result.accepted)}",
+                           "the nominal model with the accepted effects", result.augmented))
+    for name in members:
+        say(f"final model: fitting the {name} member on {fit_on.name!r}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fit = identify(fit_on, model=name)
+        candidates.append((name, member(name).what, fit.model))
+    floor = float(result.floor.get("rms", 0.0))
+    rows = []
+    for name, what, model in candidates:
+        rms = _scores(model, held)
+        rows.append({"candidate": name, "what": what, "rms": rms,
+                     "mean_rms": float(np.mean(rms))})
+    nominal = rows[0]["mean_rms"]
+    gap = nominal - floor
+    for r in rows:
+        r["gap_closed"] = float((nominal - r["mean_rms"]) / gap) if gap > 0 else 0.0
+    chosen = rows[0]
+    for r in rows[1:]:
+        if r["mean_rms"] < (1.0 - margin) * chosen["mean_rms"]:
+            chosen = r
+    model = next(m for name, _, m in candidates if name == chosen["candidate"])
+    verdict = _verdict(chosen, rows, members)
+    return FinalModel(rows, chosen["candidate"], model, floor, verdict,
+                      [f"{rec.name}" + (f" [{k}:]" if k else "") for rec, k in held])
+
+
+def _verdict(chosen: dict, rows: list[dict], members: Sequence[str]) -> str:
+    name = chosen["candidate"]
+    share = f"{100 * chosen['gap_closed']:.0f} %"
+    if name in members:
+        return (f"the hysteresis operator is what the nominal model gets wrong: the {name} "
+                f"member closes {share} of the gap to the floor, more than any effect around "
+                "the nominal operator")
+    if name != "nominal":
+        return f"the accepted effects close {share} of the gap; no member does better"
+    return "neither an effect nor another member beats the nominal model by the margin"

@@ -1,0 +1,433 @@
+"""C99 export of a saved model: the placed model, the feed-forward compensator and the on-line
+identifier's step, as ``hystid_model.h`` and ``hystid_model.c``.
+
+The generated code allocates nothing and includes nothing beyond ``math.h``. Every number it
+holds comes from the same Python objects the Python functions run on (the model's coefficients,
+the compensator's chain arrays, the on-line identifier's packed state), written with 17
+significant digits, and the C code does the same floating-point operations in the same order,
+so it agrees with Python sample by sample to the last bit when the compiler does not contract
+``a*b+c`` into fused multiply-adds (``-ffp-contract=off``, GCC's default with ``-std=c99``;
+clang contracts by default) and is not given ``-ffast-math``; otherwise to round-off.
+
+What each function is:
+
+* ``hystid_model_step`` -- ``model.simulate(u).y`` one sample at a time: the recorded input in
+  (record units), the displacement out (record units, the sensor offset included), from rest
+  (the Duhem state at the model's ``rest_memory``).
+* ``hystid_ff_step`` -- :func:`hystid.compensate.feedforward` one sample at a time, in the
+  record's units (the reference less the sensor offset in, the command plus the rest level
+  out; limits from the model's envelope by default, see :func:`ff_options`). The Python
+  function reads the reference ``advance`` samples ahead (the delays of L1 and L2 and the
+  reversal planner's preview); a causal step cannot, so the C step returns the command for
+  the reference ``HYSTID_FF_DELAY = advance`` samples earlier (during the first
+  ``HYSTID_FF_DELAY`` calls, the rest command).
+* ``hystid_rpem_step`` -- one sample of the on-line identifier's recursion
+  (:func:`hystid.identify.online.rpem_run`), warm-started from the saved model (see
+  :func:`hystid.export.rpem.rpem_start`); Duhem models only. The start-up solve of
+  :class:`~hystid.identify.online.OnlineIdentifier` (a batch fit) is not part of the export.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..model import DuhemSandwich
+from ._c_ff import FF_CHAIN, FF_PLANNER
+from ._c_model import DUHEM_STEP, MODEL_COMMON, PI_STEP
+from ._c_rpem import RPEM_STEP
+from .rpem import rpem_start
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..compensate.compensator import _Chain
+    from ..identify.online import OnlineIdentifier
+    from ..pi import PISandwich
+    from ..records import Record
+
+__all__ = ["C_FILES", "ENVELOPE_MARGIN", "c_sources", "export_c", "ff_chain", "ff_options",
+           "rpem_start"]
+
+#: The files :func:`export_c` writes.
+C_FILES = ("hystid_model.h", "hystid_model.c")
+
+
+# =========================================================================== numbers as C
+def _num(x: float) -> str:
+    """A double as C text that reads back to the same bits (Python's shortest repr)."""
+    x = float(x)
+    if not np.isfinite(x):
+        raise ValueError(f"cannot export a non-finite number ({x!r})")
+    text = repr(x)
+    return f"({text})" if text.startswith("-") else text
+
+
+def _array(name: str, values: Sequence[float] | np.ndarray) -> str:
+    """``static const double name[n] = {...};`` (one placeholder 0.0 when empty: C has no
+    empty arrays; the code never reads it then)."""
+    vals = [float(v) for v in np.ravel(np.asarray(values, dtype=float))] or [0.0]
+    body = ",\n    ".join(", ".join(_num(v) for v in vals[i:i + 4]) for i in range(0, len(vals), 4))
+    return f"static const double {name}[{len(vals)}] = {{\n    {body}\n}};\n"
+
+
+def _define(name: str, value: float | int) -> str:
+    if isinstance(value, int | np.integer) and not isinstance(value, bool):
+        return f"#define {name} {int(value)}\n"
+    return f"#define {name} {_num(value)}\n"
+
+
+# =========================================================================== the parts
+def _model_part(model: DuhemSandwich | PISandwich) -> tuple[str, str]:
+    """(header text, source text) of the placed model."""
+    s = model.structure
+    duhem = isinstance(model, DuhemSandwich)
+    hist = s.history
+    head = (_define("HYSTID_FS", model.fs) + _define("HYSTID_U_REST", model.u_rest)
+            + _define("HYSTID_OFFSET", model.offset) + _define("HYSTID_MODEL_WINDOW", hist + 1))
+    fields = "    double u[HYSTID_MODEL_WINDOW], w1[HYSTID_MODEL_WINDOW];\n" \
+             "    double w2[HYSTID_MODEL_WINDOW], y[HYSTID_MODEL_WINDOW];\n"
+    if duhem:
+        head += "#define HYSTID_KIND_DUHEM 1\n"
+    else:
+        head += "#define HYSTID_KIND_PI 1\n" + _define("HYSTID_MODEL_OPERATORS",
+                                                       len(model.thresholds))
+        fields += "    double p[HYSTID_MODEL_OPERATORS]; /* play-operator states */\n"
+    head += ("\n/* The placed model's state: past samples of u - u_rest, w1, w2 and y - offset "
+             "(newest last). */\ntypedef struct hystid_model_state {\n" + fields
+             + "} hystid_model_state;\n\n"
+             "/* Start at rest (the state model.simulate starts from). */\n"
+             "void hystid_model_init(hystid_model_state *s);\n"
+             "/* One sample: the recorded input u in, the displacement out (record units). */\n"
+             "double hystid_model_step(hystid_model_state *s, double u);\n")
+    src = (_define("HX_HIST", hist) + _define("HX_Q1", s.q1) + _define("HX_Q2", s.q2)
+           + _define("HX_N1A", len(model.a1)) + _define("HX_N1B", len(model.b1))
+           + _define("HX_N2A", len(model.a2)) + _define("HX_N2B", len(model.b2))
+           + _array("hx_a1", model.a1) + _array("hx_b1", model.b1)
+           + _array("hx_a2", model.a2) + _array("hx_b2", model.b2))
+    if duhem:
+        p = model.params
+        rest = model.at_rest()
+        src += (_define("HX_ALPHA", p["alpha"]) + _define("HX_F0", p.get("f0", 0.0))
+                + _define("HX_F1", p["f1"]) + _define("HX_G0", p["g0"])
+                + _define("HX_W2_REST", rest.window("w2", 1)[0])
+                + _define("HX_Y_REST", rest.window("y", 1)[0]) + DUHEM_STEP)
+    else:
+        src += (_define("HX_NPI", len(model.thresholds)) + _array("hx_r", model.thresholds)
+                + _array("hx_mu", model.mu) + PI_STEP)
+    return head, src
+
+
+#: Share of the identified input span the exported compensator's default limits add at each
+#: end of the model's envelope.
+ENVELOPE_MARGIN = 0.1
+_FF_KEYS = ("u_limits", "reference_model", "reference_lead", "preview", "duhem_bound")
+
+
+def ff_options(model: DuhemSandwich | PISandwich, **options: Any) -> dict[str, Any]:
+    """The keyword arguments of :func:`hystid.compensate.feedforward` the export runs with.
+
+    The exported step works in the record's units: it takes the reference with the sensor
+    offset in and returns the command with the rest level in, i.e. it is
+    ``feedforward(model, r - offset, **ff_options(model)) + u_rest``. So ``u_limits`` given here
+    are in the record's units and returned relative to the rest; by default they are the
+    model's input envelope widened by :data:`ENVELOPE_MARGIN` of its span at each end, or,
+    without an envelope, ``feedforward``'s own default. The other options not given take
+    ``feedforward``'s defaults.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+    **options
+        ``u_limits`` (record units), ``reference_model``, ``reference_lead``, ``preview``,
+        ``duhem_bound``.
+
+    Returns
+    -------
+    dict
+        All five options, ``u_limits`` relative to the rest level.
+    """
+    from ..compensate import compensator as comp
+
+    unknown = sorted(set(options) - set(_FF_KEYS))
+    if unknown:
+        raise ValueError(f"compensator options: unknown {unknown} (expected {list(_FF_KEYS)})")
+    params = inspect.signature(comp.feedforward).parameters
+    kw = {k: options.get(k, params[k].default) for k in _FF_KEYS}
+    if "u_limits" in options:
+        low, high = (float(v) - model.u_rest for v in options["u_limits"])
+        kw["u_limits"] = (low, high)
+    elif model.envelope is not None:
+        env = model.envelope
+        pad = ENVELOPE_MARGIN * (env.u_max - env.u_min)
+        kw["u_limits"] = (env.u_min - pad - model.u_rest, env.u_max + pad - model.u_rest)
+    return kw
+
+
+def ff_chain(model: DuhemSandwich | PISandwich, **options: Any) -> _Chain:
+    """The compensator chain the exported ``hystid_ff_step`` runs (see :func:`ff_options`).
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+    **options
+        As for :func:`ff_options`.
+
+    Returns
+    -------
+    hystid.compensate.compensator._Chain
+        The arrays of the compiled chain of :func:`hystid.compensate.feedforward`.
+    """
+    from ..compensate import compensator as comp
+
+    return comp._build(model, kind=comp.KIND_DUHEM, **ff_options(model, **options))
+
+
+def _ff_part(chain: _Chain, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
+    """(header text, source text) of the compensator."""
+    from ..compensate import compensator as comp
+
+    ispec, fpar = chain.ispec, chain.fpar
+    kind = int(ispec[comp._KIND])
+    if kind not in (comp.KIND_DUHEM, comp.KIND_PI, comp.KIND_LINEAR):
+        raise ValueError(f"compensator kind {kind} cannot be exported")
+    rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX])) + model.u_rest
+    P = int(ispec[comp._P])
+    head = (f"\n/* Feed-forward compensator: hystid.compensate.feedforward(model, r - offset) + "
+            f"u_rest, in the\n   record's units. The step takes the reference r(n) and returns "
+            f"the command for\n   r(n - HYSTID_FF_DELAY): the Python compensator reads the "
+            f"reference {chain.advance} samples ahead\n   (delays q1 + q2 = {chain.delay}, "
+            f"planner preview {P}{f', reference lead {chain.lead}' if chain.lead else ''}). */\n"
+            + _define("HYSTID_FF_DELAY", chain.advance) + _define("HYSTID_FF_PREVIEW", P)
+            + _define("HYSTID_FF_NX", int(ispec[comp._NX]))
+            + _define("HYSTID_FF_U_MIN", float(fpar[comp._UMIN]) + model.u_rest)
+            + _define("HYSTID_FF_U_MAX", float(fpar[comp._UMAX]) + model.u_rest)
+            + "/* the command returned while the first HYSTID_FF_DELAY references are read in */\n"
+            + _define("HYSTID_FF_REST_COMMAND", rest)
+            + "typedef struct hystid_ff_state {\n    double x[HYSTID_FF_NX]; /* the Python "
+            "compensator's state vector */\n    double gaps[HYSTID_FF_PREVIEW + 1]; /* planner "
+            "scratch */\n    long n;\n    double u, yd;\n    int status;\n} hystid_ff_state;\n\n"
+            "void hystid_ff_init(hystid_ff_state *s);\n"
+            "/* r: the reference now; returns the command for the reference HYSTID_FF_DELAY "
+            "samples ago. */\ndouble hystid_ff_step(hystid_ff_state *s, double r);\n"
+            "/* the desired output aligned with that command's output, and the status bits (1 "
+            "step clipped\n   to the bound of condition 8, 2 no exact step, 4 saturated, 8 "
+            "turning the hysteresis round) */\ndouble hystid_ff_desired(const hystid_ff_state "
+            "*s);\nint hystid_ff_status(const hystid_ff_state *s);\n")
+    names = ("KIND", "N1A", "N1B", "Q1", "N2A", "N2B", "Q2", "NM", "L2MODE", "P", "LY", "LW",
+             "NPI", "OFF_M", "OFF_Y", "OFF_W", "OFF_U", "OFF_W1", "OFF_H", "NX", "H1", "Q")
+    src = "".join(_define(f"HX_FF_{n}", int(ispec[getattr(comp, f"_{n}")])) for n in names)
+    fnames = ("ALPHA", "F0", "F1", "G0", "BOUND", "UMIN", "UMAX", "B1LEAD", "B2LEAD", "K2", "KH")
+    src += "".join(_define(f"HX_FF_{n}", float(fpar[getattr(comp, f"_{n}")])) for n in fnames)
+    src += _define("HX_FF_DM", float(chain.DM)) + _define("HX_FF_R_SHIFT", model.offset) \
+        + _define("HX_FF_U_SHIFT", model.u_rest)
+    arrays = {"a1": chain.a1, "b1t": chain.b1t}
+    if int(ispec[comp._L2MODE]) == 1:
+        arrays.update(a2=chain.a2, b2t=chain.b2t)
+    if int(ispec[comp._NM]) > 0:
+        arrays.update(am=chain.AM, bm=chain.BM, cm=chain.CM)
+    if kind == comp.KIND_PI:
+        arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi, r_inv=chain.r_inv,
+                      mu_inv=chain.mu_inv)
+    src += "".join(_array(f"hx_ff_{k}", v) for k, v in arrays.items())
+    if kind == comp.KIND_DUHEM:
+        src += FF_PLANNER
+    return head, src + FF_CHAIN
+
+
+def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
+    """(header text, source text) of the on-line identifier's step."""
+    from ..identify import online as on
+    from ..kernels import offsets
+
+    s = ident.structure
+    npar = len(ident.theta)
+    w = ident.window
+    sett = ident._sett
+    head = ("\n/* On-line identifier (hystid.identify.online: recursive prediction error), "
+            "warm-started from\n   the model. Parameters in the order of "
+            f"theta: {', '.join(s.names)}; then the offset. */\n"
+            + _define("HYSTID_RPEM_NPAR", npar) + _define("HYSTID_RPEM_WINDOW", w)
+            + "typedef struct hystid_rpem_state {\n"
+            "    double est[HYSTID_RPEM_NPAR + 1], est_good[HYSTID_RPEM_NPAR + 1];\n"
+            "    double P[HYSTID_RPEM_NPAR + 1][HYSTID_RPEM_NPAR + 1];\n"
+            "    double P_good[HYSTID_RPEM_NPAR + 1][HYSTID_RPEM_NPAR + 1];\n"
+            "    double scal[12], PH[HYSTID_RPEM_NPAR + 1], cand[HYSTID_RPEM_NPAR + 1];\n"
+            "    double work[HYSTID_RPEM_NPAR + 1];\n"
+            "    double u[HYSTID_RPEM_WINDOW], w1[HYSTID_RPEM_WINDOW], w2[HYSTID_RPEM_WINDOW];\n"
+            "    double yh[HYSTID_RPEM_WINDOW], ym[HYSTID_RPEM_WINDOW];\n"
+            "    double s1[HYSTID_RPEM_WINDOW][HYSTID_RPEM_NPAR];\n"
+            "    double s2[HYSTID_RPEM_WINDOW][HYSTID_RPEM_NPAR];\n"
+            "    double sy[HYSTID_RPEM_WINDOW][HYSTID_RPEM_NPAR];\n"
+            "    double e;\n} hystid_rpem_state;\n\n"
+            "void hystid_rpem_init(hystid_rpem_state *s);\n"
+            "/* One sample: the recorded input u and the measured output y (record units; a "
+            "non-finite y\n   is skipped). */\n"
+            "void hystid_rpem_step(hystid_rpem_state *s, double u, double y);\n"
+            "/* The current estimate: HYSTID_RPEM_NPAR parameters, then the sensor offset. */\n"
+            "const double *hystid_rpem_theta(const hystid_rpem_state *s);\n"
+            "double hystid_rpem_offset(const hystid_rpem_state *s);\n"
+            "/* The last residual y - yhat - offset (NaN for a skipped sample). */\n"
+            "double hystid_rpem_error(const hystid_rpem_state *s);\n"
+            "/* Restarts after a diverging residual so far. */\n"
+            "long hystid_rpem_restarts(const hystid_rpem_state *s);\n")
+    i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = (int(v) for v in offsets(s.layout))
+    src = "".join(_define(f"HX_R_{k}", v) for k, v in (
+        ("NPAR", npar), ("NE", npar + 1), ("W", w), ("N1A", s.n1a), ("N1B", s.n1b),
+        ("N2A", s.n2a), ("N2B", s.n2b), ("Q1", s.q1), ("Q2", s.q2), ("I_ALPHA", i_alpha),
+        ("I_F0", i_f0), ("I_F1", i_f1), ("I_B1", i_b1), ("I_G0", i_g0), ("I_A1", i_a1),
+        ("I_A2", i_a2), ("RESYNC", max(s.n2a, s.q2 + s.n2b))))
+    if i_b2 != 0:  # the C code reads b2j at theta[j - 1]
+        raise ValueError("unexpected parameter layout: b2 does not lead theta")
+    settings = {"LAM_INF": "LAM_INF", "LAM_RATE": "LAM_RATE", "CLIP": "CLIP",
+                "TRACE_MAX": "TRACE", "DIV_RATIO": "DIV_RATIO", "DIV_HOLD": "DIV_HOLD",
+                "PRESET": "PRESET", "KMAX": "KMAX", "A_SHORT": "SHORT", "A_LONG": "LONG",
+                "A_SIG": "SIG", "TRACK": "TRACK"}
+    src += "".join(_define(f"HX_R_{c}", float(sett[getattr(on, f"_S_{k}")]))
+                   for c, k in settings.items())
+    pos = int(ident._ints[on._I_POS])
+    windows = np.concatenate([a[pos - w:pos] for a in ident._windows[:5]])
+    src += (_array("hx_r_est0", ident._est) + _array("hx_r_p0", ident.P)
+            + _array("hx_r_scal0", ident._scal) + _array("hx_r_win0", windows))
+    return head, src + RPEM_STEP
+
+
+# =========================================================================== assembling
+def c_sources(
+    model: DuhemSandwich | PISandwich,
+    *,
+    source: str = "",
+    compensator: Mapping[str, Any] | None = None,
+    rpem_sigma: float | None = None,
+    rpem_record: Record | None = None,
+    notes: list[str] | None = None,
+) -> dict[str, str]:
+    """The text of ``hystid_model.h`` and ``hystid_model.c`` for a model.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model (placed or not).
+    source : str
+        Where the model came from (a file name), for the header's comment.
+    compensator : mapping, optional
+        Options of :func:`hystid.compensate.feedforward` for the exported compensator.
+    rpem_sigma : float, optional
+        Initial residual scale of the on-line identifier (see :func:`rpem_start`).
+    rpem_record : Record, optional
+        A record of the stage for the on-line identifier's starting information.
+    notes : list of str, optional
+        Receives what the export leaves out and why (a model whose compensator cannot be
+        built is exported without it, ``HYSTID_NO_FF`` defined).
+
+    Returns
+    -------
+    dict of str to str
+        File name to content, for the names in :data:`C_FILES`.
+
+    Raises
+    ------
+    ValueError
+        When the compensator cannot be built with the ``compensator`` options given, or a
+        number is not finite.
+    """
+    from .. import __version__
+
+    duhem = isinstance(model, DuhemSandwich)
+    mhead, msrc = _model_part(model)
+    try:
+        fhead, fsrc = _ff_part(ff_chain(model, **dict(compensator or {})), model)
+    except ValueError as err:
+        if compensator:  # options asked for explicitly: their error is the answer
+            raise
+        reason = str(err).replace("*/", "* /")
+        fhead = (f"\n/* No feed-forward compensator: {reason}. */\n"
+                 "#define HYSTID_NO_FF 1\n")
+        fsrc = ""
+        if notes is not None:
+            notes.append(f"no feed-forward compensator in the export: {reason}")
+    rhead = rsrc = ""
+    if duhem:
+        rhead, rsrc = _rpem_part(rpem_start(model, rpem_record, rpem_sigma))
+    kind = "Duhem" if duhem else "Prandtl-Ishlinskii"
+    units = f"u in {model.units.get('u', '?')}, y in {model.units.get('y', '?')}"
+    banner = (f"/* Generated by hystid {__version__} (hystid export --c) from "
+              f"{source or 'a model'}:\n   the {kind} sandwich {model.name!r} at "
+              f"{model.fs:g} Hz, {units}. C99, no allocation, only math.h.\n"
+              "   Python's numbers to the last bit need no -ffast-math and no fused multiply-adds "
+              "(-ffp-contract=off:\n   GCC's default with -std=c99; clang contracts by "
+              "default). */\n")
+    header = (banner + "#ifndef HYSTID_MODEL_H\n#define HYSTID_MODEL_H\n\n" + mhead + fhead
+              + (rhead if duhem else "\n#define HYSTID_NO_RPEM 1 /* Duhem models only */\n")
+              + "\n#endif /* HYSTID_MODEL_H */\n")
+    helpers = MODEL_COMMON
+    if not duhem:  # sgn is used by the Duhem parts only (an unused static is an error)
+        helpers = MODEL_COMMON[MODEL_COMMON.index("static double hx_max"):]
+    source_text = (banner + '#include <math.h>\n\n#include "hystid_model.h"\n' + helpers
+                   + "\n/* ---- the placed model */\n" + msrc
+                   + ("\n/* ---- the feed-forward compensator */\n" + fsrc if fsrc else "")
+                   + ("\n/* ---- the on-line identifier */\n" + rsrc if duhem else ""))
+    return {"hystid_model.h": header, "hystid_model.c": source_text}
+
+
+def export_c(
+    model: DuhemSandwich | PISandwich,
+    folder: str | os.PathLike[str],
+    *,
+    force: bool = False,
+    source: str = "",
+    compensator: Mapping[str, Any] | None = None,
+    rpem_sigma: float | None = None,
+    rpem_record: Record | None = None,
+    notes: list[str] | None = None,
+) -> list[Path]:
+    """Write ``hystid_model.h`` and ``hystid_model.c`` into a folder.
+
+    Parameters
+    ----------
+    model : DuhemSandwich or PISandwich
+        The model.
+    folder : str or os.PathLike
+        The folder (created with its parents when missing).
+    force : bool
+        Replace the two files when they exist.
+    source : str
+        Where the model came from, for the header's comment.
+    compensator : mapping, optional
+        Options of :func:`hystid.compensate.feedforward` (see :func:`c_sources`).
+    rpem_sigma : float, optional
+        Initial residual scale of the on-line identifier (see :func:`rpem_start`).
+    rpem_record : Record, optional
+        A record of the stage for the on-line identifier's starting information.
+    notes : list of str, optional
+        Receives what the export leaves out and why (see :func:`c_sources`).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The written files.
+
+    Raises
+    ------
+    hystid.safeio.OutputError
+        When a file exists (without ``force``), is a link or a folder, or the folder cannot be
+        written; nothing is written then.
+    ValueError
+        See :func:`c_sources`.
+    """
+    from ..safeio import check_output_dir, write_text
+
+    out = check_output_dir(folder, C_FILES, option="--c", force=force)
+    texts = c_sources(model, source=source, compensator=compensator, rpem_sigma=rpem_sigma,
+                      rpem_record=rpem_record, notes=notes)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name in C_FILES:
+        write_text(out / name, texts[name])
+        paths.append(out / name)
+    return paths

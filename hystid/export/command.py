@@ -1,0 +1,127 @@
+"""``hystid export MODEL --c DIR``: a saved model as C99 ``DIR/hystid_model.h`` and ``.c``.
+
+Bad input (not a model file, a folder that cannot be written, files already there without
+``--force``, a compensator option the model cannot take) is one line on stderr and exit
+status 2; nothing is written then.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["configure_parser", "run"]
+
+EXIT_BAD_INPUT = 2
+
+
+def _limits(text: str) -> tuple[float, float]:
+    try:
+        low, high = (float(v) for v in text.split(","))
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") \
+            from err
+    if not low < high:
+        raise argparse.ArgumentTypeError(f"expected LOW < HIGH, got {text!r}")
+    return low, high
+
+
+def _samples(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected a whole number of samples, got {text!r}") \
+            from err
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected at least 0, got {text!r}")
+    return value
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from err
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``hystid export``.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The sub-command's parser.
+    """
+    parser.description = ("Write a saved model as C99 DIR/hystid_model.h and DIR/hystid_model.c: "
+                          "the placed model's step, the feed-forward compensator's step and "
+                          "the on-line identifier's step (no allocation, only math.h).")
+    parser.add_argument("model", metavar="MODEL", help="a saved model file (hystid identify "
+                        "--out writes DIR/model.json)")
+    parser.add_argument("--c", dest="c_dir", required=True, metavar="DIR",
+                        help="folder for hystid_model.h and hystid_model.c (created if missing)")
+    parser.add_argument("--force", action="store_true", help="replace the two files in DIR")
+    parser.add_argument("--u-limits", type=_limits, default=None, metavar="LOW,HIGH",
+                        help="compensator: command limits in the record's units (default: the "
+                        "model's input envelope widened by 10%% of its span at each end)")
+    parser.add_argument("--preview", type=_samples, default=None, metavar="N",
+                        help="compensator: reversal planner preview in samples (default: "
+                        "feedforward's)")
+    parser.add_argument("--rpem-sigma", type=_positive, default=None, metavar="S",
+                        help="on-line identifier: initial residual scale in output units "
+                        "(default: 1e-3 of the model's output span)")
+    parser.add_argument("--rpem-record", default=None, metavar="REC",
+                        help="on-line identifier: a record of the stage for its starting "
+                        "covariance and residual scale (default: the model on the paper's "
+                        "excitation within its envelope)")
+    parser.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``hystid export``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments (see :func:`configure_parser`).
+
+    Returns
+    -------
+    int
+        0 on success, 2 on bad input.
+    """
+    from ..modelfile import ModelFileError, load_model
+    from .c import export_c
+
+    options = {k: v for k, v in (("u_limits", args.u_limits), ("preview", args.preview))
+               if v is not None}
+    notes: list[str] = []
+    try:
+        model = load_model(args.model)
+        record = None
+        if args.rpem_record is not None:
+            from ..records import load_record
+
+            record = load_record(args.rpem_record)
+        paths = export_c(model, args.c_dir, force=args.force, source=str(args.model),
+                         compensator=options or None, rpem_sigma=args.rpem_sigma,
+                         rpem_record=record, notes=notes)
+    except ModelFileError as err:
+        return _fail(str(err))
+    except ValueError as err:  # OutputError (a ValueError) and the generator's refusals
+        return _fail(str(err))
+    except OSError as err:
+        return _fail(f"--c {args.c_dir}: cannot write there ({err.strerror or err}"
+                     f"{f': {err.filename}' if err.filename else ''}); no file was half-written")
+    for note in notes:
+        print(f"hystid export: note: {note}", file=sys.stderr)
+    if not args.quiet:
+        print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _fail(message: str) -> int:
+    print(f"hystid export: error: {' '.join(message.split())}", file=sys.stderr)
+    return EXIT_BAD_INPUT

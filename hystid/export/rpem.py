@@ -1,0 +1,167 @@
+"""The state the exported on-line identifier starts from: the recursion warm-started at a model.
+
+:class:`~hystid.identify.online.OnlineIdentifier` starts with a batch solve on its first
+samples and sets ``P`` to the inverse Gauss-Newton information of that solution. The exported
+step starts at a saved model instead, and :func:`rpem_start` builds that start the same way:
+``P`` is the inverse information of the model's output sensitivities (and the offset's) on a
+record, and the residual scale the RMS of the model's error there. Without a record the
+information is taken on the paper's excitation scaled into the model's input envelope (the
+model's own output: no residual, so the scale is a thousandth of the output span).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..model import DuhemSandwich
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..identify.online import OnlineIdentifier
+    from ..records import Record
+
+__all__ = ["INFORMATION_SAMPLES", "rpem_start", "warm_information"]
+
+#: Samples of a record (or of the synthetic input) the starting information is taken on.
+INFORMATION_SAMPLES = 2_000
+
+
+def warm_information(
+    model: DuhemSandwich, u: np.ndarray, y: np.ndarray | None = None
+) -> tuple[np.ndarray, float | None]:
+    """Inverse Gauss-Newton information of a model on a record, as the on-line start sets it.
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        The model; simulated from its rest on ``u``.
+    u : ndarray
+        Input samples (record units).
+    y : ndarray, optional
+        Measured output (record units); non-finite samples are left out.
+
+    Returns
+    -------
+    P : ndarray
+        ``pinv(J^T J + 1e-9 trace/n I)`` with ``J`` the output sensitivities to the parameters
+        and (last column, ones) the offset.
+    sigma : float or None
+        RMS of ``y`` less the model's output (None without ``y``).
+    """
+    from ..kernels import sensitivities_into
+
+    s = model.structure
+    u = np.asarray(u, dtype=float)
+    n, npar, h = len(u), len(model.theta), s.history
+    rest = model.at_rest()
+    U, W1, W2, Y = (np.concatenate([rest.window(k, h), np.zeros(n)])
+                    for k in ("u", "w1", "w2", "y"))
+    U[h:] = u - model.u_rest
+    S1, S2, SY = (np.zeros((h + n, npar)) for _ in range(3))
+    with np.errstate(all="ignore"):
+        sensitivities_into(model.theta, s.layout, U, W1, W2, Y, S1, S2, SY, h)
+    ok = np.all(np.isfinite(SY[h:]), axis=1) & np.isfinite(Y[h:])
+    sigma = None
+    if y is not None:
+        y = np.asarray(y, dtype=float)
+        ok &= np.isfinite(y)
+        r = (y - Y[h:] - model.offset)[ok]
+        sigma = max(float(np.sqrt(np.mean(r**2))), 1e-12) if len(r) else None
+    J = np.column_stack([SY[h:][ok], np.ones(int(ok.sum()))])
+    info = J.T @ J
+    P = np.linalg.pinv(info + 1e-9 * np.trace(info) / len(info) * np.eye(len(info)))
+    return P, sigma
+
+
+def _synthetic_input(model: DuhemSandwich, n: int) -> np.ndarray | None:
+    from ..reference import paper_excitation
+
+    env = model.envelope
+    if env is None or not env.u_max > model.u_rest:
+        return None
+    e = paper_excitation(n, model.fs, seed=0)
+    return model.u_rest + e * (env.u_max - model.u_rest) / float(np.max(e))
+
+
+def _default_sigma(model: DuhemSandwich) -> float:
+    env = model.envelope
+    if env is None:
+        return 1e-3
+    gain = model.params["f1"] * (1.0 + np.sum(model.b1)) / (1.0 + np.sum(model.a1)) \
+        * model._l2_gain()
+    value = 1e-3 * abs(gain) * (env.u_max - env.u_min)
+    return float(value) if np.isfinite(value) and value > 0 else 1e-3
+
+
+def rpem_start(
+    model: DuhemSandwich, record: Record | None = None, sigma: float | None = None
+) -> OnlineIdentifier:
+    """The on-line identifier warm-started from a model: the state ``hystid_rpem_init`` sets.
+
+    The recursion (:func:`hystid.identify.online.rpem_run`) starts at the model's parameters
+    and sensor offset, its signal windows at the model's rest, ``P`` from
+    :func:`warm_information` (on the first :data:`INFORMATION_SAMPLES` samples of ``record``,
+    or of the paper's excitation scaled into the model's envelope; without either, the
+    identifier's covariance reset ``min(1, trace_max / (npar + 1)) I``) and the other settings
+    :class:`~hystid.identify.online.OnlineIdentifier`'s defaults. Its input is
+    ``u - model.u_rest``.
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        The model to start from.
+    record : Record, optional
+        A record of the stage for the starting information and residual scale.
+    sigma : float, optional
+        Initial residual scale (output units; step 2 clips at ``clip`` times it); by default
+        the model's RMS error on ``record``, else a thousandth of the output span the model's
+        static line gives over its input envelope (``1e-3`` without an envelope).
+
+    Returns
+    -------
+    OnlineIdentifier
+        Running (its start-up solve skipped), ready for ``rpem_run(ident._buf, ident._ints,
+        u - u_rest, y, ...)``.
+    """
+    from ..identify import online as on
+
+    if not isinstance(model, DuhemSandwich):
+        raise ValueError("the on-line identifier (RPEM) is exported for Duhem models only")
+    ident = on.OnlineIdentifier(model.structure, model.fs)
+    npar = len(model.theta)
+    if record is not None:
+        if not np.isclose(float(record.fs), model.fs, rtol=1e-9):
+            raise ValueError(f"record: sampled at {float(record.fs):g} Hz, the model at "
+                             f"{model.fs:g} Hz")
+        m = INFORMATION_SAMPLES
+        P, measured = warm_information(model, record.u[:m], record.y[:m])
+    else:
+        u = _synthetic_input(model, INFORMATION_SAMPLES)
+        P, measured = (warm_information(model, u) if u is not None else (None, None))
+    if P is None or not np.all(np.isfinite(P)):
+        preset = ident._sett[on._S_PRESET]
+        P = np.diag([preset] * npar + [preset * ident._sett[on._S_TRACK]])
+    if sigma is None:
+        sigma = measured if measured is not None else _default_sigma(model)
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma: expected a positive residual scale, got {sigma!r}")
+    ident._est[:npar] = model.theta
+    ident._est[npar] = model.offset
+    ident.P[:] = P
+    ident._est_good[:] = ident._est
+    ident._P_good[:] = ident.P
+    ident._scal[on._SIG] = sigma
+    ident._scal[on._SHORT] = ident._scal[on._LONG] = sigma**2
+    w = ident.window
+    rest = model.at_rest()
+    U, W1, W2, Yh, Ym = ident._windows[:5]
+    U[:w] = 0.0
+    W1[:w] = 0.0
+    W2[:w] = rest.window("w2", 1)[0]
+    Yh[:w] = Ym[:w] = rest.window("y", 1)[0]
+    ident._ints[on._I_POS] = w
+    ident._running = True
+    ident._verify_at = None
+    ident.u_rest_ = model.u_rest
+    return ident

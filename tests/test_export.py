@@ -1,0 +1,396 @@
+"""``hystid export --c``: the generated C99 against Python, sample by sample.
+
+Every test compiles the export with the system C compiler (``-std=c99 -Wall -Wextra -Werror
+-pedantic``) and a small driver that reads samples on stdin and prints ``%.17g``; without a
+compiler they are skipped (the generator's own tests still run).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hystid import DuhemSandwich
+from hystid.cli import main
+from hystid.compensate import feedforward
+from hystid.compensate.compensator import smoothing_model
+from hystid.export import c_sources, export_c, ff_chain, ff_options, rpem_start
+from hystid.identify.online import rpem_run
+from hystid.operating import Envelope
+from hystid.pi import PISandwich, PIStructure, pi_thresholds
+from hystid.reference import paper_excitation, reference_model
+
+CC = shutil.which("cc") or shutil.which("gcc")
+needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler (cc or gcc) on PATH")
+FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
+STAGE_A = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "stageA"
+RTOL = 1e-9
+
+DRIVER = r"""
+#include <stdio.h>
+#include <string.h>
+
+#include "hystid_model.h"
+
+int main(int argc, char **argv)
+{
+    long n, k;
+    double u;
+    if (argc < 2 || scanf("%ld", &n) != 1) {
+        return 2;
+    }
+    if (strcmp(argv[1], "model") == 0) {
+        hystid_model_state s;
+        hystid_model_init(&s);
+        for (k = 0; k < n; k++) {
+            if (scanf("%lf", &u) != 1) {
+                return 3;
+            }
+            printf("%.17g\n", hystid_model_step(&s, u));
+        }
+#ifndef HYSTID_NO_FF
+    } else if (strcmp(argv[1], "ff") == 0) {
+        static hystid_ff_state s;
+        double c;
+        hystid_ff_init(&s);
+        for (k = 0; k < n; k++) {
+            if (scanf("%lf", &u) != 1) {
+                return 3;
+            }
+            c = hystid_ff_step(&s, u);
+            printf("%.17g %.17g %d\n", c, hystid_ff_desired(&s), hystid_ff_status(&s));
+        }
+#endif
+#ifndef HYSTID_NO_RPEM
+    } else if (strcmp(argv[1], "rpem") == 0) {
+        static hystid_rpem_state s;
+        const double *th;
+        double y;
+        int i;
+        hystid_rpem_init(&s);
+        for (k = 0; k < n; k++) {
+            if (scanf("%lf %lf", &u, &y) != 2) {
+                return 3;
+            }
+            hystid_rpem_step(&s, u, y);
+            th = hystid_rpem_theta(&s);
+            for (i = 0; i <= HYSTID_RPEM_NPAR; i++) {
+                printf(i ? " %.17g" : "%.17g", th[i]);
+            }
+            printf(" %ld\n", hystid_rpem_restarts(&s));
+        }
+#endif
+    } else {
+        return 2;
+    }
+    return 0;
+}
+"""
+
+
+# --------------------------------------------------------------------------- helpers
+def build(texts: dict[str, str], folder: Path) -> Path:
+    """Write the export and the driver into ``folder``, compile, return the program."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, text in texts.items():
+        (folder / name).write_text(text)
+    (folder / "driver.c").write_text(DRIVER)
+    exe = folder / "driver"
+    proc = subprocess.run([CC, *FLAGS, "-I", str(folder), str(folder / "hystid_model.c"),
+                           str(folder / "driver.c"), "-o", str(exe), "-lm"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return exe
+
+
+def run(exe: Path, mode: str, *columns: np.ndarray) -> np.ndarray:
+    """Feed the columns to the driver (exact decimal text), parse its rows."""
+    rows = np.column_stack(columns)
+    text = f"{len(rows)}\n" + "\n".join(" ".join(repr(float(v)) for v in r) for r in rows)
+    out = subprocess.run([str(exe), mode], input=text, capture_output=True, text=True,
+                         check=True).stdout
+    return np.array([[float(v) for v in line.split()] for line in out.splitlines()])
+
+
+def assert_close(c: np.ndarray, py: np.ndarray, rtol: float = RTOL) -> None:
+    """Sample by sample: ``|c - py| <= rtol |py|`` (exact where ``py`` is 0)."""
+    assert c.shape == py.shape
+    bad = np.abs(c - py) > rtol * np.abs(py)
+    assert not bad.any(), (f"{bad.sum()} samples differ, first at {np.argmax(bad)}: "
+                           f"{c[bad][:3]} vs {py[bad][:3]}")
+
+
+def placed_duhem() -> DuhemSandwich:
+    ref = reference_model()
+    return DuhemSandwich(ref.params, ref.structure, fs=ref.fs, name="placed", u_rest=-5.34,
+                         offset=-0.8, rest_memory=0.02, envelope=Envelope(-5.34, 4.7, 0.05),
+                         units={"u": "V", "y": "um"})
+
+
+def pi_model(placed: bool) -> PISandwich:
+    n = 12
+    params = {"a11": -0.6, "a12": 0.05, "b12": 0.1, "a21": -1.2, "a22": 0.4, "b22": 0.05,
+              **{f"mu{i}": 0.3 / (1 + i) for i in range(n)}}
+    place = {"u_rest": 1.5, "offset": 0.3} if placed else {}
+    return PISandwich(params, pi_thresholds((0.0, 10.0), n), PIStructure(n_operators=n),
+                      fs=10_000.0, **place)
+
+
+def stage_a_model() -> DuhemSandwich:
+    from hystid.identify import identify
+    from hystid.records import load_record
+
+    path = STAGE_A / "prbn_1.csv"
+    if not path.exists():
+        pytest.skip(f"measured stage A record not found at {path}")
+    rec = load_record(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return identify(rec).model
+
+
+def excitation(model, n: int) -> np.ndarray:
+    env = model.envelope or Envelope(0.0, 10.0, 0.05)
+    u = paper_excitation(n, seed=3)
+    u = (u - u.min()) / (u.max() - u.min())
+    return model.u_rest + u * (env.u_max - model.u_rest)
+
+
+# --------------------------------------------------------------------------- the model
+MODELS = {
+    "duhem": reference_model,
+    "duhem-placed": placed_duhem,
+    "pi": lambda: pi_model(False),
+    "pi-placed": lambda: pi_model(True),
+}
+
+
+@needs_cc
+@pytest.mark.parametrize("name", list(MODELS))
+def test_model_step_matches_simulate(name, tmp_path):
+    model = MODELS[name]()
+    exe = build(c_sources(model), tmp_path)
+    u = excitation(model, 5_000)
+    py = model.simulate(u, check=False).y
+    c = run(exe, "model", u)[:, 0]
+    assert_close(c, py)
+    assert np.ptp(py) > 0
+
+
+@needs_cc
+def test_model_compensator_and_rpem_match_on_stage_a(tmp_path):
+    """A model identified on measured stage A (rest level -5.34 V, a sensor offset): the
+    model on two records, the compensator (limits widened to the stage's) and the RPEM step
+    warm-started on a record."""
+    from hystid.records import load_record
+
+    model = stage_a_model()
+    assert model.u_rest != 0 and model.offset != 0 and model.rest_memory != 0
+    prbn = load_record(STAGE_A / "prbn_1.csv")
+    options = {"u_limits": (-120.0, 120.0)}
+    texts = c_sources(model, compensator=options, rpem_record=prbn)
+    exe = build(texts, tmp_path)
+    for rec in (prbn, load_record(STAGE_A / "sine50_1.csv")):
+        assert_close(run(exe, "model", rec.u)[:, 0], model.simulate(rec.u, check=False).y)
+    sine = load_record(STAGE_A / "sine50_1.csv")
+    r = sine.y[:3_000]  # a measured displacement, record units
+    ff = feedforward(model, r - model.offset, full_output=True, **ff_options(model, **options))
+    D = ff_chain(model, **options).advance
+    out = run(exe, "ff", np.concatenate([r, np.full(D, r[-1])]))
+    assert_close(out[D:, 0], ff.u + model.u_rest)
+    assert not np.all(ff.status & 4)  # not simply saturated
+    n = 4_000
+    ident = rpem_start(model, prbn)
+    history = np.empty((n, len(model.theta)))
+    rpem_run(ident._buf, ident._ints, np.ascontiguousarray(sine.u[:n] - model.u_rest),
+             np.ascontiguousarray(sine.y[:n]), history, np.empty((n, 7)))
+    assert_close(run(exe, "rpem", sine.u[:n], sine.y[:n])[:, :len(model.theta)], history)
+
+
+# --------------------------------------------------------------------------- compensator
+def _ff_case(model, r, tmp_path, **options):
+    """The C compensator on a reference in record units against
+    ``feedforward(model, r - offset, **ff_options(model, ...)) + u_rest``."""
+    exe = build(c_sources(model, compensator=options or None), tmp_path)
+    D = ff_chain(model, **options).advance
+    ff = feedforward(model, r - model.offset, full_output=True, **ff_options(model, **options))
+    out = run(exe, "ff", np.concatenate([r, np.full(D, r[-1])]))
+    rest = out[:D]
+    assert np.all(rest[:, 0] == rest[0, 0])
+    assert_close(out[D:, 0], ff.u + model.u_rest)
+    assert_close(out[D:, 1], ff.yd + model.offset)
+    np.testing.assert_array_equal(out[D:, 2].astype(int), ff.status)
+    return ff
+
+
+@needs_cc
+def test_ff_step_matches_feedforward_with_reversal_planning(tmp_path):
+    model = reference_model()
+    t = np.arange(6_000) / model.fs
+    r = 3.5 * (1 - np.cos(2 * np.pi * 20 * t))
+    ff = _ff_case(model, r, tmp_path)
+    assert ff.preview == 300 and np.any(ff.status & 8) and np.any(ff.status == 0)
+
+
+@needs_cc
+@pytest.mark.parametrize("option", ["exact", "smoother"])
+def test_ff_step_matches_with_a_reference_model(option, tmp_path):
+    model = reference_model()
+    t = np.arange(4_000) / model.fs
+    r = 3.5 * (1 - np.cos(2 * np.pi * 30 * t))
+    M = "exact" if option == "exact" else smoothing_model(31, model.dt)
+    _ff_case(model, r, tmp_path, reference_model=M, u_limits=(-20.0, 20.0))
+
+
+@needs_cc
+@pytest.mark.parametrize("placed", [False, True])
+def test_ff_step_matches_for_a_pi_model(placed, tmp_path):
+    model = pi_model(placed)
+    t = np.arange(3_000) / model.fs
+    r = 0.9 * (1 - np.cos(2 * np.pi * 25 * t))
+    _ff_case(model, r, tmp_path, u_limits=(-20.0, 20.0))
+
+
+def test_ff_limits_default_to_the_envelope_in_record_units():
+    model = placed_duhem()
+    env = model.envelope
+    pad = 0.1 * (env.u_max - env.u_min)
+    low, high = ff_options(model)["u_limits"]
+    assert np.isclose(low + model.u_rest, env.u_min - pad)
+    assert np.isclose(high + model.u_rest, env.u_max + pad)
+    assert ff_options(model, u_limits=(-1.0, 2.0))["u_limits"] == (-1.0 - model.u_rest,
+                                                                   2.0 - model.u_rest)
+    head = c_sources(model)["hystid_model.h"]
+    assert f"#define HYSTID_FF_U_MIN ({env.u_min - pad - model.u_rest + model.u_rest!r})" in head
+
+
+def test_pi_without_inverse_is_exported_without_compensator():
+    model = pi_model(False)
+    model.theta[model.structure.slices()["mu"]] = -0.1
+    notes: list[str] = []
+    texts = c_sources(model, notes=notes)
+    assert "#define HYSTID_NO_FF 1" in texts["hystid_model.h"]
+    assert "hystid_ff_step" not in texts["hystid_model.c"]
+    assert notes and "no exact inverse" in notes[0]
+
+
+# --------------------------------------------------------------------------- on-line identifier
+@needs_cc
+def test_rpem_step_matches_the_recursion(tmp_path):
+    """The parameter trajectory of the C step against rpem_run, with clipped outliers, a
+    skipped sample and a diverging burst that forces a restart."""
+    model = placed_duhem()
+    exe = build(c_sources(model), tmp_path)
+    n = 3_000
+    u = excitation(model, n)
+    truth = DuhemSandwich(model.theta * 1.02, model.structure, fs=model.fs,
+                          u_rest=model.u_rest, offset=model.offset + 0.01)
+    rng = np.random.default_rng(0)
+    y = truth.simulate(u, check=False).y + 1e-3 * rng.standard_normal(n)
+    y[500] += 5.0
+    y[700] = np.nan
+    y[1_500:1_800] += 30.0  # a diverging stretch: the recursion restarts (and projects)
+    ident = rpem_start(model)
+    npar = len(model.theta)
+    history = np.empty((n, npar))
+    rpem_run(ident._buf, ident._ints, np.ascontiguousarray(u - model.u_rest), y, history,
+             np.empty((n, 7)))
+    out = run(exe, "rpem", u, y)
+    assert_close(out[:, :npar], history)
+    assert out[-1, npar] == ident.offset_estimate
+    assert out[-1, -1] == ident.n_recoveries >= 1 and ident.n_projections >= 1
+    assert np.max(np.abs(history[-1] / model.theta - 1)) > 1e-3  # the estimate moved
+
+
+def test_rpem_is_for_duhem_models_only():
+    texts = c_sources(pi_model(False))
+    assert "#define HYSTID_NO_RPEM 1" in texts["hystid_model.h"]
+    with pytest.raises(ValueError, match="Duhem models only"):
+        rpem_start(pi_model(False))
+
+
+# --------------------------------------------------------------------------- what is written
+def test_the_source_needs_only_math_h():
+    for model in (placed_duhem(), pi_model(True)):
+        texts = c_sources(model)
+        includes = [line for line in texts["hystid_model.c"].splitlines()
+                    if line.startswith("#include")]
+        assert includes == ["#include <math.h>", '#include "hystid_model.h"']
+        assert "#include" not in texts["hystid_model.h"]
+        assert not any(w in texts["hystid_model.c"] for w in ("malloc", "calloc", "free("))
+
+
+def test_export_never_overwrites_without_force(tmp_path):
+    model = placed_duhem()
+    paths = export_c(model, tmp_path / "c")
+    assert [p.name for p in paths] == ["hystid_model.h", "hystid_model.c"]
+    (tmp_path / "c" / "hystid_model.c").write_text("mine")
+    with pytest.raises(ValueError, match="already"):
+        export_c(model, tmp_path / "c")
+    assert (tmp_path / "c" / "hystid_model.c").read_text() == "mine"
+    export_c(model, tmp_path / "c", force=True)
+    assert "hystid_model_step" in (tmp_path / "c" / "hystid_model.c").read_text()
+
+
+# --------------------------------------------------------------------------- the command
+def test_cli_export(tmp_path, capsys):
+    model_file = placed_duhem().save(tmp_path / "model.json")
+    assert main(["export", str(model_file), "--c", str(tmp_path / "out"), "--quiet"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["hystid_model.c",
+                                                                    "hystid_model.h"]
+    # existing files, no --force: one line, exit 2, the files untouched
+    (tmp_path / "out" / "hystid_model.h").write_text("mine")
+    capsys.readouterr()
+    assert main(["export", str(model_file), "--c", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("hystid export: error:") and "\n" not in err and "--force" in err
+    assert (tmp_path / "out" / "hystid_model.h").read_text() == "mine"
+    assert main(["export", str(model_file), "--c", str(tmp_path / "out"), "--force",
+                 "--quiet"]) == 0
+    assert "HYSTID_MODEL_H" in (tmp_path / "out" / "hystid_model.h").read_text()
+
+
+@pytest.mark.parametrize("case", ["not-a-model", "missing", "unwritable"])
+def test_cli_export_bad_input(case, tmp_path, capsys):
+    model_file = placed_duhem().save(tmp_path / "model.json")
+    out = tmp_path / "out"
+    if case == "not-a-model":
+        model_file = tmp_path / "record.csv"
+        model_file.write_text("t,u,y\n0,0,0\n")
+    elif case == "missing":
+        model_file = tmp_path / "nothing.json"
+    else:
+        out = tmp_path / "a-file"
+        out.write_text("x")
+    assert main(["export", str(model_file), "--c", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("hystid export: error:") and "\n" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_export_options(tmp_path, capsys):
+    model = placed_duhem()
+    model_file = model.save(tmp_path / "model.json")
+    rec = tmp_path / "rec.csv"
+    u = excitation(model, 3_000)
+    y = model.simulate(u, check=False).y
+    rec.write_text("t,u,y\n" + "\n".join(f"{k / model.fs!r},{float(a)!r},{float(b)!r}"
+                                          for k, (a, b) in enumerate(zip(u, y, strict=True))))
+    assert main(["export", str(model_file), "--c", str(tmp_path / "out"), "--u-limits=-6,6",
+                 "--preview", "50", "--rpem-record", str(rec), "--quiet"]) == 0
+    head = (tmp_path / "out" / "hystid_model.h").read_text()
+    assert "#define HYSTID_FF_U_MIN (-6.0)" in head and "#define HYSTID_FF_U_MAX 6.0" in head
+    assert "#define HYSTID_FF_PREVIEW 50" in head
+    src = (tmp_path / "out" / "hystid_model.c").read_text()
+    assert src != c_sources(model, compensator={"u_limits": (-6.0, 6.0), "preview": 50})[
+        "hystid_model.c"]  # the record changed the RPEM's starting covariance
+    for bad in (["--u-limits", "6,-6"], ["--preview", "-1"], ["--rpem-sigma", "0"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["export", str(model_file), "--c", str(tmp_path / "x"), *bad])
+        assert exc.value.code == 2
+    assert not (tmp_path / "x").exists()
