@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
@@ -19,12 +18,9 @@ from .options import MAX_SECONDS, integer, number
 #: shown by ``identify`` (a result the fit could not trust carries its own warnings).
 NUMERIC_NOISE = r"(overflow|invalid value|divide by zero|underflow) encountered"
 #: Files ``identify --out`` and ``demo --out`` write into their folder.
+kernels_cached = cli_support.kernels_cached  # where it always was
 REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png")
 _RECORD_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
-#: Compiled kernels every ``hystid demo`` runs, as (module, name): while one of them is not in
-#: numba's cache yet, the demo says that it compiles them.
-DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensitivities_into"),
-                ("hystid.identify.online", "rpem_run"), ("hystid.identify.eria", "eria_run"))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -122,14 +118,6 @@ def _path(text: str) -> str:
     return text
 
 
-def _table(rows: list[list[str]], header: list[str]) -> str:
-    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
-    line = "  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True))
-    out = [line, "  ".join("-" * w for w in widths)]
-    out += ["  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
-    return "\n".join(out)
-
-
 def _crop_arg(args):
     text = getattr(args, "crop", None)
     if text is None:
@@ -192,7 +180,7 @@ def _method_arg(args: argparse.Namespace) -> str:
                            "expected --model duhem or pi for an on-line method)")
     if getattr(args, "history", None) and method not in _HISTORY_METHODS[family]:
         raise CommandError(f"--history: method {method!r} keeps no parameter history "
-                           f"(expected --method {_one_of(_HISTORY_METHODS[family])})")
+                           f"(expected --method {cli_support.one_of(_HISTORY_METHODS[family])})")
     batch_only = (("--skip", getattr(args, "skip", None)),
                   ("--offset", getattr(args, "offset", None)))
     for option, value in batch_only:
@@ -217,11 +205,6 @@ def _check_skip(args: argparse.Namespace, train, structure) -> None:
         raise CommandError(f"--skip {args.skip:g}: leaves {max(left, 0)} of the {train.n} "
                            f"samples fitted ({train.n / train.fs:g} s of {train.name!r} "
                            f"without its held-out end; expected at least {need} samples left)")
-
-
-def _one_of(names: tuple[str, ...]) -> str:
-    """``"a, b or c"``."""
-    return " or ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
 
 
 def _identify_record(rec, args, progress: Progress, structure=None):
@@ -315,18 +298,10 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         "beats_baselines": baselines.beats_baselines,
         "warnings": warnings_,
         "converged_at": result.converged_at,
-        "settings": {k_: v for k_, v in result.settings.items() if _jsonable(v)},
+        "settings": {k_: v for k_, v in result.settings.items() if cli_support.jsonable(v)},
         "record": {"name": rec.name, "samples": rec.n, "fs": rec.fs},
-        "info": {k_: v for k_, v in result.info.items() if _jsonable(v)},
+        "info": {k_: v for k_, v in result.info.items() if cli_support.jsonable(v)},
     }, yhat, target
-
-
-def _jsonable(value) -> bool:
-    try:
-        json.dumps(value)
-    except TypeError:
-        return False
-    return True
 
 
 def _write_history(path: str, result) -> None:
@@ -495,7 +470,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         rows, yu = [[k, f"{v:.6g}"] for k, v in report["params"].items()], rec.units.get("y", "")
         rows += [[f"{k} [{rec.units.get(x, '')}]", f"{report[k]:.6g}"]
                  for k, x in (("u_rest", "u"), ("offset", "y"))]
-        print(_table(rows, ["parameter", "estimate"]))
+        print(cli_support.table(rows, ["parameter", "estimate"]))
         _print_choice(result.info.get("member_selection"), rec.units.get("y", ""))
         v = report["validation"]
         if v is not None:
@@ -526,7 +501,7 @@ def _print_choice(selection: dict | None, unit: str) -> None:
     print(f"\nmodel choice (held-out samples {selection['holdout_from']}.."
           f"{selection['holdout_to'] - 1} of the identification record; a richer member must "
           f"be {100 * selection['margin']:.0f} % better):")
-    print(_table(rows, ["member", "parameters", "held-out RMS", ""]))
+    print(cli_support.table(rows, ["member", "parameters", "held-out RMS", ""]))
 
 
 def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
@@ -564,33 +539,6 @@ def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
                              samples=result.history_index,
                              title=f"{report['model']} sandwich, {report['method']}: "
                              "parameter convergence")
-
-
-def kernels_cached(kernels: tuple[tuple[str, str], ...] = DEMO_KERNELS) -> bool:
-    """Whether numba's cache holds every kernel named (True when it cannot tell).
-
-    Parameters
-    ----------
-    kernels : tuple of (str, str)
-        Module and name of each compiled kernel.
-
-    Returns
-    -------
-    bool
-        False when one of them has no cache index yet: it compiles on first use.
-    """
-    import importlib
-    import os
-
-    for modname, name in kernels:
-        kernel = getattr(importlib.import_module(modname), name, None)
-        try:
-            index = kernel._cache._cache_file._index_path  # numba's index file of the kernel
-        except AttributeError:  # not a cached kernel, or numba keeps its cache otherwise
-            continue
-        if not os.path.exists(index):
-            return False
-    return True
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -648,9 +596,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         progress.say(f"{method}: done in {elapsed:.2f} s")
     params = [[k, f"{v:.6g}"] + [f"{report['methods'][m]['params'][k]:.6g}" for m in methods]
               for k, v in PAPER_PARAMS.items()]
-    print(_table(params, ["parameter", "truth", *methods]))
+    print(cli_support.table(params, ["parameter", "truth", *methods]))
     print()
-    print(_table(rows, ["method", "max param err", "converged at", "restarts",
+    print(cli_support.table(rows, ["method", "max param err", "converged at", "restarts",
                         "val error [nm]", "RMS [nm]", "fit %", "time [s]"]))
     print("batch: off-line output error; online: hystid's recursive identifier; eria: the "
           "paper's recursion as published (see README, method)")

@@ -7,6 +7,7 @@ work: the length of a simulated record, the delays of a model against its input 
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import sys
 import time
@@ -14,9 +15,14 @@ from typing import NoReturn
 
 #: Exit status of a refused input or a failed write.
 EXIT_BAD_INPUT = 2
+#: Compiled kernels every ``hystid demo`` runs, as (module, name): while one of them is not in
+#: numba's cache yet, the demo says that it compiles them.
+DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensitivities_into"),
+                ("hystid.identify.online", "rpem_run"), ("hystid.identify.eria", "eria_run"))
 
-__all__ = ["EXIT_BAD_INPUT", "RECORD_FILES", "CommandError", "OneLineParser", "Progress",
-           "check_model_on", "check_seconds", "for_cli", "remember", "run_command"]
+__all__ = ["DEMO_KERNELS", "EXIT_BAD_INPUT", "RECORD_FILES", "CommandError", "OneLineParser",
+           "Progress", "check_model_on", "check_seconds", "for_cli", "jsonable", "kernels_cached",
+           "one_of", "remember", "run_command", "table"]
 
 
 class CommandError(Exception):
@@ -226,3 +232,85 @@ def run_command(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         return 130
+
+
+def kernels_cached(kernels: tuple[tuple[str, str], ...] = DEMO_KERNELS) -> bool:
+    """Whether numba's cache holds every kernel named (True when it cannot tell).
+
+    Parameters
+    ----------
+    kernels : tuple of (str, str)
+        Module and name of each compiled kernel.
+
+    Returns
+    -------
+    bool
+        False when one of them has no cache index yet: it compiles on first use.
+    """
+    import importlib
+    import os
+
+    for modname, name in kernels:
+        kernel = getattr(importlib.import_module(modname), name, None)
+        try:
+            index = kernel._cache._cache_file._index_path  # numba's index file of the kernel
+        except AttributeError:  # not a cached kernel, or numba keeps its cache otherwise
+            continue
+        if not os.path.exists(index):
+            return False
+    return True
+
+
+def table(rows: list[list[str]], header: list[str]) -> str:
+    """A plain-text table: the header, a rule, the rows, columns padded to their width.
+
+    Parameters
+    ----------
+    rows : list of list of str
+        The cells.
+    header : list of str
+        Column titles.
+
+    Returns
+    -------
+    str
+    """
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    line = "  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True))
+    out = [line, "  ".join("-" * w for w in widths)]
+    out += ["  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    return "\n".join(out)
+
+
+def one_of(names: tuple[str, ...]) -> str:
+    """``"a, b or c"``.
+
+    Parameters
+    ----------
+    names : tuple of str
+        The choices.
+
+    Returns
+    -------
+    str
+    """
+    return " or ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
+
+
+def jsonable(value: object) -> bool:
+    """Whether :func:`json.dumps` takes ``value``.
+
+    Parameters
+    ----------
+    value : object
+        Anything.
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        json.dumps(value)
+    except TypeError:
+        return False
+    return True
