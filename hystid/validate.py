@@ -199,6 +199,11 @@ def check_model(model: Any) -> None:
         if not (np.isfinite(value) and abs(value) <= MAX_MAGNITUDE):
             raise ValueError(f"'{key}' is {value!r} (expected a finite number of magnitude at "
                              f"most {MAX_MAGNITUDE:g})")
+    envelope = getattr(model, "envelope", None)
+    for key, value in (envelope.to_dict() if envelope is not None else {}).items():
+        if not abs(value) <= MAX_MAGNITUDE:
+            raise ValueError(f"envelope '{key}' is {value!r} (expected a finite number of "
+                             f"magnitude at most {MAX_MAGNITUDE:g})")
     thresholds = np.asarray(getattr(model, "thresholds", []), dtype=float)
     if thresholds.size and not np.all(np.abs(thresholds) <= MAX_MAGNITUDE):
         raise ValueError(f"'thresholds' reach {np.max(np.abs(thresholds)):g} (expected at most "

@@ -121,6 +121,7 @@ _REFUSED = [
     ({"params.alpha": -0.5}, "alpha > 0"),
     ({"params.g0": 1e200}, "'g0' is 1e+200"),
     ({"offset": 1e308}, "'offset' is 1e+308"),
+    ({"envelope": {"u_min": 0.0, "u_max": 1e308, "slew": 1.0}}, "envelope 'u_max' is 1e+308"),
     ({"structure.q1": 10**9}, "q1=1000000000"),
     ({"structure.n2a": 10000}, "n2a=10000"),
 ]
