@@ -219,6 +219,10 @@ def _identify_record(rec, args, progress: Progress, structure=None):
         settings["offset"] = getattr(args, "offset", None) != "none"
         if _model_arg(args) == "duhem":  # the PI batch fit keeps its own settings
             settings["say"] = progress.say
+        elif _model_arg(args) == "auto":  # a line per candidate fitted and scored
+            settings["progress"] = progress
+        else:
+            progress.say(f"fitting the {_model_arg(args)} member (batch, one line when done)")
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
     return identify(rec, method=method, structure=structure, model=_model_arg(args),

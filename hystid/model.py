@@ -160,6 +160,9 @@ class DuhemSandwich(Placed):
         The same values by name.
     """
 
+    #: The model file's ``kind`` (:mod:`hystid.modelfile`).
+    kind = "duhem"
+
     def __init__(
         self,
         params: Mapping[str, float] | Sequence[float] | np.ndarray,

@@ -209,7 +209,7 @@ class Placed:
         pathlib.Path
             The written file; :func:`hystid.load_model` reads it back.
         """
-        from .modelfile import save_model
+        from .document import save_model
 
         return save_model(self, path, provenance=provenance, force=force)
 

@@ -14,6 +14,8 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from .validate import MAX_DELAY, MAX_ORDER
+
 if TYPE_CHECKING:  # pragma: no cover
     from .model import Structure
     from .records import Record
@@ -31,10 +33,6 @@ __all__ = [
     "parse_structure",
 ]
 
-#: Largest order of L1 or L2 accepted by ``--structure``.
-MAX_ORDER = 10
-#: Largest delay (samples) of L1 or L2 accepted by ``--structure``.
-MAX_DELAY = 1000
 #: Longest simulated record accepted by ``--seconds``.
 MAX_SECONDS = 600.0
 

@@ -509,6 +509,9 @@ class PISandwich(Placed):
         Play-operator thresholds (fixed, not identified).
     """
 
+    #: The model file's ``kind`` (:mod:`hystid.modelfile`).
+    kind = "pi"
+
     def __init__(
         self,
         params: Mapping[str, float] | Sequence[float] | np.ndarray,

@@ -6,8 +6,8 @@ the model it holds is refused when it could not be simulated soundly: a number b
 :data:`MAX_MAGNITUDE` (no unit system puts a stage's parameter there, and the products of two
 such numbers overflow), a pole of L1 or L2 on or outside the unit circle (its output grows
 without bound), ``alpha <= 0`` for the Duhem block (the loop then grows instead of settling),
-or orders and delays beyond :data:`~hystid.options.MAX_ORDER` and
-:data:`~hystid.options.MAX_DELAY`. Each check raises ``ValueError`` (the caller wraps it in its
+or orders and delays beyond :data:`MAX_ORDER` and
+:data:`MAX_DELAY`. Each check raises ``ValueError`` (the caller wraps it in its
 own error class) with a message naming the entry and what was expected.
 
 The command line refuses records longer than a method takes in reasonable time and memory
@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["MAX_BATCH_SAMPLES", "MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING",
-           "MAX_RECURSIVE_SAMPLES", "check_call", "check_magnitudes",
+           "MAX_RECURSIVE_SAMPLES", "check_magnitudes",
            "check_delays_fit", "check_fit_size",
            "check_model", "check_structure_size", "read_plain_text", "too_deep"]
 
@@ -49,6 +49,11 @@ MAX_RECURSIVE_SAMPLES = 3_000_000
 #: not settle within any record).
 MAX_POLE_RADIUS = 1.0 - 1e-9
 
+
+#: Largest order of L1 or L2 of a model (``--structure``, model files).
+MAX_ORDER = 10
+#: Largest delay (samples) of L1 or L2 of a model.
+MAX_DELAY = 1000
 
 def read_plain_text(path: str, what: str = "model file",
                     limit: int = MAX_MODEL_BYTES) -> str:
@@ -121,7 +126,7 @@ def too_deep(value: Any, limit: int = MAX_NESTING) -> bool:
 
 
 def check_structure_size(structure: Any) -> None:
-    """Orders at most :data:`~hystid.options.MAX_ORDER`, delays at most ``MAX_DELAY``.
+    """Orders at most :data:`MAX_ORDER`, delays at most ``MAX_DELAY``.
 
     Parameters
     ----------
@@ -133,8 +138,6 @@ def check_structure_size(structure: Any) -> None:
     ValueError
         Naming the key, its value and the range expected.
     """
-    from .options import MAX_DELAY, MAX_ORDER
-
     for key, value in vars(structure).items():
         if key == "f0":
             continue
@@ -217,44 +220,6 @@ def check_model(model: Any) -> None:
             raise ValueError(f"{block} has a pole of radius {radius:.6g} (expected every pole "
                              "strictly inside the unit circle: the block is unstable and its "
                              "output grows without bound)")
-
-
-def check_call(record: Any, structure: Any = None) -> None:
-    """Refuse what :func:`hystid.identify.identify` cannot take, saying what it takes.
-
-    Parameters
-    ----------
-    record : object
-        Expected a :class:`~hystid.records.Record`.
-    structure : object
-        Expected None, ``"auto"`` or a :class:`~hystid.model.Structure`.
-
-    Raises
-    ------
-    TypeError
-        For a path, an array, None or anything else in place of a record, or a structure of
-        another type.
-    ValueError
-        For a record with values beyond :data:`MAX_MAGNITUDE` (:func:`check_magnitudes`).
-    """
-    from .model import Structure
-    from .records import Record
-
-    if not isinstance(record, Record):
-        if isinstance(record, str | os.PathLike):
-            hint = (f"got the path {os.fspath(record)!r}; load it first: "
-                    f"hystid.records.load_record({os.fspath(record)!r}) (add fs=... when the "
-                    "file has no time column)")
-        elif isinstance(record, np.ndarray):
-            hint = (f"got an array of shape {record.shape}; wrap it: "
-                    "hystid.records.Record(u, y, fs)")
-        else:
-            hint = f"got {type(record).__name__}"
-        raise TypeError(f"record: expected a hystid.records.Record, {hint}")
-    check_magnitudes(record)
-    if structure is not None and not isinstance(structure, Structure | str):
-        raise TypeError(f"structure: expected a hystid.Structure, 'auto' or None, got "
-                        f"{type(structure).__name__} {structure!r}")
 
 
 def check_fit_size(n: int, method: str, where: str) -> None:

@@ -453,6 +453,9 @@ class AugmentedSandwich:
         The effect vector used by the compiled kernel.
     """
 
+    #: The model file's ``kind``: a Duhem model file with ``effects``.
+    kind = "duhem"
+
     def __init__(
         self,
         model: DuhemSandwich,

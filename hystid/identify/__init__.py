@@ -95,9 +95,9 @@ def identify(
     methods run on the record less its rest level (input) and its output at rest, which is
     taken from the leading rest segment (see :mod:`hystid.identify.prepare`).
     """
-    from ..validate import check_call, check_delays_fit
+    from ..validate import check_delays_fit
 
-    check_call(record, structure)
+    _check_call(record, structure)
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if model != "duhem":
@@ -199,3 +199,45 @@ def run_placed(record: Record, make: Callable[[Record], Any],
                                 if "condition" in w or "diverged" in w]
     result.info["warnings"] = list(result.info.get("warnings", [])) + notes
     return result
+
+
+def _check_call(record: Any, structure: Any = None) -> None:
+    """Refuse what :func:`hystid.identify.identify` cannot take, saying what it takes.
+
+    Parameters
+    ----------
+    record : object
+        Expected a :class:`~hystid.records.Record`.
+    structure : object
+        Expected None, ``"auto"`` or a :class:`~hystid.model.Structure`.
+
+    Raises
+    ------
+    TypeError
+        For a path, an array, None or anything else in place of a record, or a structure of
+        another type.
+    ValueError
+        For a record with values beyond :data:`hystid.validate.MAX_MAGNITUDE`
+        (:func:`~hystid.validate.check_magnitudes`).
+    """
+    import os
+
+    import numpy as np
+
+    from ..validate import check_magnitudes
+
+    if not isinstance(record, Record):
+        if isinstance(record, str | os.PathLike):
+            hint = (f"got the path {os.fspath(record)!r}; load it first: "
+                    f"hystid.records.load_record({os.fspath(record)!r}) (add fs=... when the "
+                    "file has no time column)")
+        elif isinstance(record, np.ndarray):
+            hint = (f"got an array of shape {record.shape}; wrap it: "
+                    "hystid.records.Record(u, y, fs)")
+        else:
+            hint = f"got {type(record).__name__}"
+        raise TypeError(f"record: expected a hystid.records.Record, {hint}")
+    check_magnitudes(record)
+    if structure is not None and not isinstance(structure, Structure | str):
+        raise TypeError(f"structure: expected a hystid.Structure, 'auto' or None, got "
+                        f"{type(structure).__name__} {structure!r}")
