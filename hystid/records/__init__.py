@@ -41,7 +41,7 @@ The package: :mod:`~hystid.records.record` (the record, its errors and constants
 :mod:`~hystid.records.loading` (:func:`load_record` and friends),
 :mod:`~hystid.records.csvfile` and :mod:`~hystid.records.arrays` (the formats, with the
 hostile-file checks), :mod:`~hystid.records.checks` (the sampling rate) and
-:mod:`~hystid.records.writers` (:meth:`Record.save`).
+(:meth:`Record.save` writes in :mod:`~hystid.records.record` itself).
 """
 
 from .loading import load_piezo_sine_150v, load_record, parse_columns, parse_units, read_records
