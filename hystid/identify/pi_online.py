@@ -343,7 +343,7 @@ class PIStageOnline(Estimator):
         *,
         warmup: int = 2000,
         window: int = 10_000,
-        every: int = 1000,
+        every: int = 500,
         iterations: int = 12,
         P0: float = 1.0,
         forgetting: float = 1.0,
@@ -431,12 +431,12 @@ class PIStageOnline(Estimator):
         self._su = self._sy = 1.0
         self._rn = self.thresholds
         self._P = np.eye(len(self.names)) * self.P0
-        self._s2 = 1.0
         self._st = np.zeros((_STATE_ROWS, n))
         self._chunk_u: list[float] = []
         self._chunk_y: list[float] = []
-        self._chunks: list[dict[str, Any]] = []  # completed chunks with their start state
-        self._start: dict[str, Any] | None = None  # the state at the open chunk's start
+        self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # the window's whole chunks
+        self._wstate = np.zeros((_STATE_ROWS, n))  # the branches at the window's start
+        self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
         return self
 
     # ----------------------------------------------------------------- one sample
@@ -502,11 +502,11 @@ class PIStageOnline(Estimator):
         un, yn = (u - self._u0) / self._su, y / self._sy
         yhat, err = np.empty(m), np.empty(m)
         if history is None:
-            _run(self._phi, self._P, self._s2, self.forgetting, self.max_step, self._rn, un, yn,
+            _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn, un, yn,
                  self._st, True, np.zeros((0, len(self._phi))), yhat, err)
         else:
             for j in range(m):  # one sample at a time to record the estimate after each
-                _run(self._phi, self._P, self._s2, self.forgetting, self.max_step, self._rn,
+                _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
                      un[j:j + 1], yn[j:j + 1], self._st, True, np.zeros((0, len(self._phi))),
                      yhat[j:j + 1], err[j:j + 1])
                 history[j] = self.theta
@@ -531,67 +531,56 @@ class PIStageOnline(Estimator):
         n = self.structure.n_operators
         rest = np.array(self._rest).reshape(-1, 2)
         exc = np.array(self._buffer)
-        u0 = self._u0 or 0.0
-        u = np.r_[rest[:, 0], exc[:, 0]] - u0
+        u = np.r_[rest[:, 0], exc[:, 0]] - (self._u0 or 0.0)
         y = np.r_[rest[:, 1], exc[:, 1]]
         fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
         phi = stage_from_theta(fit.theta, n)
         un, yn = u / su, y / sy
-        # replay: the branch state through the rest, then chunk by chunk through the warm-up
-        st = np.zeros((_STATE_ROWS, n))
-        npar = len(phi)
         nr = len(rest)
-        scratch = np.empty(nr)
-        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, un[:nr], yn[:nr], st, False,
-             np.zeros((0, npar)), scratch, scratch.copy())
-        J = np.empty((len(exc), npar))
-        yhat, err = np.empty(len(exc)), np.empty(len(exc))
-        starts = []
-        for a in range(0, len(exc), self.every):
-            b = min(len(exc), a + self.every)
-            starts.append((a, st.copy()))
-            _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, un[nr + a:nr + b], yn[nr + a:nr + b],
-                 st, False, J[a:b], yhat[a:b], err[a:b])
+        self._wstate = self._simulate(phi, np.zeros((_STATE_ROWS, n)), un[:nr], yn[:nr])[2]
+        err, J, st = self._simulate(phi, self._wstate, un[nr:], yn[nr:])
         seen = np.isfinite(err)
-        self._s2 = max(float(np.mean(err[seen] ** 2)), 1e-12)
-        prior = np.eye(npar) / self.P0
-        for a, st0 in starts:
-            rows = seen[:a]
-            info = J[:a][rows].T @ J[:a][rows] / self._s2 + prior
-            chunk = {"state": st0, "phi": phi.copy(), "P": np.linalg.inv(info),
-                     "u": un[nr + a:nr + a + self.every], "y": yn[nr + a:nr + a + self.every]}
-            if a + self.every <= len(exc):
-                self._chunks.append(chunk)
-            else:
-                self._start = chunk
-                self._chunk_u = chunk["u"].tolist()
-                self._chunk_y = chunk["y"].tolist()
-        info = J[seen].T @ J[seen] / self._s2 + prior
-        self._phi, self._P, self._st = phi, np.linalg.inv(info), st
+        s2 = max(float(np.mean(err[seen] ** 2)), 1e-12)
+        # the recursion is scale-free: information in plain sums of squares, the prior's
+        # variance P0 relative to the warm-up fit's residual variance
+        self._arrival = (phi.copy(), np.eye(len(phi)) * s2 / self.P0)
+        for a in range(0, len(exc) - self.every + 1, self.every):
+            self._chunks.append((un[nr + a:nr + a + self.every], yn[nr + a:nr + a + self.every]))
+        done = len(self._chunks) * self.every
+        self._chunk_u, self._chunk_y = un[nr + done:].tolist(), yn[nr + done:].tolist()
+        self._phi, self._st = phi, st
+        self._P = np.linalg.inv(J[seen].T @ J[seen] + self._arrival[1])
         self._buffer, self._rest = [], []
-        if self._start is None:
-            self._start = {"state": st.copy(), "phi": phi.copy(), "P": self._P.copy()}
-        self._trim()
+        while len(self._chunks) > self._keep():
+            self._fold(phi)
         self.warmup_seconds_ = time.perf_counter() - t0
-        if len(self._chunk_u) >= self.every:
-            self._close_chunk()
-        if self._chunks and len(exc) % self.every == 0:
+        if self._chunks and not self._chunk_u:
             self._resolve()
 
     # ----------------------------------------------------------------- moving horizon
-    def _close_chunk(self) -> None:
-        """The open chunk is complete: keep it with its start; open the next one."""
-        assert self._start is not None
-        self._chunks.append({**self._start, "u": np.array(self._chunk_u),
-                             "y": np.array(self._chunk_y)})
-        self._chunk_u, self._chunk_y = [], []
-        self._start = {"state": self._st.copy(), "phi": self._phi.copy(), "P": self._P.copy()}
-        self._trim()
+    def _keep(self) -> int:
+        return max(1, self.window // self.every)
 
-    def _trim(self) -> None:
-        keep = max(1, self.window // self.every)
-        self._chunks = self._chunks[-keep:]
+    def _close_chunk(self) -> None:
+        """The open chunk is complete: keep it in the window; open the next one."""
+        self._chunks.append((np.array(self._chunk_u), np.array(self._chunk_y)))
+        self._chunk_u, self._chunk_y = [], []
+
+    def _fold(self, phi: np.ndarray) -> None:
+        """Drop the window's oldest chunk into the arrival cost, linearised at ``phi``.
+
+        Its cost ``|e - J d|^2`` is added to ``(d - d_a)' R_a (d - d_a)`` (``d = phi' - phi``),
+        and the window starts at the chunk's end, the branches run with ``phi``.
+        """
+        u, y = self._chunks.pop(0)
+        err, J, st = self._simulate(phi, self._wstate, u, y)
+        seen = np.isfinite(err)
+        J, err = J[seen], err[seen]
+        phi_a, R_a = self._arrival
+        R = R_a + J.T @ J
+        self._arrival = (np.linalg.solve(R, R_a @ phi_a + J.T @ (J @ phi + err)), R)
+        self._wstate = st
 
     def _simulate(self, phi: np.ndarray, st0: np.ndarray, u: np.ndarray,
                   y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -602,34 +591,31 @@ class PIStageOnline(Estimator):
         return err, J, st
 
     def _resolve(self) -> None:
-        """Levenberg-Marquardt on the kept chunks with the first one's estimate as prior."""
+        """Levenberg-Marquardt on the window with the arrival cost; then the oldest chunk is
+        folded into the arrival cost once the window is full."""
         t0 = time.perf_counter()
-        first = self._chunks[0]
-        u = np.concatenate([c["u"] for c in self._chunks])
-        y = np.concatenate([c["y"] for c in self._chunks])
+        u = np.concatenate([c[0] for c in self._chunks])
+        y = np.concatenate([c[1] for c in self._chunks])
         n = self.structure.n_operators
-        phi_s = first["phi"]
-        Pinv = np.linalg.inv(0.5 * (first["P"] + first["P"].T))
-        s2 = self._s2
+        phi_a, R_a = self._arrival
 
         def cost(phi, err):
-            d = phi - phi_s
-            return float(np.nansum(err ** 2) / s2 + d @ Pinv @ d)
+            d = phi - phi_a
+            return float(np.nansum(err ** 2) + d @ R_a @ d)
 
         phi = self._phi.copy()
-        err, J, st = self._simulate(phi, first["state"], u, y)
+        err, J, st = self._simulate(phi, self._wstate, u, y)
         f = cost(phi, err)
         damping = 1e-3
         for _ in range(self.iterations):
             seen = np.isfinite(err)
-            A = J[seen].T @ J[seen] / s2 + Pinv
-            grad = J[seen].T @ err[seen] / s2 - Pinv @ (phi - phi_s)
-            step = np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
-            trial = phi + step
+            A = J[seen].T @ J[seen] + R_a
+            grad = J[seen].T @ err[seen] - R_a @ (phi - phi_a)
+            trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
             if not (_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n)):
                 damping *= 4.0
                 continue
-            err_t, J_t, st_t = self._simulate(trial, first["state"], u, y)
+            err_t, J_t, st_t = self._simulate(trial, self._wstate, u, y)
             f_t = cost(trial, err_t)
             if np.isfinite(f_t) and f_t < f:
                 phi, err, J, st, f = trial, err_t, J_t, st_t, f_t
@@ -637,11 +623,10 @@ class PIStageOnline(Estimator):
             else:
                 damping *= 4.0
         seen = np.isfinite(err)
-        self._phi = phi
-        self._P = np.linalg.inv(J[seen].T @ J[seen] / s2 + Pinv)
-        self._st = st
-        self._s2 = max(float(np.mean(err[seen] ** 2)), 1e-12)
-        self._start = {"state": st.copy(), "phi": phi.copy(), "P": self._P.copy()}
+        self._phi, self._st = phi, st
+        self._P = np.linalg.inv(J[seen].T @ J[seen] + R_a)
+        if len(self._chunks) >= self._keep():
+            self._fold(phi)
         self.n_resolves += 1
         self.resolve_seconds_ += time.perf_counter() - t0
 
