@@ -42,8 +42,10 @@ The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
    iteration every ``every`` samples, is bounded per sample whatever the record's length.
 
 Admissible: L2 stable (by construction) and a positive loading slope, every cumulative sum of
-the weights ``mu_0 + .. + mu_i > 0``: a step that would break it is halved (an estimate that
-already breaks it may only move towards it).
+the weights ``mu_0 + .. + mu_i > 0``: the warm-up fit is moved into that set
+(:func:`admissible_weights`) and a step that would leave it is halved (the re-solve damps it).
+Whatever the weights, a stable L2 after play operators keeps the output bounded for a bounded
+input: a larger input cannot make the model diverge.
 """
 
 from __future__ import annotations
@@ -56,15 +58,20 @@ import numpy as np
 from numba import njit
 
 from ..pi import PISandwich, PIStructure
+from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
 from .result import IdentificationResult, converged_at
 
-__all__ = ["PIStageOnline", "is_stage_structure", "stage_from_theta", "theta_from_stage"]
+__all__ = ["PIStageOnline", "admissible_weights", "is_stage_structure", "stage_from_theta",
+           "theta_from_stage"]
 
 #: Rows of the branch state of one operator: p(k-1), p(k-2), xS(k-1), dxS/dp, xM(k-1),
 #: xM(k-2), dxM/d(c1, c2, m1) at k-1 and at k-2.
 _STATE_ROWS = 12
+#: Bound on the slow pole and on the mode's reflection coefficients (``|.| < 1 - 1e-6``), so
+#: that neither branch can become an integrator.
+_KMAX = 1.0 - 1e-6
 #: Rest samples kept before the excitation for the warm-up fit.
 _REST_KEPT = 200
 
@@ -89,8 +96,8 @@ def is_stage_structure(structure: PIStructure) -> bool:
 
 # =========================================================================== coordinates
 def _filters(phi: np.ndarray, n: int) -> tuple[float, float, float, float, float]:
-    g, p, k1, c2, m1 = phi[n], np.tanh(phi[n + 1]), np.tanh(phi[n + 2]), np.tanh(phi[n + 3]), \
-        phi[n + 4]
+    g, m1 = phi[n], phi[n + 4]
+    p, k1, c2 = (_KMAX * np.tanh(phi[n + j]) for j in (1, 2, 3))
     return g, p, k1 * (1.0 + c2), c2, m1
 
 
@@ -140,10 +147,11 @@ def stage_from_theta(theta: np.ndarray, n_operators: int) -> np.ndarray:
     b = np.r_[1.0 + a.sum() - theta[n + 3] - theta[n + 4], theta[n + 3:n + 5]]
     roots = np.roots(np.r_[1.0, a])
     real = roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1.0, np.abs(roots))].real
-    p = float(np.clip(real.max(), -1 + 1e-12, 1 - 1e-12))
+    lim = _KMAX * (1.0 - 1e-12)
+    p = float(np.clip(real.max(), -lim, lim))
     q = np.polydiv(np.r_[1.0, a], [1.0, -p])[0].real
-    c1, c2 = float(q[1]), float(np.clip(q[2], -1 + 1e-12, 1 - 1e-12))
-    k1 = float(np.clip(c1 / (1.0 + c2), -1 + 1e-12, 1 - 1e-12))
+    c1, c2 = float(q[1]), float(np.clip(q[2], -lim, lim))
+    k1 = float(np.clip(c1 / (1.0 + c2), -lim, lim))
     s = 1.0 + c1 + c2
     # b = g (1-p) [1, c1, c2] + h [m0, m1 - p m0, -p m1] with h = 1 - g, m0 = s - m1; in
     # h and n1 = h m1 it is linear: b - (1-p)[1,c1,c2] = h (-(1-p)[1,c1,c2] + s [1, -p, 0])
@@ -152,7 +160,31 @@ def stage_from_theta(theta: np.ndarray, n_operators: int) -> np.ndarray:
     A = np.column_stack([-base + s * np.array([1.0, -p, 0.0]), [-1.0, 1.0 + p, -p]])
     (h, n1), *_ = np.linalg.lstsq(A, b - base, rcond=None)
     m1 = n1 / h if abs(h) > 1e-12 else 0.0
-    return np.r_[theta[:n], 1.0 - h, np.arctanh(p), np.arctanh(k1), np.arctanh(c2), m1]
+    return np.r_[theta[:n], 1.0 - h, np.arctanh(np.array([p, k1, c2]) / _KMAX), m1]
+
+
+def admissible_weights(mu: np.ndarray, floor: float = 1e-3) -> np.ndarray:
+    """Weights with a positive loading slope: every cumulative sum at least ``floor`` times the
+    largest one (those below are raised to it, the others kept).
+
+    Parameters
+    ----------
+    mu : ndarray
+        Weights ``mu_0 .. mu_N-1`` of the play operators, thresholds increasing.
+    floor : float
+        Smallest cumulative sum kept, relative to the largest.
+
+    Returns
+    -------
+    ndarray
+        The weights, unchanged when already admissible.
+    """
+    mu = np.asarray(mu, dtype=float)
+    c = np.cumsum(mu)
+    low = floor * max(float(np.max(c)), float(np.sum(np.abs(mu))), 1e-300)
+    if np.all(c >= low):
+        return mu.copy()
+    return np.diff(np.r_[0.0, np.maximum(c, low)])
 
 
 # =========================================================================== compiled kernels
@@ -162,9 +194,9 @@ def _step(phi, r, u_k, st, psi):
     # psi = d yhat / d phi; then the operators move with u(k). Returns yhat(k).
     n = r.shape[0]
     g = phi[n]
-    p = np.tanh(phi[n + 1])
-    k1 = np.tanh(phi[n + 2])
-    c2 = np.tanh(phi[n + 3])
+    tp, t1, t2 = np.tanh(phi[n + 1]), np.tanh(phi[n + 2]), np.tanh(phi[n + 3])
+    p, k1, c2 = _KMAX * tp, _KMAX * t1, _KMAX * t2
+    dp, dk1, dk2 = _KMAX * (1.0 - tp * tp), _KMAX * (1.0 - t1 * t1), _KMAX * (1.0 - t2 * t2)
     c1 = k1 * (1.0 + c2)
     m1 = phi[n + 4]
     m0 = 1.0 + c1 + c2 - m1
@@ -201,13 +233,23 @@ def _step(phi, r, u_k, st, psi):
         st[1, i] = p1
         st[0, i] = q
     psi[n] = dg
-    psi[n + 1] = g * sp * (1.0 - p * p)
+    psi[n + 1] = g * sp * dp
     dc1 = (1.0 - g) * s0
     dc2 = (1.0 - g) * s1
-    psi[n + 2] = dc1 * (1.0 - k1 * k1) * (1.0 + c2)
-    psi[n + 3] = (dc1 * k1 + dc2) * (1.0 - c2 * c2)
+    psi[n + 2] = dc1 * dk1 * (1.0 + c2)
+    psi[n + 3] = (dc1 * k1 + dc2) * dk2
     psi[n + 4] = (1.0 - g) * s2
     return yhat
+
+
+@njit(cache=True)
+def _l2_stable(phi, n):
+    # the multiplied-out denominator (1 - p z^-1)(1 + c1 z^-1 + c2 z^-2) passes the library's
+    # stability test (its margin), not only its two factors
+    p = _KMAX * np.tanh(phi[n + 1])
+    c2 = _KMAX * np.tanh(phi[n + 3])
+    c1 = _KMAX * np.tanh(phi[n + 2]) * (1.0 + c2)
+    return schur_stable(np.array([c1 - p, c2 - p * c1, -p * c2]), KMAX_STABLE)
 
 
 @njit(cache=True)
@@ -243,7 +285,7 @@ def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
         for a in range(npar):
             phi[a] = old[a] + scale * Pg[a] / den * e
         after = _slope(phi, n)
-        if after > 0.0 or after >= before:
+        if (after > 0.0 or after >= before) and _l2_stable(phi, n):
             break
         scale *= 0.5
     else:
@@ -536,6 +578,7 @@ class PIStageOnline(Estimator):
         fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
         phi = stage_from_theta(fit.theta, n)
+        phi[:n] = admissible_weights(phi[:n])
         un, yn = u / su, y / sy
         nr = len(rest)
         self._wstate = self._simulate(phi, np.zeros((_STATE_ROWS, n)), un[:nr], yn[:nr])[2]
@@ -612,7 +655,8 @@ class PIStageOnline(Estimator):
             A = J[seen].T @ J[seen] + R_a
             grad = J[seen].T @ err[seen] - R_a @ (phi - phi_a)
             trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
-            if not (_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n)):
+            if not ((_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n))
+                    and _l2_stable(trial, n)):
                 damping *= 4.0
                 continue
             err_t, J_t, st_t = self._simulate(trial, self._wstate, u, y)
