@@ -10,9 +10,10 @@ unit DC gain::
     S(z)  = (1 - p) z^-1 / (1 - p z^-1)                               slow real pole p
     M(z)  = (m0 + m1 z^-1) z^-1 / (1 + c1 z^-1 + c2 z^-2),  m0 = 1 + c1 + c2 - m1
 
-with ``p = tanh(xp)``, ``c2 = tanh(x2)``, ``c1 = tanh(x1) (1 + c2)`` (so L2 is stable for every
-value of the search coordinates ``phi = [mu_0..mu_N-1, g, xp, x1, x2, m1]``). Multiplied out,
-it is the member's L2 ``B(z) / A(z)`` (:func:`theta_from_stage`; :func:`stage_from_theta` goes
+with ``p = K tanh(xp)``, ``c2 = K tanh(x2)``, ``c1 = K tanh(x1) (1 + c2)``, ``K = 1 - 1e-6``
+(so L2 is stable, and no branch an integrator, for every value of the search coordinates
+``phi = [mu_0..mu_N-1, g, xp, x1, x2, m1]``). Multiplied out, it is the member's L2
+``B(z) / A(z)`` (:func:`theta_from_stage`; :func:`stage_from_theta` goes
 back). Why this form:
 
 * the operator outputs ``p_i`` do not depend on the parameters (L1 is static), and the branch
@@ -36,10 +37,12 @@ The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
    updated by a recursive Gauss-Newton step (a recursive prediction-error method) with a
    bounded step, kept admissible;
 4. every ``every`` excited samples (a *background* re-solve of bounded size): a few
-   Levenberg-Marquardt iterations on the last ``window`` samples, started from the branch
-   states stored at the window's start and with the recursion's estimate and covariance there
-   as prior (the arrival cost of a moving-horizon estimator). Its cost, ``O(window n^2)`` per
-   iteration every ``every`` samples, is bounded per sample whatever the record's length.
+   Levenberg-Marquardt iterations on the last ``window`` samples, from the branch states at
+   the window's start, with an arrival cost (a moving-horizon estimator): each chunk of
+   samples that leaves the window is folded into a quadratic prior, linearised at the
+   estimate of the time. Its cost, ``O(window n^2)`` per iteration every ``every`` samples,
+   is bounded per sample whatever the record's length; with the default ``window`` (1 s at
+   10 kHz) the last re-solve on a record with 1 s of excitation spans all of it.
 
 Admissible: L2 stable (by construction) and a positive loading slope, every cumulative sum of
 the weights ``mu_0 + .. + mu_i > 0``: the warm-up fit is moved into that set
@@ -479,6 +482,7 @@ class PIStageOnline(Estimator):
         self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # the window's whole chunks
         self._wstate = np.zeros((_STATE_ROWS, n))  # the branches at the window's start
         self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
+        self._solved: np.ndarray | None = None  # the last re-solve's estimate
         return self
 
     # ----------------------------------------------------------------- one sample
@@ -592,7 +596,7 @@ class PIStageOnline(Estimator):
             self._chunks.append((un[nr + a:nr + a + self.every], yn[nr + a:nr + a + self.every]))
         done = len(self._chunks) * self.every
         self._chunk_u, self._chunk_y = un[nr + done:].tolist(), yn[nr + done:].tolist()
-        self._phi, self._st = phi, st
+        self._phi, self._st, self._solved = phi, st, phi.copy()
         self._P = np.linalg.inv(J[seen].T @ J[seen] + self._arrival[1])
         self._buffer, self._rest = [], []
         while len(self._chunks) > self._keep():
@@ -634,8 +638,10 @@ class PIStageOnline(Estimator):
         return err, J, st
 
     def _resolve(self) -> None:
-        """Levenberg-Marquardt on the window with the arrival cost; then the oldest chunk is
-        folded into the arrival cost once the window is full."""
+        """Levenberg-Marquardt on the window with the arrival cost, from the recursion's
+        estimate and from the last re-solve's (the lower cost is kept: the recursion may have
+        drifted along a direction the data do not fix); then the oldest chunk is folded into
+        the arrival cost once the window is full."""
         t0 = time.perf_counter()
         u = np.concatenate([c[0] for c in self._chunks])
         y = np.concatenate([c[1] for c in self._chunks])
@@ -646,26 +652,32 @@ class PIStageOnline(Estimator):
             d = phi - phi_a
             return float(np.nansum(err ** 2) + d @ R_a @ d)
 
-        phi = self._phi.copy()
-        err, J, st = self._simulate(phi, self._wstate, u, y)
-        f = cost(phi, err)
-        damping = 1e-3
-        for _ in range(self.iterations):
-            seen = np.isfinite(err)
-            A = J[seen].T @ J[seen] + R_a
-            grad = J[seen].T @ err[seen] - R_a @ (phi - phi_a)
-            trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
-            if not ((_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n))
-                    and _l2_stable(trial, n)):
-                damping *= 4.0
-                continue
-            err_t, J_t, st_t = self._simulate(trial, self._wstate, u, y)
-            f_t = cost(trial, err_t)
-            if np.isfinite(f_t) and f_t < f:
-                phi, err, J, st, f = trial, err_t, J_t, st_t, f_t
-                damping = max(damping / 3.0, 1e-9)
-            else:
-                damping *= 4.0
+        best = None
+        for start in (self._phi, self._solved):
+            phi = start.copy()
+            err, J, st = self._simulate(phi, self._wstate, u, y)
+            f = cost(phi, err)
+            damping = 1e-3
+            for _ in range(self.iterations):
+                seen = np.isfinite(err)
+                A = J[seen].T @ J[seen] + R_a
+                grad = J[seen].T @ err[seen] - R_a @ (phi - phi_a)
+                trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
+                if not ((_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n))
+                        and _l2_stable(trial, n)):
+                    damping *= 4.0
+                    continue
+                err_t, J_t, st_t = self._simulate(trial, self._wstate, u, y)
+                f_t = cost(trial, err_t)
+                if np.isfinite(f_t) and f_t < f:
+                    phi, err, J, st, f = trial, err_t, J_t, st_t, f_t
+                    damping = max(damping / 3.0, 1e-9)
+                else:
+                    damping *= 4.0
+            if best is None or f < best[0]:
+                best = (f, phi, err, J, st)
+        _, phi, err, J, st = best
+        self._solved = phi.copy()
         seen = np.isfinite(err)
         self._phi, self._st = phi, st
         self._P = np.linalg.inv(J[seen].T @ J[seen] + R_a)
