@@ -109,3 +109,22 @@ def test_online_is_within_the_goal_of_batch_on_stage_a():
     batch, online = _heldout("batch", train, held), _heldout("online", train, held)
     assert np.all(np.isfinite(online))
     assert np.max(online / batch) <= RATIO, (online, batch)
+
+
+def test_branch_gradients_are_the_derivatives_of_the_prediction():
+    rng = np.random.default_rng(4)
+    phi = np.r_[rng.uniform(0.01, 0.1, 20), 0.4, np.arctanh(0.999), 1.2, 2.0, -0.3]
+    r = np.arange(20) / 20 * 1.5
+    u = np.cumsum(rng.normal(0, 0.05, 2000))
+
+    def run(p):
+        J, yhat, err = np.empty((len(u), 25)), np.empty(len(u)), np.empty(len(u))
+        _run(p, np.eye(25), 1.0, 1.0, 1.0, r, u, np.zeros(len(u)), np.zeros((12, 20)), False,
+             J, yhat, err)
+        return yhat, J
+
+    _, J = run(phi)
+    for j in (0, 7, 20, 21, 22, 23, 24):
+        h = 1e-6 * max(1.0, abs(phi[j]))
+        fd = (run(phi + h * np.eye(25)[j])[0] - run(phi - h * np.eye(25)[j])[0]) / (2 * h)
+        np.testing.assert_allclose(J[:, j], fd, rtol=1e-5, atol=1e-7 * np.max(np.abs(fd)))
