@@ -17,6 +17,7 @@ from hystid.identify.base import Estimator
 from hystid.identify.ekf import KalmanIdentifier
 from hystid.identify.eria import ERIA
 from hystid.identify.online import OnlineIdentifier
+from hystid.identify.pi_online import PIStageOnline
 from hystid.identify.pi_recursive import PIRecursiveIdentifier
 from hystid.pi import pi_thresholds
 from hystid.records import Record
@@ -31,6 +32,8 @@ ESTIMATORS = {
     "eria": lambda: ERIA(),
     "ekf": lambda: KalmanIdentifier(theta0=NEAR),
     "pi-recursive": lambda: PIRecursiveIdentifier(PI_THRESHOLDS, warmup=200),
+    "pi-stage-online": lambda: PIStageOnline(PI_THRESHOLDS, warmup=200, window=200, every=100,
+                                             fs=30_000.0),
 }
 
 

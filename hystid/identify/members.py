@@ -98,15 +98,22 @@ class Member:
 
     def _online(self, record: Record, progress: Callable[[int, int], None] | None,
                 settings: dict[str, Any]) -> IdentificationResult:
-        """The PI member's recursive identifier on the record less its rest, placed back;
-        the thresholds by the member's rule over the fitted samples."""
+        """The PI member's on-line identifier on the record less its rest, placed back; the
+        thresholds by the member's rule over the fitted samples. The ``pi-stage`` shape runs
+        :class:`~hystid.identify.pi_online.PIStageOnline`, other PI structures the extended
+        recursion :class:`~hystid.identify.pi_recursive.PIRecursiveIdentifier`."""
         from ..thresholds import RULES
         from . import run_placed
+        from .pi_online import PIStageOnline, is_stage_structure
         from .pi_recursive import PIRecursiveIdentifier
         from .prepare import prepare
 
         rule = self.settings.get("thresholds", "range")
         r = RULES[rule](record.u[prepare(record).fitted], self.structure.n_operators)
+        if is_stage_structure(self.structure):
+            return run_placed(record, lambda rel: PIStageOnline(
+                **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
+                progress)
         return run_placed(record, lambda rel: PIRecursiveIdentifier(
             **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
             progress)

@@ -1,0 +1,760 @@
+"""On-line identification of the ``pi-stage`` member: a separable recursion with a moving horizon.
+
+The ``pi-stage`` member (:data:`hystid.identify.members.MEMBERS`) is a PI operator between a
+static L1 (``w1 = u``) and a third-order L2 with one input delay. Its L2 is run here in
+parallel form, a slow first-order branch beside a second-order (flexure mode) branch, both of
+unit DC gain::
+
+    y(k)  = sum_i mu_i x_i(k)
+    x_i   = g  S(z) p_i  +  (1 - g) M(z) p_i
+    S(z)  = (1 - p) z^-1 / (1 - p z^-1)                               slow real pole p
+    M(z)  = (m0 + m1 z^-1) z^-1 / (1 + c1 z^-1 + c2 z^-2),  m0 = 1 + c1 + c2 - m1
+
+with ``p = K tanh(xp)``, ``c2 = K tanh(x2)``, ``c1 = K tanh(x1) (1 + c2)``, ``K = 1 - 1e-6``
+(so L2 is stable, and no branch an integrator, for every value of the search coordinates
+``phi = [mu_0..mu_N-1, g, xp, x1, x2, m1]``). Multiplied out, it is the member's L2
+``B(z) / A(z)`` (:func:`theta_from_stage`; :func:`stage_from_theta` goes
+back). Why this form:
+
+* the operator outputs ``p_i`` do not depend on the parameters (L1 is static), and the branch
+  states ``S p_i``, ``M p_i`` depend on the four filter coordinates only: the prediction and
+  its gradient with respect to the weights and ``g`` are exact whatever the weights were in
+  the past. In the polynomial form the simulated output keeps, through the slow pole (radius
+  ~0.9999 on stage A, a memory of ~1 s), the contribution of every past estimate, and the
+  recursion of :class:`~hystid.identify.pi_recursive.PIRecursiveIdentifier` left even the batch
+  optimum (measured: 400-480 nm held-out from a start at 25-30 nm);
+* its coordinates are well conditioned: the polynomial coefficients of a pole at 0.9999 make
+  an information matrix of condition ~1e13 there.
+
+The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
+
+1. the leading rest is not counted: the warm-up clock starts at the first sample that leaves
+   the first input value;
+2. warm-up: the first ``warmup`` excited samples (and the last samples of the rest) are fitted
+   off-line once (:func:`~hystid.identify.pi_recursive.fit_pi_output_error`'s solver), a
+   bounded one-time cost;
+3. every sample: the branch states and their sensitivities are propagated and the estimate is
+   updated by a recursive Gauss-Newton step (a recursive prediction-error method) with a
+   bounded step, kept admissible;
+4. every ``every`` excited samples (a *background* re-solve of bounded size): a few
+   Levenberg-Marquardt iterations on the last ``window`` samples, from the branch states at
+   the window's start, with an arrival cost (a moving-horizon estimator): each chunk of
+   samples that leaves the window is folded into a quadratic prior, linearised at the
+   estimate of the time. Its cost, ``O(window n^2)`` per iteration every ``every`` samples,
+   is bounded per sample whatever the record's length; with the default ``window`` (1 s at
+   10 kHz) the last re-solve on a record with 1 s of excitation spans all of it.
+
+Admissible: L2 stable (by construction) and a positive loading slope, every cumulative sum of
+the weights ``mu_0 + .. + mu_i > 0``: the warm-up fit is moved into that set
+(:func:`admissible_weights`) and a step that would leave it is halved (the re-solve damps it).
+Whatever the weights, a stable L2 after play operators keeps the output bounded for a bounded
+input: a larger input cannot make the model diverge.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from ..pi import PISandwich, PIStructure
+from ..poly import KMAX_STABLE, schur_stable
+from ..records import Record
+from .base import Estimator, record_signals, sample_arrays
+from .result import IdentificationResult, converged_at
+
+__all__ = ["PIStageOnline", "admissible_weights", "is_stage_structure", "stage_from_theta",
+           "theta_from_stage"]
+
+#: Rows of the branch state of one operator: p(k-1), p(k-2), xS(k-1), dxS/dp, xM(k-1),
+#: xM(k-2), dxM/d(c1, c2, m1) at k-1 and at k-2.
+_STATE_ROWS = 12
+#: Bound on the slow pole and on the mode's reflection coefficients (``|.| < 1 - 1e-6``), so
+#: that neither branch can become an integrator.
+_KMAX = 1.0 - 1e-6
+#: Rest samples kept before the excitation for the warm-up fit.
+_REST_KEPT = 200
+
+
+def is_stage_structure(structure: PIStructure) -> bool:
+    """Whether a PI structure is the ``pi-stage`` shape this identifier runs.
+
+    Parameters
+    ----------
+    structure : PIStructure
+        Orders and delays.
+
+    Returns
+    -------
+    bool
+        True for a static L1 (``n1a=0, n1b=1, q1=0``) and a third-order L2 with three
+        numerator coefficients and one input delay (``n2a=3, n2b=3, q2=1``).
+    """
+    s = structure
+    return (s.n1a, s.n1b, s.q1, s.n2a, s.n2b, s.q2) == (0, 1, 0, 3, 3, 1)
+
+
+# =========================================================================== coordinates
+def _filters(phi: np.ndarray, n: int) -> tuple[float, float, float, float, float]:
+    g, m1 = phi[n], phi[n + 4]
+    p, k1, c2 = (_KMAX * np.tanh(phi[n + j]) for j in (1, 2, 3))
+    return g, p, k1 * (1.0 + c2), c2, m1
+
+
+def theta_from_stage(phi: np.ndarray, n_operators: int) -> np.ndarray:
+    """The member's parameters ``[mu.., a21, a22, a23, b22, b23]`` from search coordinates.
+
+    Parameters
+    ----------
+    phi : ndarray
+        ``[mu_0..mu_N-1, g, xp, x1, x2, m1]`` (see the module docstring).
+    n_operators : int
+        Number of operators ``N``.
+
+    Returns
+    -------
+    ndarray
+        Parameters in the order of ``PIStructure.names`` for the stage structure.
+    """
+    n = n_operators
+    g, p, c1, c2, m1 = _filters(phi, n)
+    m0 = 1.0 + c1 + c2 - m1
+    a = np.convolve([1.0, -p], [1.0, c1, c2])
+    b = g * (1.0 - p) * np.array([1.0, c1, c2]) + (1.0 - g) * np.convolve([m0, m1], [1.0, -p])
+    return np.r_[phi[:n], a[1:], b[1:]]
+
+
+def stage_from_theta(theta: np.ndarray, n_operators: int) -> np.ndarray:
+    """Search coordinates of the member's parameters (the inverse of :func:`theta_from_stage`).
+
+    The slow pole is the largest real root of ``A``; the rest of ``A`` is the mode; ``g`` and
+    ``m1`` follow from ``B`` by least squares (exact for a stable ``A`` with distinct roots).
+
+    Parameters
+    ----------
+    theta : ndarray
+        ``[mu.., a21, a22, a23, b22, b23]`` with a stable L2.
+    n_operators : int
+        Number of operators ``N``.
+
+    Returns
+    -------
+    ndarray
+        ``[mu.., g, xp, x1, x2, m1]``.
+    """
+    n = n_operators
+    a = np.asarray(theta[n:n + 3], dtype=float)
+    b = np.r_[1.0 + a.sum() - theta[n + 3] - theta[n + 4], theta[n + 3:n + 5]]
+    roots = np.roots(np.r_[1.0, a])
+    real = roots[np.abs(roots.imag) <= 1e-9 * np.maximum(1.0, np.abs(roots))].real
+    lim = _KMAX * (1.0 - 1e-12)
+    p = float(np.clip(real.max(), -lim, lim))
+    q = np.polydiv(np.r_[1.0, a], [1.0, -p])[0].real
+    c1, c2 = float(q[1]), float(np.clip(q[2], -lim, lim))
+    k1 = float(np.clip(c1 / (1.0 + c2), -lim, lim))
+    s = 1.0 + c1 + c2
+    # b = g (1-p) [1, c1, c2] + h [m0, m1 - p m0, -p m1] with h = 1 - g, m0 = s - m1; in
+    # h and n1 = h m1 it is linear: b - (1-p)[1,c1,c2] = h (-(1-p)[1,c1,c2] + s [1, -p, 0])
+    #                                                     + n1 [-1, 1 + p, -p]
+    base = (1.0 - p) * np.array([1.0, c1, c2])
+    A = np.column_stack([-base + s * np.array([1.0, -p, 0.0]), [-1.0, 1.0 + p, -p]])
+    (h, n1), *_ = np.linalg.lstsq(A, b - base, rcond=None)
+    m1 = n1 / h if abs(h) > 1e-12 else 0.0
+    return np.r_[theta[:n], 1.0 - h, np.arctanh(np.array([p, k1, c2]) / _KMAX), m1]
+
+
+def admissible_weights(mu: np.ndarray, floor: float = 1e-3) -> np.ndarray:
+    """Weights with a positive loading slope: every cumulative sum at least ``floor`` times the
+    largest one (those below are raised to it, the others kept).
+
+    Parameters
+    ----------
+    mu : ndarray
+        Weights ``mu_0 .. mu_N-1`` of the play operators, thresholds increasing.
+    floor : float
+        Smallest cumulative sum kept, relative to the largest.
+
+    Returns
+    -------
+    ndarray
+        The weights, unchanged when already admissible.
+    """
+    mu = np.asarray(mu, dtype=float)
+    c = np.cumsum(mu)
+    low = floor * max(float(np.max(c)), float(np.sum(np.abs(mu))), 1e-300)
+    if np.all(c >= low):
+        return mu.copy()
+    return np.diff(np.r_[0.0, np.maximum(c, low)])
+
+
+# =========================================================================== compiled kernels
+@njit(cache=True)
+def _step(phi, r, u_k, st, psi):
+    # one sample: branch states at k from p(k-1), p(k-2), the prediction and its gradient
+    # psi = d yhat / d phi; then the operators move with u(k). Returns yhat(k).
+    n = r.shape[0]
+    g = phi[n]
+    tp, t1, t2 = np.tanh(phi[n + 1]), np.tanh(phi[n + 2]), np.tanh(phi[n + 3])
+    p, k1, c2 = _KMAX * tp, _KMAX * t1, _KMAX * t2
+    dp, dk1, dk2 = _KMAX * (1.0 - tp * tp), _KMAX * (1.0 - t1 * t1), _KMAX * (1.0 - t2 * t2)
+    c1 = k1 * (1.0 + c2)
+    m1 = phi[n + 4]
+    m0 = 1.0 + c1 + c2 - m1
+    yhat = 0.0
+    dg = 0.0
+    sp = 0.0
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(n):
+        p1, p2 = st[0, i], st[1, i]
+        xs = p * st[2, i] + (1.0 - p) * p1
+        ds = p * st[3, i] + st[2, i] - p1
+        xm = -c1 * st[4, i] - c2 * st[5, i] + m0 * p1 + m1 * p2
+        d0 = -c1 * st[6, i] - c2 * st[9, i] - st[4, i] + p1
+        d1 = -c1 * st[7, i] - c2 * st[10, i] - st[5, i] + p1
+        d2 = -c1 * st[8, i] - c2 * st[11, i] - p1 + p2
+        st[5, i] = st[4, i]
+        st[4, i] = xm
+        for j in range(3):
+            st[9 + j, i] = st[6 + j, i]
+        st[6, i], st[7, i], st[8, i] = d0, d1, d2
+        st[2, i], st[3, i] = xs, ds
+        mu = phi[i]
+        xi = g * xs + (1.0 - g) * xm
+        yhat += mu * xi
+        psi[i] = xi
+        dg += mu * (xs - xm)
+        sp += mu * ds
+        s0 += mu * d0
+        s1 += mu * d1
+        s2 += mu * d2
+        q = max(u_k - r[i], min(u_k + r[i], p1))     # eq. (30), w1 = u
+        st[1, i] = p1
+        st[0, i] = q
+    psi[n] = dg
+    psi[n + 1] = g * sp * dp
+    dc1 = (1.0 - g) * s0
+    dc2 = (1.0 - g) * s1
+    psi[n + 2] = dc1 * dk1 * (1.0 + c2)
+    psi[n + 3] = (dc1 * k1 + dc2) * dk2
+    psi[n + 4] = (1.0 - g) * s2
+    return yhat
+
+
+@njit(cache=True)
+def _l2_stable(phi, n):
+    # the multiplied-out denominator (1 - p z^-1)(1 + c1 z^-1 + c2 z^-2) passes the library's
+    # stability test (its margin), not only its two factors
+    p = _KMAX * np.tanh(phi[n + 1])
+    c2 = _KMAX * np.tanh(phi[n + 3])
+    c1 = _KMAX * np.tanh(phi[n + 2]) * (1.0 + c2)
+    return schur_stable(np.array([c1 - p, c2 - p * c1, -p * c2]), KMAX_STABLE)
+
+
+@njit(cache=True)
+def _slope(phi, n):
+    # smallest cumulative sum of the weights (the loading slope's weakest point)
+    acc = 0.0
+    low = np.inf
+    for i in range(n):
+        acc += phi[i]
+        low = min(low, acc)
+    return low
+
+
+@njit(cache=True)
+def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
+    # recursive Gauss-Newton: K = P psi / (lam s2 + psi' P psi), a bounded, admissible step
+    npar = phi.shape[0]
+    den = lam * s2
+    for a in range(npar):
+        acc = 0.0
+        for b in range(npar):
+            acc += P[a, b] * psi[b]
+        Pg[a] = acc
+        den += psi[a] * acc
+    norm = 0.0
+    for a in range(npar):
+        norm += (Pg[a] / den * e) ** 2
+    scale = 1.0 if norm <= max_step * max_step else max_step / np.sqrt(norm)
+    for a in range(npar):
+        old[a] = phi[a]
+    before = _slope(phi, n)
+    for _ in range(12):
+        for a in range(npar):
+            phi[a] = old[a] + scale * Pg[a] / den * e
+        after = _slope(phi, n)
+        if (after > 0.0 or after >= before) and _l2_stable(phi, n):
+            break
+        scale *= 0.5
+    else:
+        for a in range(npar):
+            phi[a] = old[a]
+    for a in range(npar):
+        for b in range(npar):
+            P[a, b] = (P[a, b] - Pg[a] * Pg[b] / den) / lam
+    for a in range(npar):
+        for b in range(a):
+            v = 0.5 * (P[a, b] + P[b, a])
+            P[a, b] = v
+            P[b, a] = v
+
+
+@njit(cache=True)
+def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err):
+    """Run the branches over ``u`` from the state ``st`` (updated in place).
+
+    With ``learn`` each sample with a finite ``y`` updates ``phi`` and ``P``; ``J`` (one row per
+    sample, or zero rows) receives the gradients; ``yhat`` and ``err`` the predictions and the
+    errors (NaN where ``y`` is not finite).
+    """
+    n = r.shape[0]
+    npar = phi.shape[0]
+    psi = np.empty(npar)
+    Pg = np.empty(npar)
+    old = np.empty(npar)
+    keep = J.shape[0] > 0
+    for k in range(u.shape[0]):
+        yh = _step(phi, r, u[k], st, psi)
+        yhat[k] = yh
+        if keep:
+            J[k, :] = psi
+        if not np.isfinite(y[k]):
+            err[k] = np.nan
+            continue
+        e = y[k] - yh
+        err[k] = e
+        if learn:
+            _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old)
+
+
+# =========================================================================== the identifier
+class PIStageOnline(Estimator):
+    """On-line identification of the ``pi-stage`` sandwich (see the module docstring).
+
+    Keeps the estimator contract (:class:`~hystid.identify.base.Estimator`): :meth:`update`
+    takes one sample and returns theta(k) in the member's parameters (:attr:`names`, record
+    units); :meth:`fit` restarts and :meth:`partial_fit` continues; a non-finite output is
+    skipped (the model runs on, nothing is learned from it), a non-finite input refused.
+
+    Parameters
+    ----------
+    thresholds : array_like
+        Play-operator thresholds in input units, relative to the record's first input value.
+    structure : PIStructure, optional
+        The member's structure (:func:`is_stage_structure`); ``pi-stage``'s by default.
+    warmup : int
+        Excited samples fitted off-line before the recursion starts (the leading rest, the
+        samples before the input first moves, is not counted).
+    window : int
+        Samples of the moving-horizon re-solve (the last ``window`` samples).
+    every : int
+        Excited samples between two re-solves.
+    iterations : int
+        Levenberg-Marquardt evaluations per re-solve (0: the recursion alone).
+    P0 : float
+        Prior variance of every search coordinate (normalised units) before any data.
+    forgetting : float
+        Forgetting factor of the per-sample recursion, in (0, 1]; 1 forgets nothing.
+    max_step : float
+        Largest change of the search coordinates in one sample (normalised units).
+    epsilon : float
+        Stop index of :func:`~hystid.identify.result.converged_at`.
+    fs : float
+        Sampling rate in Hz.
+
+    Attributes
+    ----------
+    theta : ndarray
+        Current estimate in the member's parameters (record units).
+    k : int
+        Samples processed.
+    n_resolves : int
+        Re-solves run so far.
+    e, yhat : float
+        Prediction error and prediction of the last sample (output units).
+    """
+
+    method = "pi-stage-online"
+
+    def __init__(
+        self,
+        thresholds: np.ndarray,
+        structure: PIStructure | None = None,
+        *,
+        warmup: int = 2000,
+        window: int = 10_000,
+        every: int = 500,
+        iterations: int = 12,
+        P0: float = 1.0,
+        forgetting: float = 1.0,
+        max_step: float = 0.05,
+        epsilon: float = 1e-4,
+        fs: float = 10_000.0,
+    ) -> None:
+        s = structure or PIStructure(n_operators=len(np.ravel(thresholds)), n1a=0, n1b=1, q1=0,
+                                     n2a=3, n2b=3, q2=1)
+        if not is_stage_structure(s):
+            raise ValueError(f"structure: expected the pi-stage shape (static L1, n2a=3, n2b=3, "
+                             f"q2=1), got {s}")
+        r = np.ascontiguousarray(np.asarray(thresholds, dtype=float).ravel())
+        if len(r) != s.n_operators or not np.all(np.isfinite(r)) or np.any(r < 0):
+            raise ValueError(f"thresholds: expected {s.n_operators} finite non-negative values")
+        for label, value in (("warmup", warmup), ("window", window), ("every", every),
+                             ("iterations", iterations + 1)):
+            if int(value) != value or value < 1:
+                raise ValueError(f"{label}: expected a positive integer, got {value!r}")
+        if every > window:
+            raise ValueError(f"every: expected at most window ({window}), got {every}")
+        for label, value in (("P0", P0), ("max_step", max_step), ("epsilon", epsilon),
+                             ("fs", fs)):
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{label}: expected a positive finite number, got {value!r}")
+        if not 0.0 < forgetting <= 1.0:
+            raise ValueError(f"forgetting: expected a value in (0, 1], got {forgetting!r}")
+        self.thresholds, self.structure = r, s
+        self.warmup, self.window, self.every = int(warmup), int(window), int(every)
+        self.iterations = int(iterations)
+        self.P0, self.forgetting, self.max_step = float(P0), float(forgetting), float(max_step)
+        self.epsilon, self.fs = float(epsilon), float(fs)
+        self.reset()
+
+    # ----------------------------------------------------------------- configuration
+    @property
+    def settings(self) -> dict[str, Any]:
+        """The constructor's configuration as plain values (JSON-ready)."""
+        return {"thresholds": self.thresholds.tolist(), "n_operators": self.structure.n_operators,
+                "warmup": self.warmup, "window": self.window, "every": self.every,
+                "iterations": self.iterations, "P0": self.P0, "forgetting": self.forgetting,
+                "max_step": self.max_step, "epsilon": self.epsilon, "fs": self.fs}
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of the member's parameters (the entries of :attr:`theta`)."""
+        return self.structure.names
+
+    @property
+    def theta(self) -> np.ndarray:
+        """The current estimate in the member's parameters, record units."""
+        if self._phi is None:
+            return self._theta_rest.copy()
+        th = theta_from_stage(self._phi, self.structure.n_operators)
+        th[: self.structure.n_operators] *= self._sy / self._su
+        return th
+
+    @property
+    def model(self) -> PISandwich:
+        """The current estimate as a :class:`~hystid.pi.PISandwich` (at rest at ``u = 0``)."""
+        return PISandwich(self.theta, self.thresholds, self.structure, fs=self.fs,
+                          name="identified PI sandwich (on-line)", u_rest=self._u0 or 0.0)
+
+    def reset(self) -> PIStageOnline:
+        """Forget everything learned: at rest, before the warm-up, at sample 0.
+
+        Returns
+        -------
+        PIStageOnline
+            The identifier.
+        """
+        n = self.structure.n_operators
+        self.k = 0
+        self.n_skipped = 0
+        self.n_resolves = 0
+        self.e = self.yhat = 0.0
+        self.excited_at: int | None = None
+        self.warmup_seconds_ = 0.0
+        self.resolve_seconds_ = 0.0
+        self._u0: float | None = None
+        self._rest: list[tuple[float, float]] = []
+        self._buffer: list[tuple[float, float]] = []
+        self._phi: np.ndarray | None = None
+        self._theta_rest = np.zeros(len(self.names))
+        self._su = self._sy = 1.0
+        self._rn = self.thresholds
+        self._P = np.eye(len(self.names)) * self.P0
+        self._st = np.zeros((_STATE_ROWS, n))
+        self._chunk_u: list[float] = []
+        self._chunk_y: list[float] = []
+        self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # the window's whole chunks
+        self._wstate = np.zeros((_STATE_ROWS, n))  # the branches at the window's start
+        self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
+        self._solved: np.ndarray | None = None  # the last re-solve's estimate
+        return self
+
+    # ----------------------------------------------------------------- one sample
+    def update(self, u_k: float, y_k: float) -> np.ndarray:
+        """Process one sample ``(u(k), y(k))``; returns the estimate theta(k).
+
+        Parameters
+        ----------
+        u_k : float
+            Input u(k), finite.
+        y_k : float
+            Measured y(k); when not finite the model runs on and nothing is learned.
+
+        Returns
+        -------
+        ndarray
+            A copy of theta(k), in the order of :attr:`names`.
+        """
+        u, y = sample_arrays(u_k, y_k)
+        self._process(u, y)
+        return self.theta
+
+    def _process(self, u: np.ndarray, y: np.ndarray,
+                 history: np.ndarray | None = None, errors: np.ndarray | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> None:
+        """Rest, warm-up and recursion over a block of samples."""
+        i, n = 0, len(u)
+        self.n_skipped += int(np.count_nonzero(~np.isfinite(y)))
+        while i < n:
+            if self._phi is None:
+                i = self._before_recursion(u, y, i, history, errors)
+                continue
+            # the recursion up to the end of the open chunk (or of the block)
+            b = min(n, i + self.every - len(self._chunk_u))
+            self._recurse(u[i:b], y[i:b], None if errors is None else errors[i:b],
+                          None if history is None else history[i:b])
+            i = b
+            if progress is not None:
+                progress(i, n)
+
+    def _before_recursion(self, u, y, i, history, errors) -> int:
+        """Rest and warm-up samples from index ``i``; returns the next index."""
+        if self._u0 is None:
+            self._u0 = float(u[i])
+        tol = 1e-6 * max(float(self.thresholds[-1]), 1e-300)
+        if self.excited_at is None and abs(u[i] - self._u0) <= tol:
+            self._rest = (self._rest + [(float(u[i]), float(y[i]))])[-_REST_KEPT:]
+        else:
+            if self.excited_at is None:
+                self.excited_at = self.k
+            self._buffer.append((float(u[i]), float(y[i])))
+        self.k += 1
+        if len(self._buffer) >= self.warmup:
+            self._warm_start()
+        if history is not None:
+            history[i] = self.theta
+            errors[i] = np.nan
+        return i + 1
+
+    def _recurse(self, u, y, errors, history) -> None:
+        """The per-sample recursion over samples that stay inside the open chunk."""
+        m = len(u)
+        un, yn = (u - self._u0) / self._su, y / self._sy
+        yhat, err = np.empty(m), np.empty(m)
+        if history is None:
+            _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn, un, yn,
+                 self._st, True, np.zeros((0, len(self._phi))), yhat, err)
+        else:
+            for j in range(m):  # one sample at a time to record the estimate after each
+                _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
+                     un[j:j + 1], yn[j:j + 1], self._st, True, np.zeros((0, len(self._phi))),
+                     yhat[j:j + 1], err[j:j + 1])
+                history[j] = self.theta
+        if errors is not None:
+            errors[:] = err * self._sy
+        self.k += m
+        self.e, self.yhat = float(err[-1] * self._sy), float(yhat[-1] * self._sy)
+        self._chunk_u.extend(un.tolist())
+        self._chunk_y.extend(yn.tolist())
+        if len(self._chunk_u) >= self.every:
+            self._close_chunk()
+            self._resolve()
+            if history is not None:
+                history[-1] = self.theta
+
+    # ----------------------------------------------------------------- warm start
+    def _warm_start(self) -> None:
+        """Fit the rest kept and the warm-up samples off-line; replay them as chunks."""
+        from .pi_recursive import _fit_normalised_from_zero
+
+        t0 = time.perf_counter()
+        n = self.structure.n_operators
+        rest = np.array(self._rest).reshape(-1, 2)
+        exc = np.array(self._buffer)
+        u = np.r_[rest[:, 0], exc[:, 0]] - (self._u0 or 0.0)
+        y = np.r_[rest[:, 1], exc[:, 1]]
+        fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure)
+        self._su, self._sy, self._rn = su, sy, self.thresholds / su
+        phi = stage_from_theta(fit.theta, n)
+        phi[:n] = admissible_weights(phi[:n])
+        un, yn = u / su, y / sy
+        nr = len(rest)
+        self._wstate = self._simulate(phi, np.zeros((_STATE_ROWS, n)), un[:nr], yn[:nr])[2]
+        err, J, st = self._simulate(phi, self._wstate, un[nr:], yn[nr:])
+        seen = np.isfinite(err)
+        s2 = max(float(np.mean(err[seen] ** 2)), 1e-12)
+        # the recursion is scale-free: information in plain sums of squares, the prior's
+        # variance P0 relative to the warm-up fit's residual variance
+        self._arrival = (phi.copy(), np.eye(len(phi)) * s2 / self.P0)
+        for a in range(0, len(exc) - self.every + 1, self.every):
+            self._chunks.append((un[nr + a:nr + a + self.every], yn[nr + a:nr + a + self.every]))
+        done = len(self._chunks) * self.every
+        self._chunk_u, self._chunk_y = un[nr + done:].tolist(), yn[nr + done:].tolist()
+        self._phi, self._st, self._solved = phi, st, phi.copy()
+        self._P = np.linalg.inv(J[seen].T @ J[seen] + self._arrival[1])
+        self._buffer, self._rest = [], []
+        while len(self._chunks) > self._keep():
+            self._fold(phi)
+        self.warmup_seconds_ = time.perf_counter() - t0
+        if self._chunks and not self._chunk_u:
+            self._resolve()
+
+    # ----------------------------------------------------------------- moving horizon
+    def _keep(self) -> int:
+        return max(1, self.window // self.every)
+
+    def _close_chunk(self) -> None:
+        """The open chunk is complete: keep it in the window; open the next one."""
+        self._chunks.append((np.array(self._chunk_u), np.array(self._chunk_y)))
+        self._chunk_u, self._chunk_y = [], []
+
+    def _fold(self, phi: np.ndarray) -> None:
+        """Drop the window's oldest chunk into the arrival cost, linearised at ``phi``.
+
+        Its cost ``|e - J d|^2`` is added to ``(d - d_a)' R_a (d - d_a)`` (``d = phi' - phi``),
+        and the window starts at the chunk's end, the branches run with ``phi``.
+        """
+        u, y = self._chunks.pop(0)
+        err, J, st = self._simulate(phi, self._wstate, u, y)
+        seen = np.isfinite(err)
+        J, err = J[seen], err[seen]
+        phi_a, R_a = self._arrival
+        R = R_a + J.T @ J
+        self._arrival = (np.linalg.solve(R, R_a @ phi_a + J.T @ (J @ phi + err)), R)
+        self._wstate = st
+
+    def _simulate(self, phi: np.ndarray, st0: np.ndarray, u: np.ndarray,
+                  y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        st = st0.copy()
+        J = np.empty((len(u), len(phi)))
+        yhat, err = np.empty(len(u)), np.empty(len(u))
+        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, u, y, st, False, J, yhat, err)
+        return err, J, st
+
+    def _resolve(self) -> None:
+        """Levenberg-Marquardt on the window with the arrival cost, from the recursion's
+        estimate and from the last re-solve's (the lower cost is kept: the recursion may have
+        drifted along a direction the data do not fix); then the oldest chunk is folded into
+        the arrival cost once the window is full."""
+        t0 = time.perf_counter()
+        u = np.concatenate([c[0] for c in self._chunks])
+        y = np.concatenate([c[1] for c in self._chunks])
+        n = self.structure.n_operators
+        phi_a, R_a = self._arrival
+
+        def cost(phi, err):
+            d = phi - phi_a
+            return float(np.nansum(err ** 2) + d @ R_a @ d)
+
+        best = None
+        for start in (self._phi, self._solved):
+            phi = start.copy()
+            err, J, st = self._simulate(phi, self._wstate, u, y)
+            f = cost(phi, err)
+            damping = 1e-3
+            for _ in range(self.iterations):
+                seen = np.isfinite(err)
+                A = J[seen].T @ J[seen] + R_a
+                grad = J[seen].T @ err[seen] - R_a @ (phi - phi_a)
+                trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
+                if not ((_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n))
+                        and _l2_stable(trial, n)):
+                    damping *= 4.0
+                    continue
+                err_t, J_t, st_t = self._simulate(trial, self._wstate, u, y)
+                f_t = cost(trial, err_t)
+                if np.isfinite(f_t) and f_t < f:
+                    phi, err, J, st, f = trial, err_t, J_t, st_t, f_t
+                    damping = max(damping / 3.0, 1e-9)
+                else:
+                    damping *= 4.0
+            if best is None or f < best[0]:
+                best = (f, phi, err, J, st)
+        _, phi, err, J, st = best
+        self._solved = phi.copy()
+        seen = np.isfinite(err)
+        self._phi, self._st = phi, st
+        self._P = np.linalg.inv(J[seen].T @ J[seen] + R_a)
+        if len(self._chunks) >= self._keep():
+            self._fold(phi)
+        self.n_resolves += 1
+        self.resolve_seconds_ += time.perf_counter() - t0
+
+    # ----------------------------------------------------------------- a record
+    def fit(self, record: Record,
+            progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
+        """Restart (:meth:`reset`) and run over a whole record.
+
+        Parameters
+        ----------
+        record : Record
+            Input and measured output at :attr:`fs`, with more excited samples than the
+            warm-up.
+        progress : callable, optional
+            Called as ``progress(k, n)`` after each chunk of samples.
+
+        Returns
+        -------
+        IdentificationResult
+            As :meth:`partial_fit`.
+        """
+        u, _, name = record_signals(record, self.fs)
+        self.reset()
+        moved = np.flatnonzero(np.abs(u - u[0]) > 1e-6 * max(float(self.thresholds[-1]),
+                                                              1e-300))
+        if len(moved) == 0 or len(u) - moved[0] <= self.warmup:
+            raise ValueError(f"record {name!r}: {len(u) - (moved[0] if len(moved) else len(u))}"
+                             f" excited samples are too few for the on-line PI identifier "
+                             f"(expected more than the warm-up, {self.warmup})")
+        return self.partial_fit(record, progress=progress)
+
+    def partial_fit(self, record: Record,
+                    progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
+        """Run over a record from the current state, keeping the history.
+
+        Parameters
+        ----------
+        record : Record
+            Input and measured output at :attr:`fs`.
+        progress : callable, optional
+            Called as ``progress(k, n)`` after each chunk of samples.
+
+        Returns
+        -------
+        IdentificationResult
+            ``method="pi-stage-online"``; ``history`` has one row per sample (the member's
+            parameters, record units); ``info`` holds the prediction errors (NaN at rest, in
+            the warm-up and at skipped samples), their RMS over the last 10 % of the samples,
+            the re-solves and the time spent.
+        """
+        u, y, _ = record_signals(record, self.fs)
+        n, before = len(u), self.n_skipped
+        history = np.empty((n, len(self.names)))
+        errors = np.empty(n)
+        t0 = time.perf_counter()
+        self._process(u, y, history, errors, progress)
+        self._warn_skipped(before)
+        tail = errors[-max(1, n // 10):]
+        tail = tail[np.isfinite(tail)]
+        info = {
+            "rms_prediction_error_last10": float(np.sqrt(np.mean(tail ** 2))) if tail.size
+            else None,
+            "prediction_errors": errors,
+            "excited_at": self.excited_at,
+            "resolves": self.n_resolves,
+            "seconds": time.perf_counter() - t0,
+            "warmup_seconds": self.warmup_seconds_,
+            "resolve_seconds": self.resolve_seconds_,
+            "thresholds": self.thresholds.tolist(),
+            "stable": bool(self.model.is_stable()),
+            "loading_slope_min": float(_slope(self.theta, self.structure.n_operators)),
+        }
+        return IdentificationResult(self.model, self.method, {**self.settings, "samples": n},
+                                    history=history,
+                                    converged_at=converged_at(history, self.epsilon), info=info)

@@ -1,0 +1,130 @@
+"""On-line identification of the ``pi-stage`` member against its batch fit (issue 21, item 3)."""
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hystid.baselines import compare, simulate_from_rest
+from hystid.identify import identify
+from hystid.identify.members import member
+from hystid.identify.pi_online import (
+    PIStageOnline,
+    _run,
+    is_stage_structure,
+    stage_from_theta,
+    theta_from_stage,
+)
+from hystid.pi import PISandwich
+from hystid.records import Record, load_record
+from hystid.testing import stage_a_like
+
+STAGE = member("pi-stage").structure
+STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
+#: Issue 21's goal: the on-line model within this factor of the batch fit's held-out RMS.
+RATIO = 1.25
+
+
+def _heldout(method: str, train: Record, held: list[Record], **settings) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = identify(train, model="pi-stage", method=method, **settings)
+        rows = compare(res.model, train, held).rows
+    return np.array([r["model"] for r in rows])
+
+
+def _admissible(model: PISandwich) -> bool:
+    return model.is_stable() and np.all(np.cumsum(model.mu) > 0)
+
+
+def test_stage_coordinates_round_trip_and_predict_as_the_sandwich():
+    rng = np.random.default_rng(3)
+    phi = np.r_[rng.uniform(0.01, 0.1, 20), 0.4, np.arctanh(0.9995), 1.2, 2.0, -0.3]
+    theta = theta_from_stage(phi, 20)
+    np.testing.assert_allclose(stage_from_theta(theta, 20), phi, rtol=1e-6, atol=1e-9)
+    r = np.arange(20) / 20 * 1.5
+    model = PISandwich(theta, r, STAGE)
+    assert model.is_stable() and is_stage_structure(STAGE)
+    u = np.cumsum(rng.normal(0, 0.05, 3000))
+    st = np.zeros((12, 20))
+    yhat, err = np.empty(len(u)), np.empty(len(u))
+    _run(phi, np.eye(25), 1.0, 1.0, 1.0, r, u, np.zeros(len(u)), st, False,
+         np.zeros((0, 25)), yhat, err)
+    y = model.simulate(u).y
+    np.testing.assert_allclose(yhat, y, atol=1e-9 * np.max(np.abs(y)))
+
+
+def test_update_sample_by_sample_is_fit():
+    rec = stage_a_like("prbn", seconds=0.25, rest_seconds=0.05, seed=2)
+    u = rec.u - rec.u[0]
+    r = np.arange(20) / 20 * 0.5 * np.ptp(u[:-1])
+    est = PIStageOnline(r, STAGE, warmup=600, window=1000, every=250, fs=rec.fs)
+    res = est.fit(Record(u, rec.y - rec.y[0], rec.fs))
+    one = PIStageOnline(r, STAGE, warmup=600, window=1000, every=250, fs=rec.fs)
+    steps = np.array([one.update(float(a), float(b))
+                      for a, b in zip(u, rec.y - rec.y[0], strict=True)])
+    np.testing.assert_allclose(steps[-1], res.model.theta, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(steps, res.history, rtol=1e-9, atol=1e-12)
+    assert one.k == rec.n and one.n_resolves == est.n_resolves > 0
+    assert res.info["excited_at"] == est.excited_at > 0
+
+
+def test_settings_are_checked():
+    r = np.arange(20) / 20.0
+    with pytest.raises(ValueError, match="structure"):
+        PIStageOnline(r, member("pi").structure)
+    with pytest.raises(ValueError, match="every"):
+        PIStageOnline(r, STAGE, window=100, every=200)
+    with pytest.raises(ValueError, match="too few"):
+        PIStageOnline(r, STAGE, warmup=500).fit(Record(np.r_[np.zeros(100), np.ones(100)],
+                                                       np.zeros(200), 10_000.0))
+
+
+def test_online_is_within_the_goal_of_batch_on_the_look_alike():
+    """Trained on a 1 s PRBN record of the Bouc-Wen look-alike of stage A, held out on others."""
+    train = stage_a_like("prbn", seconds=1.0, seed=0)
+    held = [stage_a_like(kind, seconds=1.0, seed=1) for kind in ("prbn", "sine50", "tri50")]
+    batch, online = _heldout("batch", train, held), _heldout("online", train, held)
+    assert np.all(np.isfinite(online))
+    assert np.max(online / batch) <= RATIO, (online, batch)
+    # a window of 0.3 s, shorter than the excitation: the arrival cost carries the rest
+    short = _heldout("online", train, held, window=3000)
+    assert np.max(short / batch) <= RATIO, (short, batch)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(train, model="pi-stage", method="online").model
+    assert _admissible(model)
+    big = stage_a_like("large_sine", seconds=1.0, seed=1)  # beyond the training envelope
+    y = simulate_from_rest(model, big.u, check=False)
+    assert np.all(np.isfinite(y)) and np.max(np.abs(y)) < 10 * np.ptp(big.y)
+
+
+@pytest.mark.skipif(not STAGE_A.exists(), reason=f"measured stage A records absent ({STAGE_A})")
+def test_online_is_within_the_goal_of_batch_on_stage_a():
+    """Issue 21's goal on the measured stage A: trained on prbn_1, the five others held out."""
+    names = [f"{i}_{k}" for i in ("prbn", "sine50", "tri50") for k in (1, 2)]
+    recs = {n: load_record(STAGE_A / f"{n}.csv") for n in names}
+    train, held = recs["prbn_1"], [r for n, r in recs.items() if n != "prbn_1"]
+    batch, online = _heldout("batch", train, held), _heldout("online", train, held)
+    assert np.all(np.isfinite(online))
+    assert np.max(online / batch) <= RATIO, (online, batch)
+
+
+def test_branch_gradients_are_the_derivatives_of_the_prediction():
+    rng = np.random.default_rng(4)
+    phi = np.r_[rng.uniform(0.01, 0.1, 20), 0.4, np.arctanh(0.999), 1.2, 2.0, -0.3]
+    r = np.arange(20) / 20 * 1.5
+    u = np.cumsum(rng.normal(0, 0.05, 2000))
+
+    def run(p):
+        J, yhat, err = np.empty((len(u), 25)), np.empty(len(u)), np.empty(len(u))
+        _run(p, np.eye(25), 1.0, 1.0, 1.0, r, u, np.zeros(len(u)), np.zeros((12, 20)), False,
+             J, yhat, err)
+        return yhat, J
+
+    _, J = run(phi)
+    for j in (0, 7, 20, 21, 22, 23, 24):
+        h = 1e-6 * max(1.0, abs(phi[j]))
+        fd = (run(phi + h * np.eye(25)[j])[0] - run(phi - h * np.eye(25)[j])[0]) / (2 * h)
+        np.testing.assert_allclose(J[:, j], fd, rtol=1e-5, atol=1e-7 * np.max(np.abs(fd)))
