@@ -40,8 +40,8 @@ itself). :meth:`Record.save` writes atomically (see :mod:`hystid.safeio`).
 The package: :mod:`~hystid.records.record` (the record, its errors and constants),
 :mod:`~hystid.records.loading` (:func:`load_record` and friends),
 :mod:`~hystid.records.csvfile` and :mod:`~hystid.records.arrays` (the formats, with the
-hostile-file checks), :mod:`~hystid.records.checks` (the sampling rate) and
-(:meth:`Record.save` writes in :mod:`~hystid.records.record` itself).
+hostile-file checks) and :mod:`~hystid.records.checks` (the sampling rate);
+:meth:`Record.save` writes from :mod:`~hystid.records.record` itself.
 """
 
 from .loading import load_piezo_sine_150v, load_record, parse_columns, parse_units, read_records
