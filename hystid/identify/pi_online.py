@@ -571,7 +571,7 @@ class PIStageOnline(Estimator):
     # ----------------------------------------------------------------- warm start
     def _warm_start(self) -> None:
         """Fit the rest kept and the warm-up samples off-line; replay them as chunks."""
-        from .pi_recursive import _fit_normalised_from_zero
+        from .pi_batch import _fit_normalised_from_zero
 
         t0 = time.perf_counter()
         n = self.structure.n_operators

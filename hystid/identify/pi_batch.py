@@ -1,0 +1,391 @@
+"""The PI sandwich's off-line output-error fit (the reference for the recursion).
+
+:func:`fit_pi_output_error` prepares the record, places the thresholds, fits on normalised
+signals from several starts with exact sensitivities (:mod:`~hystid.identify.pi_kernels`) and
+places the model back in the record's units.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..model import Structure
+from ..pi import N_OPERATORS, PISandwich, PIStructure
+from ..records import Record
+from ..thresholds import RULES
+from .constraints import Reflections
+from .offline import SCREEN_NFEV, linear_start, triangle_of
+from .pi_kernels import pi_output_sensitivities
+from .prepare import prepare, scales
+from .result import IdentificationResult
+
+__all__ = ["POLISHED", "RIDGE", "fit_pi_output_error"]
+
+
+#: Starts of the off-line fit polished after the screening (the best ones).
+POLISHED = 2
+#: Ridge on the weights in the off-line fits: the cost is ``sum r^2 + RIDGE m |mu_n|^2`` on
+#: normalised signals (``m`` samples in the cost, ``mu_n`` the weights in normalised units, so
+#: the same in any units). Operators that the input moves only once (on the ramp out of rest)
+#: have nearly collinear outputs; without it their weights drift along a flat valley of the
+#: cost to large alternating values, and where the solver stops there is arbitrary.
+RIDGE = 1e-8
+
+
+
+
+# =========================================================================== off-line
+def _scale_weights(theta: np.ndarray, structure: PIStructure, factor: float) -> np.ndarray:
+    """``theta`` (a vector, or one per row) with its weights multiplied by ``factor``.
+
+    With unit-DC-gain L1 and L2, ``w1`` is in input units and ``w2`` in output units, so the
+    weights alone carry units (output per input): with ``u = s_u un`` and ``y = s_y yn`` the
+    thresholds are ``s_u`` times and the weights ``s_y / s_u`` times their normalised values.
+    """
+    out = np.array(theta, dtype=float)
+    out[..., structure.slices()["mu"]] *= factor
+    return out
+
+
+def _weights_given_blocks(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
+                          r: np.ndarray, structure: PIStructure,
+                          fit_offset: bool) -> tuple[np.ndarray, float]:
+    """``theta`` with its weights (and the offset) set by linear least squares for its L1 and
+    L2: exact, since the output is linear in both."""
+    theta = np.array(theta, dtype=float)
+    mu = structure.slices()["mu"]
+    theta[mu] = 0.0
+    _, J = pi_output_sensitivities(PISandwich(theta, r, structure), un)
+    A = J[rows][:, mu]
+    if fit_offset:
+        A = np.column_stack([A, np.ones(len(rows))])
+    n = structure.n_operators
+    A = np.vstack([A, np.sqrt(RIDGE * len(rows)) * np.eye(n, A.shape[1])])
+    coef, *_ = np.linalg.lstsq(A, np.r_[yn[rows], np.zeros(n)], rcond=None)
+    theta[mu] = coef[:n]
+    return theta, float(coef[-1]) if fit_offset else 0.0
+
+
+def _arx_blocks(un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
+                structure: PIStructure) -> np.ndarray | None:
+    """L1 and L2 of the linear sandwich's ARX fit (:func:`hystid.identify.offline.linear_start`,
+    its monic numerators rescaled to unit DC gain); None when its roots do not split."""
+    s = structure
+    duhem = Structure(n1a=s.n1a, n1b=s.n1b - 1, n2a=s.n2a, n2b=s.n2b - 1, q1=s.q1, q2=s.q2)
+    filled = np.interp(np.arange(len(yn)), rows, yn[rows])
+    lin = linear_start(Record(un, filled, 1.0, name="normalised"), duhem, with_offset=True)
+    if lin is None:
+        return None
+    values = dict(zip(duhem.names, lin[0], strict=True))
+    theta = np.zeros(len(s.names))
+    for block, na, nb in (("1", s.n1a, s.n1b), ("2", s.n2a, s.n2b)):
+        a = np.array([values[f"a{block}{i}"] for i in range(1, na + 1)])
+        c = np.array([values[f"b{block}{j}"] for j in range(1, nb)])
+        lead = (1.0 + a.sum()) / (1.0 + c.sum())
+        for i, v in enumerate(a, start=1):
+            theta[s.names.index(f"a{block}{i}")] = v
+        for j, v in enumerate(c, start=2):
+            theta[s.names.index(f"b{block}{j}")] = lead * v
+    return theta if np.isfinite(theta).all() else None
+
+
+class _NormalisedFit(NamedTuple):
+    """An off-line fit on normalised signals (:func:`_solve_normalised`)."""
+
+    theta: np.ndarray
+    y0: float
+    rms: float
+    nfev: int
+    message: str
+    start: str
+
+    def info(self, r: np.ndarray, u_scale: float, y_scale: float) -> dict[str, Any]:
+        """The fit's report in record units (RMS residual, thresholds, scales)."""
+        return {"rms_residual": self.rms * y_scale, "nfev": self.nfev, "message": self.message,
+                "start": self.start, "thresholds": r.tolist(),
+                "scales": {"u": u_scale, "y": y_scale}}
+
+
+def _solve_normalised(
+    un: np.ndarray, yn: np.ndarray, weight: np.ndarray, r: np.ndarray, structure: PIStructure,
+    theta0: np.ndarray | None, fit_offset: bool, max_nfev: int, tol: float,
+) -> _NormalisedFit:
+    """Output-error least squares on normalised signals, from several starts.
+
+    Minimises ``sum (yhat(k) + y0 - yn(k))^2`` over the samples with ``weight`` (``yhat`` the
+    free run from rest on ``un``, thresholds ``r`` in normalised input units) with
+    :func:`scipy.optimize.least_squares` in reflection coefficients of L1 and L2 and, with
+    ``fit_offset``, the normalised sensor offset ``y0``. The starts (:func:`_starts`) are run
+    for :data:`SCREEN_NFEV` evaluations each; the :data:`POLISHED` best are polished.
+
+    Returns
+    -------
+    _NormalisedFit
+        Normalised parameters and offset, RMS residual and the solver's report.
+    """
+    rows = np.flatnonzero(weight)
+    problem = _PIOutputError(un, yn, rows, r, structure, fit_offset)
+    starts = _starts(un, yn, rows, r, structure, theta0, fit_offset)
+    screened = []
+    for label, (theta, y0) in starts.items():
+        sol = problem.solve(problem.to_z(theta, y0),
+                            SCREEN_NFEV if len(starts) > 1 else max_nfev, tol)
+        screened.append((sol.cost, label, sol))
+    screened.sort(key=lambda item: item[0])
+    polished = []
+    for _, label, sol in screened[:POLISHED]:
+        if len(starts) > 1:
+            sol = problem.solve(sol.x, max_nfev, tol)
+        polished.append((sol.cost, label, sol))
+    _, label, sol = min(polished, key=lambda item: item[0])
+    theta, y0 = problem.split(sol.x)
+    rms = float(np.sqrt(np.mean(problem.evaluate(sol.x)["data"] ** 2)))
+    return _NormalisedFit(theta, y0, rms, int(sol.nfev), str(sol.message), label)
+
+
+def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
+            structure: PIStructure, theta0: np.ndarray | None,
+            fit_offset: bool) -> dict[str, tuple[np.ndarray, float]]:
+    """``theta0`` alone when given; else ``L1 = L2 = z^-1`` and the linear sandwich's ARX
+    blocks, each with the weights (and offset) that fit best for its blocks."""
+    if theta0 is not None:
+        if not PISandwich(theta0, r, structure).is_stable():
+            raise ValueError("theta0: the start must have stable L1 and L2")
+        return {"theta0": (theta0, 0.0)}
+    delay = np.zeros(len(structure.names))
+    blocks = {"L1 = L2 = z^-1": delay}
+    arx = _arx_blocks(un, yn, rows, structure)
+    if arx is not None:
+        sl = structure.slices()
+        l1 = np.r_[sl["a1"], sl["b1"]]
+        blocks["ARX"] = arx
+        blocks["L1 = z^-1, ARX L2"] = np.where(np.isin(np.arange(len(arx)), l1), 0.0, arx)
+        blocks["ARX L1, L2 = z^-1"] = np.where(np.isin(np.arange(len(arx)), l1), arx, 0.0)
+    unique: dict[str, np.ndarray] = {}  # a structure without free L1 terms makes mixtures twins
+    for label, theta in blocks.items():
+        if not any(np.array_equal(theta, other) for other in unique.values()):
+            unique[label] = theta
+    return {label: _weights_given_blocks(theta, un, yn, rows, r, structure, fit_offset)
+            for label, theta in unique.items()}
+
+
+class _PIOutputError:
+    """The output-error problem on normalised signals, in ``z = [reflection coefficients of
+    L1 and L2 | the other parameters | y0 (with an offset)]``."""
+
+    def __init__(self, un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
+                 structure: PIStructure, fit_offset: bool) -> None:
+        s = self.structure = structure
+        self.un, self.r, self.rows, self.target = un, r, rows, yn[rows]
+        self.fit_offset = fit_offset
+        self.n = len(s.names)
+        sl, index = s.slices(), np.arange(self.n)
+        self.rp = Reflections([index[sl["a1"]], index[sl["a2"]]], self.n)
+        self.ones = np.ones((len(rows), int(fit_offset)))
+        self.mu = index[sl["mu"]]
+        self.ridge = np.sqrt(RIDGE * len(rows))
+        self.ridge_rows = np.zeros((len(self.mu), self.n + int(fit_offset)))
+        self.ridge_rows[np.arange(len(self.mu)), self.mu] = self.ridge
+        self._cache: dict[str, Any] = {}
+
+    def to_z(self, theta: np.ndarray, y0: float) -> np.ndarray:
+        """Search coordinates of a parameter vector and an offset."""
+        return np.r_[self.rp.to_z(theta), [y0] * self.fit_offset]
+
+    def split(self, z: np.ndarray) -> tuple[np.ndarray, float]:
+        """Parameters and offset of ``z``."""
+        return self.rp.to_theta(z[: self.n])[0], float(z[self.n]) if self.fit_offset else 0.0
+
+    def evaluate(self, z: np.ndarray) -> dict[str, Any]:
+        """Residuals and Jacobian at ``z``, folded (:func:`_folded`), and the data residuals
+        (``data``, unfolded); cached for the last ``z``."""
+        if self._cache.get("z") is None or not np.array_equal(self._cache["z"], z):
+            theta, dtheta = self.rp.to_theta(z[: self.n])
+            with np.errstate(over="ignore", invalid="ignore"):
+                yhat, J = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
+                                                  self.un)
+            y0 = z[self.n] if self.fit_offset else 0.0
+            data = yhat[self.rows] + y0 - self.target
+            r = np.r_[data, self.ridge * theta[self.mu]]
+            J = np.vstack([np.hstack([J[self.rows] @ dtheta, self.ones]), self.ridge_rows])
+            self._cache = {"z": z.copy(), "data": data, **_folded(J, r)}
+        return self._cache
+
+    def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
+        """``least_squares`` from ``z0`` within the reflection bounds."""
+        lo, hi = self.rp.bounds()
+        lo = np.r_[lo, [-np.inf] * self.fit_offset]
+        hi = np.r_[hi, [np.inf] * self.fit_offset]
+        with np.errstate(over="ignore", invalid="ignore"):
+            return least_squares(lambda z: self.evaluate(z)["r"], np.clip(z0, lo, hi),
+                                 jac=lambda z: self.evaluate(z)["J"], bounds=(lo, hi),
+                                 method="trf", ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev,
+                                 x_scale="jac")
+
+
+def _folded(J: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
+    """``[J | r]`` folded into its QR triangle ``[R | c; 0 | rho]``: the residuals ``[c, rho]``
+    and the Jacobian ``[R; 0]`` have the norm, gradient and ``J'J`` of the full problem, so
+    ``least_squares`` takes the same steps on a square problem instead of a tall one (its
+    SVD per iteration then costs nothing). A non-finite ``[J | r]`` gives non-finite
+    residuals of the same length (the solver takes that as a failed step)."""
+    A = np.column_stack([J, r])
+    width = A.shape[1]
+    if not np.all(np.isfinite(A)):
+        return {"r": np.full(width, np.nan), "J": np.zeros((width, width - 1))}
+    tri = triangle_of(A)
+    return {"r": tri[:, -1].copy(), "J": tri[:, :-1].copy()}
+
+
+def _structure_and_thresholds(
+    u: np.ndarray, thresholds: np.ndarray | str | None, structure: PIStructure | None,
+    n_operators: int,
+) -> tuple[PIStructure, np.ndarray]:
+    """The structure and the thresholds (record units): given, or placed over ``u`` by a rule
+    of :data:`hystid.thresholds.RULES` (the paper's ``"range"`` when None)."""
+    if structure is not None:
+        n_operators = structure.n_operators
+    if thresholds is None:
+        thresholds = "range"
+    if isinstance(thresholds, str):
+        if thresholds not in RULES:
+            raise ValueError(f"thresholds: expected an array or one of {', '.join(RULES)}, "
+                             f"got {thresholds!r}")
+        r = RULES[thresholds](u, n_operators)
+    else:
+        r = np.asarray(thresholds, dtype=float).ravel()
+    s = structure or PIStructure(n_operators=len(r))
+    if len(r) != s.n_operators:
+        raise ValueError(f"thresholds: expected {s.n_operators} values for the structure, got "
+                         f"{len(r)}")
+    return s, r
+
+
+def fit_pi_output_error(
+    record: Record,
+    thresholds: np.ndarray | str = "swing",
+    structure: PIStructure | None = None,
+    *,
+    n_operators: int = N_OPERATORS,
+    theta0: np.ndarray | None = None,
+    offset: bool = True,
+    skip: int | None = None,
+    max_nfev: int = 200,
+    tol: float = 1e-8,
+    name: str = "identified PI sandwich",
+) -> IdentificationResult:
+    """Identify the PI sandwich off-line by output-error least squares (the reference).
+
+    The steps, as in the off-line Duhem fit (:func:`hystid.identify.offline.fit_output_error`):
+    :func:`~hystid.identify.prepare.prepare` the record (excitation check, rest level, robust
+    scales, outliers and saturation left out of the cost, burn-in when it does not start at
+    rest); fit on the input less its rest over its scale and the output over its scale, so that
+    the result does not depend on the units; map the weights and thresholds back and place the
+    model at the record's rest level, sensor offset, input envelope and units.
+
+    The fit minimises ``sum_k (y(k) - yhat(k | theta) - y0)^2`` of the free run from rest with
+    :func:`scipy.optimize.least_squares` (trust-region reflective, exact Jacobian), in the
+    off-line Duhem fit's search coordinates (:class:`~hystid.identify.constraints.Reflections`):
+    the denominators of L1 and L2 as reflection coefficients inside the unit interval, so the
+    model stays stable. A small ridge (:data:`RIDGE`, on the normalised weights) keeps the
+    weights of operators the input hardly moves from drifting. The starts: ``L1 = L2 = z^-1``,
+    the linear sandwich's ARX blocks and the two mixtures, each with the weights and the offset
+    fitted by linear least squares (the output is linear in both); each runs for
+    :data:`~hystid.identify.offline.SCREEN_NFEV` evaluations and the :data:`POLISHED` best are
+    polished, as in the off-line Duhem fit.
+
+    Parameters
+    ----------
+    record : Record
+        Input ``u`` and measured output ``y``, in any units.
+    thresholds : array_like or {"swing", "range"}
+        Play-operator thresholds in the record's input units, or the rule that places them
+        over the fitted samples (:mod:`hystid.thresholds`): ``"swing"`` (default) within the
+        largest swing between two reversals of the input, so that every operator is reversed
+        at least once; ``"range"`` the paper's, over the input's range.
+    structure : PIStructure, optional
+        Orders and delays (the paper's by default).
+    n_operators : int
+        Number of operators when neither ``thresholds`` nor ``structure`` say.
+    theta0 : array_like, optional
+        Start vector in record units instead of the default.
+    offset : bool
+        Estimate the sensor offset (default); without it the output is taken as zero at rest.
+    skip : int, optional
+        Leading samples simulated but left out of the cost; by default none for a record that
+        starts at rest, else until the input has swept its range.
+    max_nfev : int
+        Maximum number of residual evaluations.
+    tol : float
+        ``ftol``, ``xtol`` and ``gtol`` of the solver.
+    name : str
+        Name of the identified model.
+
+    Returns
+    -------
+    IdentificationResult
+        ``method="pi-batch"``; ``info`` holds the RMS residual (record units), the solver's
+        message, the scales, the offset and ``warnings`` (what the preparation found).
+    """
+    prep = prepare(record, skip=skip)
+    s, r = _structure_and_thresholds(record.u[prep.fitted], thresholds, structure, n_operators)
+    if not offset:
+        prep.y_ref, prep.yn = 0.0, record.y / prep.y_scale
+    su, sy = prep.u_scale, prep.y_scale
+    theta0_n = None if theta0 is None else _scale_weights(
+        np.asarray(theta0, dtype=float).ravel(), s, su / sy)
+    fit = _solve_normalised(prep.un, prep.yn, prep.weight, r / su, s, theta0_n, offset,
+                            max_nfev, tol)
+    model = PISandwich(_scale_weights(fit.theta, s, sy / su), r, s, fs=record.fs, name=name,
+                       u_rest=prep.u_rest, offset=prep.offset(fit.y0), envelope=prep.envelope,
+                       units=record.units)
+    info = {**fit.info(r, su, sy), "offset": model.offset, "at_rest": prep.at_rest,
+            "skip": prep.skip, "warnings": list(prep.notes)}
+    settings = {"n_operators": len(r), "offset": offset, "skip": prep.skip,
+                "max_nfev": max_nfev, "tol": tol, "samples": record.n}
+    return IdentificationResult(model, "pi-batch", settings, info=info)
+
+
+def _zero_result(
+    fit: _NormalisedFit, su: float, sy: float, r: np.ndarray, structure: PIStructure, fs: float,
+    samples: int, *, max_nfev: int = 200, tol: float = 1e-8,
+    name: str = "identified PI sandwich",
+) -> IdentificationResult:
+    """The result of :func:`_fit_normalised_from_zero` in record units (weights mapped back)."""
+    model = PISandwich(_scale_weights(fit.theta, structure, sy / su), r, structure, fs=fs,
+                       name=name)
+    settings = {"n_operators": len(r), "max_nfev": max_nfev, "tol": tol, "samples": samples}
+    return IdentificationResult(model, "pi-batch", settings, info=fit.info(r, su, sy))
+
+
+def _zero_scales(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Input and output scales about zero (:func:`~hystid.identify.prepare.scales`) of the
+    samples with a finite output: the recursion's units."""
+    su, _, sy = scales(u, y[np.isfinite(y)], 0.0)
+    return su or 1.0, sy
+
+
+def _fit_normalised_from_zero(
+    u: np.ndarray, y: np.ndarray, r: np.ndarray, structure: PIStructure, *,
+    max_nfev: int = 200, tol: float = 1e-8,
+) -> tuple[_NormalisedFit, float, float]:
+    """:func:`_solve_normalised` at rest at ``u = 0`` without offset, on ``u / su`` and
+    ``y / sy`` (:func:`_zero_scales`); samples with a non-finite ``y`` are left out of the cost.
+
+    Returns
+    -------
+    tuple
+        The normalised fit, ``su`` and ``sy``.
+    """
+    u = np.ascontiguousarray(u, dtype=float)
+    y = np.ascontiguousarray(y, dtype=float)
+    su, sy = _zero_scales(u, y)
+    with np.errstate(invalid="ignore"):
+        fit = _solve_normalised(u / su, y / sy, np.isfinite(y), r / su, structure, None, False,
+                                max_nfev, tol)
+    return fit, su, sy
+
+
