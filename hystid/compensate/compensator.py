@@ -52,7 +52,7 @@ from numba import njit
 from numba.core.dispatcher import Dispatcher
 
 from ..model import DuhemSandwich
-from ..pi import play
+from ..pi_operator import play
 from ..signals import finite_signal
 from .duhem_inverse import check_bound, duhem_forward, plan_step
 from .linear_parts import (

@@ -136,7 +136,7 @@ def smoothing_model(samples: int, dt: float) -> ct.TransferFunction:
 
 
 def _pi_parts(model):
-    from ..pi import pi_inverse_parameters
+    from ..pi_operator import pi_inverse_parameters
 
     if not model.is_invertible():
         raise ValueError(

@@ -11,7 +11,8 @@ import numpy as np
 from numba import njit
 
 from ..model import InitialCondition
-from ..pi import PISandwich, PIStructure, play
+from ..pi import PISandwich, PIStructure
+from ..pi_operator import play
 from ..poly import KMAX_STABLE, schur_stable
 
 __all__ = [
