@@ -242,7 +242,7 @@ def _ff_part(chain: _Chain, model: DuhemSandwich | PISandwich) -> tuple[str, str
 
 def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
     """(header text, source text) of the on-line identifier's step."""
-    from ..identify import online as on
+    from ..identify import online_kernels as on
     from ..kernels import offsets
 
     s = ident.structure

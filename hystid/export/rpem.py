@@ -124,11 +124,12 @@ def rpem_start(
         Running (its start-up solve skipped), ready for ``rpem_run(ident._buf, ident._ints,
         u - u_rest, y, ...)``.
     """
-    from ..identify import online as on
+    from ..identify import online_kernels as on
+    from ..identify.online import OnlineIdentifier
 
     if not isinstance(model, DuhemSandwich):
         raise ValueError("the on-line identifier (RPEM) is exported for Duhem models only")
-    ident = on.OnlineIdentifier(model.structure, model.fs)
+    ident = OnlineIdentifier(model.structure, model.fs)
     npar = len(model.theta)
     if record is not None:
         if not np.isclose(float(record.fs), model.fs, rtol=1e-9):
