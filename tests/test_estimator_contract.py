@@ -102,3 +102,34 @@ def test_estimator_keeps_the_contract(name, record):
         make().fit((record.u, record.y))
     with pytest.raises(ValueError, match="fs"):
         make().fit(Record(record.u, record.y, fs=10_000.0))
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.array_equal(np.asarray(a), np.asarray(b))
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return a == b
+
+
+@pytest.mark.parametrize("name", ESTIMATORS)
+def test_get_params_rebuilds_an_equal_estimator(name, record):
+    """scikit-learn's round trip: the parameters come from the constructor's signature, and an
+    estimator built from them has the same parameters, settings and result."""
+    import inspect
+
+    est = ESTIMATORS[name]()
+    params = est.get_params()
+    expected = [p for p in inspect.signature(type(est).__init__).parameters if p != "self"]
+    assert list(params) == expected
+    twin = type(est)(**params)
+    assert _same(twin.get_params(), params)
+    assert twin.settings == est.settings
+    np.testing.assert_array_equal(quiet(twin.fit, record).model.theta,
+                                  quiet(est.fit, record).model.theta)
+    first = next(iter(params))
+    with pytest.raises(ValueError, match="unknown parameter"):
+        est.set_params(not_a_setting=1)
+    assert est.set_params(**{first: params[first]}) is est

@@ -209,6 +209,55 @@ class Estimator(ABC):
     def settings(self) -> dict[str, Any]:
         """The constructor's configuration as plain values (JSON-ready)."""
 
+    @classmethod
+    def _param_names(cls) -> tuple[str, ...]:
+        """The constructor's parameter names (scikit-learn's convention: each is kept as the
+        attribute of that name)."""
+        import inspect
+
+        sig = inspect.signature(cls.__init__)
+        return tuple(p.name for p in sig.parameters.values() if p.name != "self"
+                     and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD))
+
+    def get_params(self) -> dict[str, Any]:
+        """The constructor's arguments as the estimator holds them, derived from its signature.
+
+        ``type(est)(**est.get_params())`` builds an estimator with the same configuration
+        (``tests/test_estimator_contract.py`` checks it for every estimator).
+
+        Returns
+        -------
+        dict
+            Parameter name -> value.
+        """
+        return {name: getattr(self, name) for name in self._param_names()}
+
+    def set_params(self, **params: Any) -> Estimator:
+        """Change constructor arguments; the estimator is built again from them and restarts.
+
+        Parameters
+        ----------
+        **params
+            Constructor arguments by name.
+
+        Returns
+        -------
+        Estimator
+            The estimator itself.
+
+        Raises
+        ------
+        ValueError
+            Naming an argument the constructor does not take (and the ones it does).
+        """
+        unknown = sorted(set(params) - set(self._param_names()))
+        if unknown:
+            raise ValueError(f"{type(self).__name__}.set_params: unknown parameter(s) "
+                             f"{', '.join(unknown)} (expected some of "
+                             f"{', '.join(self._param_names())})")
+        self.__init__(**{**self.get_params(), **params})  # type: ignore[misc]
+        return self
+
     @property
     def names(self) -> tuple[str, ...]:
         """Names of the entries of :attr:`theta`."""

@@ -239,7 +239,7 @@ class ERIA(RecursiveIdentifier):
         self.lambda_inv0 = float(lambda_inv0)
         self.rho_exponent = float(rho_exponent)
         self.recover = bool(recover)
-        self._truth = truth
+        self.truth = truth
         if mu is not None and not (0 < mu <= 1):
             raise ValueError(f"mu: expected a forgetting factor in (0, 1], got {mu!r}")
         if not (np.isfinite(lambda_inv_min) and lambda_inv_min >= 0):
@@ -247,7 +247,7 @@ class ERIA(RecursiveIdentifier):
                              f"{lambda_inv_min!r}")
         self.mu = mu
         self.lambda_inv_min = float(lambda_inv_min)
-        self._internal = internal
+        self.internal = internal
         super().__init__(structure, fs, theta0, epsilon)
 
     def _allocate(self) -> None:
@@ -261,17 +261,17 @@ class ERIA(RecursiveIdentifier):
         self._theta_good = self.theta.copy()
         self._scal = np.array([0.0, self.lambda_inv0, 0.0, -1.0])
         self._U, self._W1, self._W2, self._Yh, self._Ym = (np.zeros(w) for _ in range(5))
-        self._truth_vec = (initial_theta(self.structure, self._truth)
-                           if self._truth is not None else np.zeros(n))
-        self._internal_vec = (initial_theta(self.structure, self._internal)
-                              if self._internal is not None else np.zeros(n))
+        self._truth_vec = (initial_theta(self.structure, self.truth)
+                           if self.truth is not None else np.zeros(n))
+        self._internal_vec = (initial_theta(self.structure, self.internal)
+                              if self.internal is not None else np.zeros(n))
         self._diag_last = np.full(len(DIAGNOSTICS), np.nan)
 
     def _run(self, u, y, history, diagnostics) -> None:
         settings = np.array([self.P0, self.lambda_inv0, self.rho_exponent, 1.0 - 1e-9,
-                             float(self.recover), float(self._truth is not None),
+                             float(self.recover), float(self.truth is not None),
                              self.mu or 0.0, self.lambda_inv_min,
-                             float(self._internal is not None)])
+                             float(self.internal is not None)])
         windows = (self._U, self._W1, self._W2, self._Yh, self._Ym)
         arrays = [extended(a, len(u)) for a in windows]
         eria_run(self.theta, self.P, self._scal, self._theta_good, self.structure.layout,
@@ -303,7 +303,8 @@ class ERIA(RecursiveIdentifier):
     def settings(self) -> dict:
         """The configuration, JSON-ready."""
         return {**super().settings, "P0": self.P0, "lambda_inv0": self.lambda_inv0,
-                "rho": f"(k+1)^-{self.rho_exponent:.6g}", "recover": self.recover,
+                "rho": f"(k+1)^-{self.rho_exponent:.6g}", "rho_exponent": self.rho_exponent,
+                "recover": self.recover,
                 "mu": self.mu or "rho(k-1)/rho(k) (1 - rho(k))",
                 "lambda_inv_min": self.lambda_inv_min,
-                "internal": "estimate" if self._internal is None else "fixed"}
+                "internal": "estimate" if self.internal is None else "fixed"}
