@@ -60,6 +60,7 @@ _HINTS = {
     "extra_mode": "the input needs broadband content near the mode",
     "delay": "the input needs fast changes",
     "asymmetry": "the input needs ascending and descending branches of different shape",
+    "asymmetry_input": "the input needs ascending and descending branches of different shape",
     "slew_limit": "the input needs fast steps",
     "saturation": "the input needs a wide range of levels",
     "offset": "the record starts at its measured level, which fixes the offset",
@@ -243,11 +244,11 @@ def screen(
                 D = sim(with_(s7=d)) - y0
                 # a dead time is not linear in its size: the grid point itself is the start
                 yield D[:, None], (lambda b, d=d: with_(s7=d))
-        elif name == "asymmetry":
-            cols = [(sim(with_(**{k: h})) - y0) / h for k in ("s8", "s9", "s13")]
-            yield np.column_stack(cols), (lambda b: with_(
-                s8=float(np.clip(b[0], -.5, .5)), s9=float(np.clip(b[1], -.5, .5)),
-                s13=float(np.clip(b[2], -.5, .5))))
+        elif name in ("asymmetry", "asymmetry_input"):
+            keys = ("s8", "s9", "s13") if name == "asymmetry" else ("s27", "s28", "s29")
+            cols = [(sim(with_(**{k: h})) - y0) / h for k in keys]
+            yield np.column_stack(cols), (lambda b, keys=keys: with_(
+                **{k: float(np.clip(v, -.5, .5)) for k, v in zip(keys, b, strict=True)}))
         elif name == "loop_level":
             hl = h / w1_scale
             cols = [(sim(with_(**{k: hl})) - y0) / hl for k in ("s14", "s20")]
