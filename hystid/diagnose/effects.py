@@ -18,8 +18,8 @@ since the start of the record::
     offset       y(k) = ... + y0: a constant offset of the sensor's zero
     asymmetry    alpha_k = alpha (1 + e_a s_k), g_k = g0 (1 + e_g s_k), f1_k = f1 (1 + e_f s_k),
                  s_k = sgn dw1(k): ascending and descending branches differ
-    asymmetry_input  the same with s_k = sgn du(k - q1), the direction of the input entering L1
-                 (coefficients switched by the commanded motion, not by w1's)
+    asymmetry_input  the same with s_k = sgn dud(k), the direction of the (delayed) input:
+                 coefficients switched by the commanded motion, not by w1's
     loop_level   alpha_k = alpha (1 + l_a w1(k-1)), g_k = g0 (1 + l_g w1(k-1)): the loop's
                  shape changes with the level
     creep        c(k) = c(k-1) + lam (kappa w2(k) - c(k-1)),   lam = 1 - exp(-dt / tau)
@@ -132,7 +132,7 @@ EFFECTS: dict[str, Effect] = {
                "ascending and descending branches differ: alpha, g0, f1 scaled by 1 +/- e"),
         Effect("asymmetry_input", ("alpha", "g0", "f1"), ("1", "1", "1"), (27, 28, 29),
                "rising and falling input differ: alpha, g0, f1 scaled by 1 +/- e with the "
-               "direction of the input entering L1", "asymmetry"),
+               "direction of the commanded input", "asymmetry"),
         Effect("loop_level", ("alpha", "g0"), ("1/u", "1/u"), (14, 20),
                "the loop changes with the level: alpha, g0 scaled by 1 + l w1", "asymmetry"),
         Effect("slew_limit", ("inv_rate",), ("s/u",), (10,),
@@ -345,7 +345,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         w2p = W2[k - 1]
         dw1 = w1 - w1p
         s = sgn(dw1)
-        su = sgn(UD[k - q1] - UD[k - q1 - 1]) if k - q1 >= 1 else 0.0
+        su = sgn(UD[k] - UD[k - 1]) if k >= 1 else 0.0
         alpha_k = alpha * (1.0 + e_a * s + e_au * su) * (1.0 + l_a * w1p)
         g_k = g0 * (1.0 + e_g * s + e_gu * su) * (1.0 + l_g * w1p)
         f = f0 * sgn(w1p) + f1 * (1.0 + e_f * s + e_fu * su) * w1p * (1.0 + cubic * w1p * w1p)
