@@ -111,7 +111,7 @@ def effect_params(name: str, strength: int, rng: np.random.Generator, u: np.ndar
                 "zeta": rng.uniform(0.01, 0.05)}
     if name == "delay":
         return {"samples": (0.3, 1.0, 3.0)[k] * rng.uniform(0.8, 1.25)}
-    if name == "asymmetry":
+    if name in ("asymmetry", "asymmetry_input"):
         e = (0.02, 0.05, 0.15)[k]
         return {"alpha": sign * e, "g0": rng.uniform(-1.0, 1.0) * e,
                 "f1": rng.uniform(-0.2, 0.2) * e}
@@ -234,13 +234,23 @@ def budget(seconds: float = 1.5) -> dict:
             "accepted": res.accepted}
 
 
-def jobs_in_form(draws: int, n_clean: int, rng: np.random.Generator) -> list[tuple]:
-    forms = list(DEFAULT_EFFECTS)
+#: Candidate forms added after the draw was fixed: their cases follow the others, from a seed
+#: stream of their own, so that the earlier cases (and the gate's) stay the same.
+LATER_FORMS = ("asymmetry_input",)
+
+
+def jobs_in_form(draws: int, n_clean: int, rng: np.random.Generator,
+                 later: bool = True) -> list[tuple]:
+    forms = [f for f in DEFAULT_EFFECTS if f not in LATER_FORMS]
     picks = list(rng.permutation(np.resize(np.array(forms), max(draws, 1) * len(forms))))
     seeds = rng.integers(1 << 30, size=len(picks) + n_clean)
     out = [("in-form", str(f), s, int(seeds[i])) for i, f in enumerate(picks)
            for s in range(3)][: 3 * draws * len(forms)]
     out += [("in-form", "none", 0, int(seeds[len(picks) + i])) for i in range(n_clean)]
+    if later:
+        more = np.random.default_rng([int(seeds[0]), len(LATER_FORMS)])
+        out += [("in-form", f, s, int(more.integers(1 << 30)))
+                for _ in range(max(draws, 1)) for f in LATER_FORMS for s in range(3)]
     return out
 
 

@@ -376,7 +376,7 @@ def withheld_effects(in_form: int = 3, cross_form: int = 3, clean: int = 1,
 
     n = int(round(seconds * bw.FS))
     rng = np.random.default_rng(seed)
-    jobs = (_pick(bw.jobs_in_form(1, clean, rng), in_form, clean)
+    jobs = (_pick(bw.jobs_in_form(1, clean, rng, later=False), in_form, clean)
             + _pick(bw.jobs_cross_form(1, clean, rng), cross_form, clean))
     with quiet():
         rows = [bw.diagnose_job(job, n, time_budget=0.0) for job in jobs]

@@ -42,6 +42,7 @@ CASES = {
     "mode_series": {"gain": 0.3, "freq": 4000.0, "zeta": 0.03},
     "delay": {"samples": 0.5},
     "asymmetry": {"alpha": 0.1},
+    "asymmetry_input": {"alpha": 0.1},
     "loop_level": {"alpha": 0.02, "g0": 0.02},
     "offset": {"y0": 0.01},
     "slew_limit": {"inv_rate": 1.0 / (0.6 * FS)},

@@ -164,3 +164,24 @@ def test_repeats_set_the_floor():
     other = Record(paper_excitation(N, FS, seed=9), reps[1].y, FS, name="other input")
     with pytest.raises(DiagnosisError, match="repeats"):
         diagnose(train, reps[0], repeats=[other], effects=["saturation"], progress=False)
+
+
+def test_gap_figure_draws_the_floor_its_legend_names(clean_stage, tmp_path, monkeypatch):
+    from matplotlib.axes import Axes
+
+    drawn = []
+    real = Axes.axvline
+
+    def record(self, x=0, *args, **kw):
+        drawn.append((kw.get("label"), x))
+        return real(self, x, *args, **kw)
+
+    monkeypatch.setattr(Axes, "axvline", record)
+    res = diagnose(*clean_stage, effects=["saturation"], progress=False)
+    res.plot(tmp_path)
+    from hystid.diagnose.report import _unit
+    from hystid.metrics import error_scale
+
+    k = error_scale(_unit(res))[0] if _unit(res) else 1.0  # errors of a length in nm
+    floors = [x for label, x in drawn if label == f"{res.floor['kind']} floor"]
+    assert floors and floors[-1] == pytest.approx(k * res.floor["rms"]) and floors[-1] > 0

@@ -6,9 +6,10 @@ it shrinks once that effect is in the model.
 * :mod:`.where` -- localisation of the error (time, frequency, zones, branches, correlation
   tests, noise floor).
 * :mod:`.effects` -- the candidate effects, families of forms (``creep``: one lag, two lags,
-  logarithmic; ``asymmetry``: by direction, by level, an offset; ``extra_mode``: in parallel or
-  in series; ``drift``, ``delay``, ``slew_limit``, ``saturation``) as augmentations of the
-  sandwich; :func:`simulate_with_effect`.
+  logarithmic; ``asymmetry``: by the direction of w1 or of the input, by level, an offset;
+  ``extra_mode``: in parallel or in series; ``drift``, ``delay``, ``slew_limit``,
+  ``saturation``) as augmentations of the sandwich; :func:`simulate_with_effect`.
+* :mod:`.structure` -- a dead time of several samples as the structure change ``q1 + d``.
 * :mod:`.screen` -- screening and the held-out significance test; :mod:`.refit` -- the refits.
 * :mod:`.report` -- summary and figures; :mod:`.command` -- ``hystid diagnose``.
 """

@@ -23,14 +23,12 @@ import math
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..baselines import repeat_floor
-from ..identify import identify
-from ..identify.offline import linear_start
 from ..identify.prepare import prepare
 from ..identify.result import IdentificationResult
 from ..model import DuhemSandwich, Structure
@@ -38,6 +36,9 @@ from ..records import Record
 from .effects import EFFECT_NAMES, EFFECTS, FAMILIES, AugmentedSandwich, effect_dict, family_of
 from .refit import FitData, RefitResult, duhem_margin, refit, simulate_fit_data
 from .screen import ScreenResult, compare_losses, effect_names_check, screen, zero_vector
+from .structure import delay_as_structure
+from .structure import head as _head
+from .structure import identify_nominal as _identify
 from .where import Segment, Where, localise
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -895,14 +896,6 @@ class _Evaluator:
         return _Evaluation(rms_tr, errs, segs, scales, margin, finite, errs_oos)
 
 
-def _head(data: FitData, n: int) -> FitData:
-    """The first ``n`` samples of a train part (the part itself when shorter)."""
-    if len(data.u) <= n:
-        return data
-    weight = data.weight[:n] if isinstance(data.weight, np.ndarray) else data.weight
-    return FitData(data.u[:n], data.y[:n], data.fs, data.level, weight)
-
-
 def _drift_basis(t: np.ndarray) -> np.ndarray:
     """Columns ``t, t^2, t^3`` of the drift (zero at the record's start)."""
     return np.column_stack([t, t * t, t**3])
@@ -1102,7 +1095,8 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
                    joint_starts=len(scr[n].starts) if n == "delay" else 1,
                    profile=scr[n].profile)
         if n == "delay" and all(a == "drift" for a in state.active):
-            rf = _delay_as_structure(state, tr, rf, say)
+            rf = delay_as_structure(state.model, state.phi, state.active, tr, rf,
+                                    state.ev.scales, say, refit)
         ev_n = None
         if rf.ok:
             ev_n = ev(DuhemSandwich(rf.theta, state.model.structure, fs=state.model.fs),
@@ -1119,52 +1113,6 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
         say(f"round {rnd}: {n}: held-out RMS {test['rms_cand']:.4g} "
             f"({100 * test['rel_reduction']:+.1f} %), p = {test['p_value']:.2g}")
     return results
-
-
-#: Dead times (samples added to q1) scanned by the structure refit of the delay.
-STRUCTURE_DELAYS = 24
-
-
-def _delay_as_structure(state: _Greedy, tr: FitData, rf: RefitResult,
-                        say: _Progress) -> RefitResult:
-    """The dead time as a structure change: the nominal model identified afresh with
-    ``q1 + d`` (eq. 1) for the one or two ``d`` whose linear start simulates best, then refitted
-    with a fractional delay; kept when it fits the train part better than ``rf``.
-
-    A large dead time moves the nominal fit into another basin (L1 and L2 bent to mimic it),
-    from which a refit of the delay alone does not come back.
-    """
-    s = state.model.structure
-    rec = Record(tr.u, tr.y, tr.fs, name="train")
-    scores = []
-    for d in range(STRUCTURE_DELAYS + 1):
-        sd = replace(s, q1=s.q1 + d)
-        lin = linear_start(rec, sd)
-        if lin is None:
-            continue
-        with np.errstate(all="ignore"):
-            y = DuhemSandwich(lin, sd, fs=tr.fs).simulate(tr.u, check=False).y
-            cost = float(np.mean((y - tr.y) ** 2)) if np.all(np.isfinite(y)) else np.inf
-        if np.isfinite(cost):
-            scores.append((cost, d))
-    scores.sort()
-    ref = dict((d, c) for c, d in scores).get(0, np.inf)
-    best = rf
-    for cost, d in scores[:1]:
-        # a dead time worth a fresh identification: its linear start is clearly better
-        if d == 0 or not cost < 0.9 * ref:
-            continue
-        say(f"identifying the nominal structure with q1 + {d}")
-        fresh = _identify(tr, replace(s, q1=s.q1 + d))
-        start = np.array(state.phi, float)
-        start[EFFECTS["delay"].slots[0]] = d
-        start[EFFECTS["offset"].slots[0]] = fresh.offset
-        m = DuhemSandwich(fresh.theta, s, fs=tr.fs, name=state.model.name)
-        cand = refit(m, tr, state.active + ["delay"], [start], base_phi=start,
-                     step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1])
-        if cand.ok and (not best.ok or cand.cost < best.cost):
-            best = cand
-    return best
 
 
 def _drift_last(passing: list[str], results: dict, level: float,
@@ -1364,18 +1312,3 @@ def _cost_mask(tr: FitData, u_rest: float) -> np.ndarray | None:
         return None
     tr.weight = keep
     return keep
-
-
-def _identify(tr: FitData, structure: Structure | None) -> DuhemSandwich:
-    """The nominal identification: :func:`hystid.identify.identify` (batch) on the train part,
-    which places the model at the record's rest level and sensor offset.
-
-    Its fitted Duhem state at rest is not part of the model: the diagnosis' simulations start
-    at the measured rest level instead (``initial='auto'`` or ``'level'``), which sets it.
-    """
-    rec = Record(tr.u, tr.y, tr.fs, name="train")
-    res = identify(rec, "batch", structure)
-    model = res.model
-    model.name = "nominal sandwich"
-    return model
-

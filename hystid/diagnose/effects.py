@@ -18,6 +18,8 @@ since the start of the record::
     offset       y(k) = ... + y0: a constant offset of the sensor's zero
     asymmetry    alpha_k = alpha (1 + e_a s_k), g_k = g0 (1 + e_g s_k), f1_k = f1 (1 + e_f s_k),
                  s_k = sgn dw1(k): ascending and descending branches differ
+    asymmetry_input  the same with s_k = sgn dud(k), the direction of the (delayed) input:
+                 coefficients switched by the commanded motion, not by w1's
     loop_level   alpha_k = alpha (1 + l_a w1(k-1)), g_k = g0 (1 + l_g w1(k-1)): the loop's
                  shape changes with the level
     creep        c(k) = c(k-1) + lam (kappa w2(k) - c(k-1)),   lam = 1 - exp(-dt / tau)
@@ -108,7 +110,7 @@ class Effect:
 # kernel effect vector:
 # [kappa, tau, d1, d2, gm, fm, zeta, delay, e_alpha, e_g, inv_rate, cubic, y0,
 #  e_f, l_alpha, kappa2, tau2, kappa_log, tau_log, g_series, l_g, d3, inv_rate_u,
-#  c2, c3, centre, span]
+#  c2, c3, centre, span, e_alpha_u, e_g_u, e_f_u]
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
@@ -128,6 +130,9 @@ EFFECTS: dict[str, Effect] = {
                "input dead time (q1 of eq. 1, several samples, fractional)"),
         Effect("asymmetry", ("alpha", "g0", "f1"), ("1", "1", "1"), (8, 9, 13),
                "ascending and descending branches differ: alpha, g0, f1 scaled by 1 +/- e"),
+        Effect("asymmetry_input", ("alpha", "g0", "f1"), ("1", "1", "1"), (27, 28, 29),
+               "rising and falling input differ: alpha, g0, f1 scaled by 1 +/- e with the "
+               "direction of the commanded input", "asymmetry"),
         Effect("loop_level", ("alpha", "g0"), ("1/u", "1/u"), (14, 20),
                "the loop changes with the level: alpha, g0 scaled by 1 + l w1", "asymmetry"),
         Effect("slew_limit", ("inv_rate",), ("s/u",), (10,),
@@ -149,7 +154,7 @@ EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
 FAMILIES: dict[str, tuple[str, ...]] = {}
 for _e in EFFECTS.values():
     FAMILIES[_e.family] = (*FAMILIES.get(_e.family, ()), _e.name)
-N_SLOTS = 27
+N_SLOTS = 30
 #: Slots set from the records and never fitted (the output curve's centre and span).
 FIXED_SLOTS = (25, 26)
 
@@ -217,9 +222,10 @@ def _check_vector(phi: np.ndarray) -> None:
         raise ValueError(f"extra_mode freq must be >= 0 Hz, got {phi[5]}")
     if not 0 <= phi[7] <= MAX_DELAY - 1:
         raise ValueError(f"delay samples must be in [0, {MAX_DELAY - 1}], got {phi[7]}")
-    if max(abs(phi[8]), abs(phi[9]), abs(phi[13])) >= 1:
-        raise ValueError(f"asymmetry alpha, g0, f1 must be in (-1, 1), got {phi[8]}, "
-                         f"{phi[9]}, {phi[13]}")
+    for label, slots in (("asymmetry", (8, 9, 13)), ("asymmetry_input", (27, 28, 29))):
+        if max(abs(phi[i]) for i in slots) >= 1:
+            raise ValueError(f"{label} alpha, g0, f1 must be in (-1, 1), got "
+                             f"{', '.join(str(phi[i]) for i in slots)}")
     if phi[10] < 0 or phi[22] < 0:
         raise ValueError(f"slew_limit inv_rate must be >= 0, got {phi[10]}, {phi[22]}")
     if (phi[23] != 0 or phi[24] != 0) and not phi[26] > 0:
@@ -275,6 +281,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     e_f, l_a, kappa2, k_log, g_ser, l_g = phi[13], phi[14], phi[15], phi[17], phi[19], phi[20]
     d3 = phi[21]
     inv_rate_u, c2o, c3o, y_c, y_s = phi[22], phi[23], phi[24], phi[25], phi[26]
+    e_au, e_gu, e_fu = phi[27], phi[28], phi[29]
     # creep: first-order lags, lam = 1 - exp(-dt / tau)
     lam = _lag_coefficient(phi[1], dt)
     lam2 = _lag_coefficient(phi[16], dt)
@@ -338,9 +345,10 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         w2p = W2[k - 1]
         dw1 = w1 - w1p
         s = sgn(dw1)
-        alpha_k = alpha * (1.0 + e_a * s) * (1.0 + l_a * w1p)
-        g_k = g0 * (1.0 + e_g * s) * (1.0 + l_g * w1p)
-        f = f0 * sgn(w1p) + f1 * (1.0 + e_f * s) * w1p * (1.0 + cubic * w1p * w1p)
+        su = sgn(UD[k] - UD[k - 1]) if k >= 1 else 0.0
+        alpha_k = alpha * (1.0 + e_a * s + e_au * su) * (1.0 + l_a * w1p)
+        g_k = g0 * (1.0 + e_g * s + e_gu * su) * (1.0 + l_g * w1p)
+        f = f0 * sgn(w1p) + f1 * (1.0 + e_f * s + e_fu * su) * w1p * (1.0 + cubic * w1p * w1p)
         W2[k] = w2p + alpha_k * (f - w2p) * abs(dw1) + g_k * dw1
         # creep of the actuator: one lag, a second lag, a logarithmic bank
         C[k] = C[k - 1] + lam * (kappa * W2[k] - C[k - 1])

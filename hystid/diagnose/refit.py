@@ -176,7 +176,7 @@ def duhem_margin(theta: np.ndarray, structure, phi: np.ndarray, w1: np.ndarray) 
     alpha = theta[structure.names.index("alpha")]
     dw = np.abs(np.diff(w1))
     level = 1.0 + phi[14] * w1[:-1]
-    return float(alpha * (1.0 + abs(phi[8])) * np.max(np.abs(level) * dw))
+    return float(alpha * (1.0 + abs(phi[8]) + abs(phi[27])) * np.max(np.abs(level) * dw))
 
 
 class Parametrisation:
@@ -281,6 +281,9 @@ class Parametrisation:
             # the curve stays monotone over the span
             23: (-0.6, 0.6),
             24: (-0.3, 0.3),
+            27: (-0.95, 0.95),
+            28: (-0.95, 0.95),
+            29: (-0.95, 0.95),
         }
         return table.get(slot, (-np.inf, np.inf))
 

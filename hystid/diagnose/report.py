@@ -256,12 +256,15 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     ax.barh(yk + 0.2, [before] * len(names), height=0.4, color="0.7", label="nominal")
     colors = ["C2" if e.accepted else "C0" for e in result.effects]
     ax.barh(yk - 0.2, np.nan_to_num(after), height=0.4, color=colors, label="with the effect")
-    for k, e in zip(yk, result.effects, strict=True):
+    for row, e in zip(yk, result.effects, strict=True):
         text = e.status if e.gap_closed is None else f"{e.status}, {_pct(e.gap_closed)} closed"
-        ax.text(before * 1.01, k, text, va="center", fontsize=7)
-    floor = k * (result.floor or {}).get("rms", result.noise_floor_rms)
-    ax.axvline(floor, color="k", ls="--", lw=1,
-               label=f"{(result.floor or {}).get('kind', 'sensor noise')} floor")
+        ax.text(before * 1.01, row, text, va="center", fontsize=7)
+    # (the rows once took the name of the unit scale k: the floor was drawn at zero, unseen)
+    kind = (result.floor or {}).get("kind", "sensor noise")
+    ax.axvline(k * (result.floor or {}).get("rms", result.noise_floor_rms), color="k", ls="--",
+               lw=1, label=f"{kind} floor")
+    if kind != "sensor noise":
+        ax.axvline(nf, color="0.4", ls=":", lw=1, label="sensor noise floor")
     ax.set_yticks(yk)
     ax.set_yticklabels(names)
     ax.set_xlabel("held-out RMS error" + yu)

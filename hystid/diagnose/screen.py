@@ -60,6 +60,7 @@ _HINTS = {
     "extra_mode": "the input needs broadband content near the mode",
     "delay": "the input needs fast changes",
     "asymmetry": "the input needs ascending and descending branches of different shape",
+    "asymmetry_input": "the input needs ascending and descending branches of different shape",
     "slew_limit": "the input needs fast steps",
     "saturation": "the input needs a wide range of levels",
     "offset": "the record starts at its measured level, which fixes the offset",
@@ -243,11 +244,11 @@ def screen(
                 D = sim(with_(s7=d)) - y0
                 # a dead time is not linear in its size: the grid point itself is the start
                 yield D[:, None], (lambda b, d=d: with_(s7=d))
-        elif name == "asymmetry":
-            cols = [(sim(with_(**{k: h})) - y0) / h for k in ("s8", "s9", "s13")]
-            yield np.column_stack(cols), (lambda b: with_(
-                s8=float(np.clip(b[0], -.5, .5)), s9=float(np.clip(b[1], -.5, .5)),
-                s13=float(np.clip(b[2], -.5, .5))))
+        elif name in ("asymmetry", "asymmetry_input"):
+            keys = ("s8", "s9", "s13") if name == "asymmetry" else ("s27", "s28", "s29")
+            cols = [(sim(with_(**{k: h})) - y0) / h for k in keys]
+            yield np.column_stack(cols), (lambda b, keys=keys: with_(
+                **{k: float(np.clip(v, -.5, .5)) for k, v in zip(keys, b, strict=True)}))
         elif name == "loop_level":
             hl = h / w1_scale
             cols = [(sim(with_(**{k: hl})) - y0) / hl for k in ("s14", "s20")]
@@ -260,8 +261,16 @@ def screen(
                 D = sim(with_(s10=inv)) - y0
                 yield D[:, None], (lambda b, inv=inv: with_(s10=inv))
         elif name == "slew_input":
-            du = float(np.max(np.abs(np.diff(data.u)))) or 1.0
-            for rel in (1.05, 1.2, 1.5, 2.0, 3.0, 5.0):
+            steps = np.abs(np.diff(data.u))
+            du = float(np.max(steps)) if steps.size else 1.0
+            du = du or 1.0
+            # limits scaled by the largest input step and, when a few outlying steps (a jump,
+            # an end glitch) dwarf the rest, by the steps of the input's ordinary motion
+            typical = float(np.quantile(steps, 0.99)) if steps.size else du
+            rels = [1.05, 1.2, 1.5, 2.0, 3.0, 5.0]
+            if 0 < typical < du / 5.0:
+                rels += [r * du / typical for r in (1.05, 1.5, 3.0)]
+            for rel in rels:
                 inv = rel / (fs * du)
                 D = sim(with_(s22=inv)) - y0
                 yield D[:, None], (lambda b, inv=inv: with_(s22=inv))
@@ -294,7 +303,11 @@ def screen(
             nD = np.linalg.norm(D, axis=0)
             if np.all(nD == 0):
                 continue
-            sep = max(sep, float(np.min(np.linalg.norm(Dp, axis=0) / np.maximum(nD, 1e-300))))
+            # the effect shows when any of its directions that moves the output at all is
+            # left by the model (a parameter whose base coefficient is zero, f1 of an
+            # asymmetry with f1 = 0, moves nothing and says nothing of the others)
+            moves = nD > 1e-9 * nD.max()
+            sep = max(sep, float(np.max(np.linalg.norm(Dp[:, moves], axis=0) / nD[moves])))
             b = _lstsq(Dp, e)
             fitted = Dp @ b
             score = float(fitted @ fitted / ee) if ee > 0 else 0.0
