@@ -195,7 +195,7 @@ def test_diagnose_out_failing_midway_leaves_the_previous_files(stage, report_fol
     (out / "report.json").write_text("{\"previous\": true}\n")
     (out / "summary.txt").write_text("previous summary\n")
     before = snapshot(tmp_path)
-    monkeypatch.setattr("hystid.diagnose.report.plot_diagnosis", full_disk)
+    monkeypatch.setattr("hystid.diagnose.result.plot_diagnosis", full_disk)
     code, _, err = run(["diagnose", stage[1], "--val", stage[0],
                         "--model", report_folder / "model.json", "--effects", "creep",
                         "--time-budget", "0", "--quiet", "--force", "--out", out], capsys)

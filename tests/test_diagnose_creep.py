@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hystid.diagnose import diagnose
-from hystid.diagnose.diagnosis import _drift_fit, _drift_out_of_sample
+from hystid.diagnose.rounds import _drift_fit, _drift_out_of_sample
 from hystid.records import Record
 from hystid.reference import paper_excitation
 

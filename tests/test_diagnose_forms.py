@@ -13,6 +13,7 @@ import pytest
 from hystid.baselines import repeat_floor
 from hystid.diagnose import AugmentedSandwich, DiagnosisError, diagnose
 from hystid.diagnose import diagnosis as diagnosis_module
+from hystid.diagnose import rounds as rounds_module
 from hystid.diagnose.refit import RefitResult
 from hystid.records import Record
 from hystid.reference import paper_excitation, reference_model
@@ -90,8 +91,9 @@ def test_failed_refits_are_reported_as_failed(clean_stage, monkeypatch):
                                "the solution leaves the Duhem stability condition (8)")
         return real(model, data, active, starts, **kw)
 
-    real = diagnosis_module.refit
-    monkeypatch.setattr(diagnosis_module, "refit", failing)
+    real = rounds_module.refit
+    monkeypatch.setattr(diagnosis_module, "refit", failing)  # the nominal refit
+    monkeypatch.setattr(rounds_module, "refit", failing)  # the rounds' refits
     res = diagnose(*clean_stage, effects=["delay", "saturation", "drift"], refit_all=True,
                    progress=False)
     failed = {e.name: e for e in res.effects if e.status == "failed"}
@@ -179,7 +181,7 @@ def test_gap_figure_draws_the_floor_its_legend_names(clean_stage, tmp_path, monk
     monkeypatch.setattr(Axes, "axvline", record)
     res = diagnose(*clean_stage, effects=["saturation"], progress=False)
     res.plot(tmp_path)
-    from hystid.diagnose.report import _unit
+    from hystid.diagnose.result import _unit
     from hystid.metrics import error_scale
 
     k = error_scale(_unit(res))[0] if _unit(res) else 1.0  # errors of a length in nm

@@ -1,4 +1,5 @@
-"""Readable summary and figures of a diagnosis.
+"""What a diagnosis returns: the outcome of every candidate effect and the result as a whole,
+JSON-ready, and its readable summary and figures.
 
 Figures (PNG): ``error_time.png`` (held-out error in time, rolling RMS, slow trend, noise floor,
 error after input steps), ``spectrum.png`` (residual spectrum against the noise floor, input-
@@ -9,19 +10,248 @@ tests with their coloured-signal bands).
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from ..model import DuhemSandwich
+from .effects import AugmentedSandwich, family_of
+from .where import Where
 
 if TYPE_CHECKING:  # pragma: no cover
     import os
 
-    from .diagnosis import DiagnosisResult
-
-__all__ = ["plot_diagnosis", "summary_text"]
+__all__ = ["DiagnosisResult", "EffectOutcome", "plot_diagnosis", "summary_text"]
 
 
+# --------------------------------------------------------------------------- result
+@dataclass
+class EffectOutcome:
+    """What the diagnosis found for one candidate effect.
+
+    Figures ``*_after`` are those of the candidate added alone to the nominal model (round 1);
+    those of an accepted candidate are of the round in which it was accepted (added to the
+    forms accepted before it), and ``cumulative`` holds that round's held-out RMS before and
+    after it.
+
+    Attributes
+    ----------
+    name : str
+        Form name.
+    status : str
+        ``accepted``, ``rejected`` (refit, not significant or not worth having),
+        ``screened out``, ``not excited``, ``not refitted`` (time budget) or ``failed`` (the
+        refit failed; ``message`` says why).
+    screen_score : float
+        Share of the train residual its signature matches.
+    separation : float
+        Share of its signature the nominal model cannot absorb.
+    params : dict or None
+        Fitted effect parameters.
+    rms_train_after, rms_val_after : float or None
+        RMS errors after the refit.
+    gap_closed : float or None
+        ``(rms_val_nominal - rms_val_after) / (rms_val_nominal - noise_floor_rms)``.
+    test : dict
+        The held-out loss-differential test (:func:`~hystid.diagnose.screen.compare_losses`).
+    message : str
+        Why it was not excited or why the refit failed.
+    round : int or None
+        Greedy round in which it was accepted.
+    cumulative : dict or None
+        ``rms_val`` and ``gap_closed`` of the accepted set up to this effect.
+    alike : dict
+        Other candidates whose held-out correction is nearly this one's (similarity above
+        :data:`ALIKE`): the records cannot tell them apart.
+    family : str
+        The effect family the form belongs to.
+    """
+
+    name: str
+    status: str
+    screen_score: float = 0.0
+    separation: float = 0.0
+    params: dict[str, float] | None = None
+    rms_train_after: float | None = None
+    rms_val_after: float | None = None
+    gap_closed: float | None = None
+    test: dict[str, float] = field(default_factory=dict)
+    message: str = ""
+    round: int | None = None
+    cumulative: dict[str, float] | None = None
+    alike: dict[str, float] = field(default_factory=dict)
+    family: str = ""
+
+    @property
+    def accepted(self) -> bool:
+        """True when the effect joined the model."""
+        return self.status == "accepted"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready figures.
+
+        Returns
+        -------
+        dict
+            The outcome's figures by name.
+        """
+        return _clean({
+            "name": self.name,
+            "family": self.family or self.name,
+            "accepted": self.accepted,
+            "status": self.status,
+            "rms_val_after": self.rms_val_after,
+            "gap_closed": self.gap_closed,
+            "rms_train_after": self.rms_train_after,
+            "rel_reduction": self.test.get("rel_reduction"),
+            "p_value": self.test.get("p_value"),
+            "screen_score": self.screen_score,
+            "separation": self.separation,
+            "params": self.params,
+            "test": self.test,
+            "round": self.round,
+            "cumulative": self.cumulative,
+            "alike": self.alike,
+            "message": self.message,
+        })
+
+
+@dataclass
+class DiagnosisResult:
+    """Result of :func:`diagnose`. Unpacks as ``where, effects, accepted``.
+
+    Attributes
+    ----------
+    noise_floor_rms : float
+        Sensor noise floor estimated from the data.
+    nominal : dict
+        ``rms_val`` and ``rms_train`` of the nominal model, its parameters and name.
+    where : Where
+        Localisation of the nominal model's held-out error.
+    effects : list of EffectOutcome
+        Candidates, best first (accepted ones first, in the order they were accepted).
+    accepted : list of str
+        Accepted effects in order.
+    final : dict
+        Held-out RMS and gap closed by the accepted set; its parameters.
+    rounds : list of dict
+        One entry per greedy round (base RMS, findings, accepted effect).
+    model : DuhemSandwich
+        The nominal model the candidates were compared with (refitted with their cost and
+        initial state when a model was given, ``initial='level'`` or ``train_skip``).
+    augmented : AugmentedSandwich
+        The final model with the accepted effects.
+    where_final : Where
+        Localisation after the accepted effects.
+    settings : dict
+        Settings of the run.
+    series : dict
+        Error arrays for the figures.
+    floor : dict
+        The floor of the gap: ``noise_floor_rms``, ``repeat_floor_rms`` (None without
+        repeats), ``rms`` (the larger) and ``kind``.
+    """
+
+    noise_floor_rms: float
+    nominal: dict[str, Any]
+    where: Where
+    effects: list[EffectOutcome]
+    accepted: list[str]
+    final: dict[str, Any]
+    rounds: list[dict[str, Any]]
+    model: DuhemSandwich
+    augmented: AugmentedSandwich
+    where_final: Where
+    settings: dict[str, Any] = field(default_factory=dict)
+    series: dict[str, Any] = field(default_factory=dict, repr=False)
+    floor: dict[str, Any] = field(default_factory=dict)
+
+    def __iter__(self) -> Iterator[Any]:
+        yield self.where
+        yield self.effects
+        yield self.accepted
+
+    @property
+    def best(self) -> str:
+        """Family of the first accepted form (the one that explains most), or ``"none"``."""
+        return family_of(self.accepted[0]) if self.accepted else "none"
+
+    @property
+    def families(self) -> list[str]:
+        """Families of the accepted forms, in order."""
+        return [family_of(n) for n in self.accepted]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The issue's JSON object (``noise_floor_rms``, ``nominal``, ``where``, ``effects``...).
+
+        Returns
+        -------
+        dict
+            The report, JSON-ready.
+        """
+        return _clean({
+            "noise_floor_rms": self.noise_floor_rms,
+            "nominal": self.nominal,
+            "where": self.where.to_dict(),
+            "effects": [e.to_dict() for e in self.effects],
+            "accepted": list(self.accepted),
+            "accepted_families": self.families,
+            "best": self.best,
+            "floor": self.floor,
+            "final": self.final,
+            "rounds": self.rounds,
+            "settings": self.settings,
+        })
+
+    def summary(self) -> str:
+        """A readable summary (what ``hystid diagnose`` prints).
+
+        Returns
+        -------
+        str
+            Several lines of text.
+        """
+        return summary_text(self)
+
+    def plot(self, out_dir: str | os.PathLike[str]) -> list[Path]:
+        """Write the figures (error in time, spectrum, branches, gap per candidate) to
+        ``out_dir``; returns their paths.
+
+        Parameters
+        ----------
+        out_dir : path-like
+            Folder the PNG files are written into.
+
+        Returns
+        -------
+        list of Path
+            The files written.
+        """
+        return plot_diagnosis(self, out_dir)
+
+
+def _clean(obj):
+    """Make a structure JSON-safe: numpy scalars to Python, non-finite floats to None."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return [_clean(v) for v in obj.tolist()]
+    if isinstance(obj, bool | np.bool_):
+        return bool(obj)
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+# --------------------------------------------------------------------------- report
 def _fmt_params(params: dict | None) -> str:
     if not params:
         return ""
