@@ -119,12 +119,22 @@ class TrackingMetrics:
         reference does not both rise and fall over a common range.
     samples : int
         Samples the figures are computed on.
+    unit : str
+        The output's unit (the reference stage's um by default); ``str()`` shows the figures
+        in it, or in nm when it is um.
     """
 
     max_error: float
     rms_error: float
     loop_width: float
     samples: int
+    unit: str = "um"
+
+    def __str__(self) -> str:
+        scale, unit = (1e3, "nm") if self.unit in ("um", "\u00b5m") else (1.0, self.unit)
+        return (f"max error {scale * self.max_error:.4g} {unit}, RMS {scale * self.rms_error:.4g} "
+                f"{unit}, loop width {scale * self.loop_width:.4g} {unit} "
+                f"({self.samples} samples)")
 
     def __iter__(self) -> Iterator[float]:
         yield from (self.max_error, self.rms_error, self.loop_width)

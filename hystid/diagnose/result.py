@@ -325,8 +325,8 @@ def summary_text(result: DiagnosisResult) -> str:
     for r in rows:
         lines.append("  " + "  ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)))
     for e in result.effects:
-        if e.message:
-            lines.append(f"  {e.name}: {e.message}")
+        if e.message:  # a screen's message names its form already (it is also an error's)
+            lines.append(f"  {e.name}: {e.message.removeprefix(f'{e.name}: ')}")
     for rnd in result.rounds[1:]:
         for n, c in rnd.get("candidates", {}).items():
             if c["status"] in ("failed", "not confirmed"):
