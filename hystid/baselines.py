@@ -386,8 +386,9 @@ def compare(model: Any, train: Record, records: Sequence[Record],
     zero : {"rest", "model"}
         ``"rest"`` (default): every prediction, the model's and the baselines', is put on the
         held-out record's own output at rest (:func:`rest_zero`; the sensor's zero moves
-        between records, and the repeat floor leaves it out too); ``"model"``: the offsets
-        identified on ``train``.
+        between records, and the repeat floor leaves it out too) -- except on a held-out
+        ``(record, k)`` tail, which shares its zero with the part fitted; ``"model"``: the
+        offsets identified on ``train``.
 
     Returns
     -------
@@ -411,7 +412,7 @@ def compare(model: Any, train: Record, records: Sequence[Record],
             yhat = simulate_from_rest(model, rec.u, check=False)
         y = rec.y[k:]
 
-        zeroed = zero == "rest"
+        zeroed = zero == "rest" and not isinstance(item, tuple)  # a tail shares its zero
         rms = _scored(yhat, rec, k, zeroed)
         r_line = _scored(line.predict(rec.u), rec, k, zeroed)
         r_lin = _scored(linear.predict(rec.u), rec, k, zeroed)

@@ -269,7 +269,8 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         yhat = simulate_from_rest(result.model, target.u, check=False)
-        yhat = yhat + rest_zero(yhat, target)  # as compare() scores it: see its zero=
+        if val is not None:  # another record: its own zero, as compare() scores it
+            yhat = yhat + rest_zero(yhat, target)
     problems = result.model.admissibility(target.u) if hasattr(result.model, "admissibility") \
         else (result.model.envelope.violations(target.u) if result.model.envelope else [])
     baselines = compare(result.model, rec, [(target, k) if k is not None else target],
@@ -296,8 +297,9 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         "validated_on": ("validation record" if getattr(args, "val", None) else
                          f"held-out end of the record (samples {k}..{target.n - 1})" if k
                          else "identification record"),
-        "zeroed_on": "the output at rest at the start of the validated record (a sensor's zero "
-                     "moves between records)",
+        "zeroed_on": ("the output at rest at the start of the validation record (a sensor's "
+                      "zero moves between records)" if val is not None else
+                      "the offset identified (the held-out part shares the record's zero)"),
         "baselines": baselines.to_dict(),
         "beats_baselines": baselines.beats_baselines,
         "warnings": warnings_,

@@ -107,7 +107,7 @@ def _scores(model: Any, held: Sequence[tuple[Record, int]]) -> list[float]:
     out = []
     for rec, k in held:
         p = _predict(model, rec.u)
-        e = (p + rest_zero(p, rec) - rec.y)[k:]
+        e = (p + (rest_zero(p, rec) if k == 0 else 0.0) - rec.y)[k:]  # a tail shares its zero
         r = float(np.sqrt(np.mean(e ** 2)))
         out.append(r if np.isfinite(r) else float("inf"))
     return out
