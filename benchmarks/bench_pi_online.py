@@ -1,4 +1,4 @@
-"""On-line vs batch identification of the ``pi-stage`` member (issue 21, item 3).
+"""On-line vs batch identification of the ``pi-stage`` member.
 
 Each training record is identified by the batch fit and by the on-line identifier
 (:class:`hystid.identify.pi_online.PIStageOnline`, through ``identify(method="online")``, with

@@ -150,7 +150,7 @@ def render(payload: dict) -> str:
         if "/" in m and batch is not None:
             ratio = [a / b for a, b in zip(e["rms"], batch["rms"], strict=True)]
             text.append(f"- `{m}`: {min(ratio):.2f}-{max(ratio):.2f}x the batch fit's held-out "
-                        "RMS (issue 21's goal: at most 1.25x on every record).")
+                        "RMS (the goal: at most 1.25x on every record).")
     if payload.get("speed_auto_over_duhem"):
         text.append(f"- `auto` takes {payload['speed_auto_over_duhem']:.1f}x the default Duhem "
                     "fit's time on prbn_1 (20 001 samples, one process).")
