@@ -13,7 +13,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
 __all__ = ["PAPER_TRANSIENT_S", "Validation", "error_scale", "plot_convergence", "plot_validation",
-           "validate", "zoom_window"]
+           "validate", "zoom_window", "noise_level", "LOOP_SPAN"]
 
 #: The paper drops the first 0.0017 s of the validation (51 samples at 30 kHz).
 PAPER_TRANSIENT_S = 0.0017
@@ -153,7 +153,9 @@ def plot_validation(
     Top: measured and model output over the record (the transient ``skip`` left out), with
     the zoomed window shaded. Middle: the window of ``zoom`` seconds around the largest error
     and, when ``u`` is given, the output against the input (the hysteresis loop), measured and
-    model. Bottom: the error, in nm when ``unit`` is a length, with its RMS and range.
+    model over :data:`LOOP_SPAN` such windows, the whole record's loop faint behind. Bottom:
+    the error, in nm when ``unit`` is a length, with its RMS and range, and the band of the
+    sensor noise estimated from it (:func:`noise_level`).
 
     The figure is a :class:`matplotlib.figure.Figure` not registered with pyplot: the caller's
     backend and current figure are left alone.
@@ -207,14 +209,21 @@ def plot_validation(
     if u is not None:
         ax_loop = fig.add_subplot(grid[1, 1])
         uu = np.asarray(u, float)[sl]
-        ax_loop.plot(uu, y, lw=0.5, label="measured")
-        ax_loop.plot(uu, yhat, lw=0.5, ls="--", label="model")
+        a, b = zoom_window(t, e, LOOP_SPAN * zoom)  # a few loops, not the whole record's
+        ax_loop.plot(uu, y, lw=0.4, color="0.8", label="measured, whole record")
+        ax_loop.plot(uu[a:b], y[a:b], lw=2.0, color="C0", alpha=0.5, label="measured")
+        ax_loop.plot(uu[a:b], yhat[a:b], lw=0.8, ls="--", color="C1", label="model")
         ax_loop.set_xlabel(f"u [{u_unit}]")
         ax_loop.set_ylabel(f"y [{unit}]")
-        ax_loop.set_title("output against input (hysteresis loop)", fontsize=9)
+        ax_loop.set_title(f"y against u (loop): {1e3 * (t[b - 1] - t[a]):.3g} ms around the "
+                          "largest error", fontsize=9)
         ax_loop.legend(loc="upper left", fontsize=8)
+    noise = noise_level(e)
+    ax_err.axhspan(-noise, noise, color="0.85", zorder=0,
+                   label=f"sensor noise +-{noise:.3g} {e_unit} (from sample-to-sample steps)")
     ax_err.plot(t, e, lw=0.6, color="C3")
     ax_err.axhline(0.0, color="0.5", lw=0.6)
+    ax_err.legend(loc="upper right", fontsize=8)
     ax_err.set_ylabel(f"error [{e_unit}]")
     ax_err.set_xlabel("time [s]")
     ax_err.set_title(f"measured - model: RMS {np.sqrt(np.mean(e**2)):.3g} {e_unit}, range "
@@ -222,6 +231,31 @@ def plot_validation(
     if path is not None:
         fig.savefig(path, dpi=120)
     return fig
+
+
+#: The loop panel spans this many zoom widths around the largest error.
+LOOP_SPAN = 10
+
+
+def noise_level(e: np.ndarray) -> float:
+    """White-noise level of a signal from its sample-to-sample steps: ``1.4826 MAD(de) / sqrt 2``
+    (a slow error does not count; a robust scale, outliers do not count either).
+
+    Parameters
+    ----------
+    e : ndarray
+        The signal (an error).
+
+    Returns
+    -------
+    float
+        The estimated standard deviation of its white part (0 for fewer than 3 samples).
+    """
+    d = np.diff(np.asarray(e, float))
+    d = d[np.isfinite(d)]
+    if d.size < 2:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
 
 
 def _group(name: str) -> str:
