@@ -411,15 +411,20 @@ def plot_diagnosis(result: DiagnosisResult, out_dir: str | os.PathLike[str]) -> 
     ax[0].set_title(f"held-out simulation error (dashed: noise floor, {nf:.3g} {u} RMS)")
     ax[0].legend(loc="best", fontsize=7)
     lag = ts["step_lags"]
-    ax[1].axhline(0, color="k", lw=0.5)
-    ax[1].plot(lag, k * ts["step_avg"], "o-", ms=3, label="nominal")
-    if result.accepted:
-        ax[1].plot(lag, k * wf.series["time"]["step_avg"], "o-", ms=3, label="final")
-    ax[1].axvline(0, color="k", ls=":", lw=0.8)
-    ax[1].set_xlabel("samples after an input step")
-    ax[1].set_ylabel("mean error x sign(step)" + yu)
-    ax[1].set_title(f"error after input steps ({w0.time['steps']} steps)")
-    ax[1].legend(fontsize=7)
+    if w0.time["steps"]:
+        ax[1].axhline(0, color="k", lw=0.5)
+        ax[1].plot(lag, k * ts["step_avg"], "o-", ms=3, label="nominal")
+        if result.accepted:
+            ax[1].plot(lag, k * wf.series["time"]["step_avg"], "o-", ms=3, label="final")
+        ax[1].axvline(0, color="k", ls=":", lw=0.8)
+        ax[1].set_xlabel("samples after an input step")
+        ax[1].set_ylabel("mean error x sign(step)" + yu)
+        ax[1].set_title(f"error after input steps ({w0.time['steps']} steps)")
+        ax[1].legend(fontsize=7)
+    else:  # nothing to average: say so rather than draw empty axes
+        ax[1].axis("off")
+        ax[1].text(0.5, 0.5, "no input steps in the held-out records: no step response to "
+                   "average", ha="center", va="center", transform=ax[1].transAxes)
     paths.append(_save(fig, out / "error_time.png"))
 
     # ---------------------------------------------------------------- spectrum
