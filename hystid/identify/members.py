@@ -181,7 +181,8 @@ def _split(record: Record, holdout: float) -> tuple[int, int]:
     """First held-out sample and end of the scored span (a wrapped last sample left out)."""
     from .prepare import prepare, rest_level
 
-    n_lead = rest_level(record.u)[2] if rest_level(record.u)[1] else 0
+    _, at_rest, n_lead = rest_level(record.u)
+    n_lead = n_lead if at_rest else 0
     stop = prepare(record).fitted.stop
     k = n_lead + int(round((1.0 - holdout) * (stop - n_lead)))
     return k, stop
