@@ -10,22 +10,27 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import control as ct
 import numpy as np
 
 __all__ = [
     "DUHEM_PARAMS",
+    "SHAPE_PARAMS",
+    "duhem_increment",
     "duhem_block",
     "duhem_output",
     "linear_block",
     "linear_coefficients",
     "placement_blocks",
     "state_from_past",
+    "transfer_function",
 ]
 
 DUHEM_PARAMS = ("alpha", "f0", "f1", "g0")
+#: The generalised Duhem block's shape parameters (see :mod:`hystid.kernels`).
+SHAPE_PARAMS = ("f2", "f3", "g1", "g2", "ad", "gd")
 
 
 def linear_block(
@@ -58,15 +63,49 @@ def linear_block(
     control.TransferFunction
         ``z^-q (1 + b_1 z^-1 + ...) / (1 + a_1 z^-1 + ...)`` written in powers of ``z``.
     """
-    a = np.asarray(a, dtype=float)
     b = np.concatenate([[1.0], np.asarray(b, dtype=float)])
+    return transfer_function(a, b, q, dt, inputs=inputs, outputs=outputs, name=name)
+
+
+def transfer_function(
+    a: Sequence[float],
+    num: Sequence[float],
+    q: int,
+    dt: float,
+    *,
+    inputs: str,
+    outputs: str,
+    name: str,
+) -> ct.TransferFunction:
+    """Discrete transfer function of ``x(k) = sum_j num_j v(k-q-j) - sum_i a_i x(k-i)``.
+
+    Parameters
+    ----------
+    a : sequence of float
+        Denominator coefficients ``a_1 .. a_na`` (``a_0 = 1``).
+    num : sequence of float
+        The whole numerator from the delay on, ``num_0, num_1, ..``.
+    q : int
+        Input delay in samples.
+    dt : float
+        Sampling period in seconds.
+    inputs, outputs, name : str
+        Signal and system names.
+
+    Returns
+    -------
+    control.TransferFunction
+        ``z^-q (num_0 + num_1 z^-1 + ...) / (1 + a_1 z^-1 + ...)`` written in powers of ``z``.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(num, dtype=float)
     m = max(len(a), q + len(b) - 1)
-    num = np.zeros(m + 1)
-    num[q : q + len(b)] = b
+    full = np.zeros(m + 1)
+    full[q : q + len(b)] = b
     den = np.zeros(m + 1)
     den[0] = 1.0
     den[1 : 1 + len(a)] = a
-    return ct.tf(num, den, dt, inputs=inputs, outputs=outputs, name=name)
+    return ct.tf(full, den, dt, inputs=inputs, outputs=outputs, name=name)
 
 
 def linear_coefficients(
@@ -129,17 +168,43 @@ def duhem_output(x: np.ndarray, w1: float, params: dict) -> float:
     w1 : float
         Input ``w1(k)``.
     params : dict
-        ``alpha``, ``f1``, ``g0`` and optionally ``f0``.
+        ``alpha``, ``f1``, ``g0``, optionally ``f0`` and the generalised block's ``f2, f3,
+        g1, g2, ad, gd`` (see :mod:`hystid.kernels`; missing ones are zero).
 
     Returns
     -------
     float
         ``w2(k)``.
     """
-    w1p, w2p = x[0], x[1]
-    dw1 = w1 - w1p
-    f = params["f0"] * np.sign(w1p) + params["f1"] * w1p
-    return w2p + params["alpha"] * (f - w2p) * abs(dw1) + params["g0"] * dw1
+    return float(x[1]) + duhem_increment(params, float(x[0]), float(x[1]), w1 - float(x[0]))
+
+
+def duhem_increment(params: Mapping[str, float], w1p: float, w2p: float, dw1: float) -> float:
+    """``w2(k) - w2(k-1)`` of the (generalised) eq. (7), one sample, in plain Python.
+
+    The compiled form is :func:`hystid.kernels.step`; this one serves the python-control block
+    and the rest-state ramp, and is tested against the kernel.
+
+    Parameters
+    ----------
+    params : mapping
+        ``alpha, f1, g0`` and optionally ``f0, f2, f3, g1, g2, ad, gd`` (zero when missing).
+    w1p, w2p : float
+        ``w1(k-1)`` and ``w2(k-1)``.
+    dw1 : float
+        ``w1(k) - w1(k-1)``.
+
+    Returns
+    -------
+    float
+        The increment of ``w2``.
+    """
+    p = {k: 0.0 for k in SHAPE_PARAMS} | {"f0": 0.0} | dict(params)
+    s = float(np.sign(dw1))
+    rate = p["alpha"] * (1.0 + p["ad"] * s)
+    f = p["f0"] * np.sign(w1p) + p["f1"] * w1p + p["f2"] * w1p**2 + p["f3"] * w1p**3
+    g = p["g0"] + p["g1"] * w1p + p["g2"] * w1p**2 + p["gd"] * s
+    return float(rate * (f - w2p) * abs(dw1) + g * dw1)
 
 
 def _duhem_update(t, x, u, params):
@@ -157,6 +222,7 @@ def duhem_block(
     g0: float,
     f0: float = 0.0,
     *,
+    shape: Mapping[str, float] | None = None,
     dt: float,
     inputs: str = "w1",
     outputs: str = "w2",
@@ -168,6 +234,9 @@ def duhem_block(
     ----------
     alpha, f1, g0, f0 : float
         Duhem coefficients: ``f(w1) = f0 sgn(w1) + f1 w1`` (eq. 5), ``g(w1) = g0`` (eq. 6).
+    shape : mapping, optional
+        The generalised block's ``f2, f3, g1, g2, ad, gd`` (see :mod:`hystid.kernels`); the
+        ones given become system ``params`` too.
     dt : float
         Sampling period in seconds.
     inputs, outputs, name : str
@@ -181,6 +250,11 @@ def duhem_block(
         :func:`control.input_output_response`.
     """
     params = {"alpha": float(alpha), "f0": float(f0), "f1": float(f1), "g0": float(g0)}
+    for key, value in (shape or {}).items():
+        if key not in SHAPE_PARAMS:
+            raise ValueError(f"shape: unknown parameter {key!r} (expected some of "
+                             f"{', '.join(SHAPE_PARAMS)})")
+        params[key] = float(value)
     return ct.nlsys(
         _duhem_update,
         _duhem_outfcn,

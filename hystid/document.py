@@ -29,6 +29,10 @@ VERSION = 1
 KINDS = ("duhem", "pi")
 
 
+#: Structure keys of the generalised Duhem block, written only when the block uses them.
+_SHAPE_KEYS = ("f_order", "g_order", "directional")
+
+
 class ModelFileError(ValueError):
     """A model file cannot be read or written; the message names the file and the entry."""
 
@@ -124,12 +128,15 @@ def model_document(
         return doc
     kind = _kind_of(model)
     structure = asdict(model.structure)
+    if getattr(model.structure, "is_plain", False):  # the paper's eq. (7): files as before
+        structure = {k: v for k, v in structure.items() if k not in _SHAPE_KEYS}
     doc: dict[str, Any] = {
         "format": FORMAT,
         "version": VERSION,
         "kind": kind,
         "name": model.name,
-        "structure": {k: (bool(v) if k == "f0" else int(v)) for k, v in structure.items()},
+        "structure": {k: (bool(v) if k in ("f0", "directional") else int(v))
+                      for k, v in structure.items()},
         "params": {k: float(v) for k, v in model.params.items()},
     }
     if kind == "pi":

@@ -9,7 +9,20 @@ The parameter vector ``theta`` is in the paper's order (eq. 13)::
 
     [b21..b2n2b, alpha, (f0), f1, b11..b1n1b, g0, a11..a1n1a, a21..a2n2a]
 
-and ``layout = [n1a, n1b, n2a, n2b, q1, q2, has_f0]`` describes it.
+and ``layout = [n1a, n1b, n2a, n2b, q1, q2, has_f0, nf, ng, directional]`` describes it.
+
+The generalised Duhem block (:class:`hystid.model.Structure` with ``f_order``, ``g_order`` or
+``directional``) appends its shape parameters after ``a2``::
+
+    [..., a21..a2n2a, f2..f(1+nf), g1..g(ng), (ad, gd)]
+
+and eq. (7) becomes, with ``d = dw1(k)``, ``s = sgn(d)`` and ``v = w1(k-1)``::
+
+    w2(k) = w2(k-1) + alpha (1 + ad s) [F(v) - w2(k-1)] |d| + [G(v) + gd s] d
+    F(v)  = f0 sgn(v) + f1 v + f2 v^2 + f3 v^3        (the anhysteretic curve)
+    G(v)  = g0 + g1 v + g2 v^2                        (the reversible slope)
+
+With ``nf = ng = directional = 0`` every kernel computes the paper's eq. (7) exactly as before.
 """
 
 from __future__ import annotations
@@ -17,8 +30,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["jacobian_block", "offsets", "simulate_into", "sensitivities_into", "step", "step_sens",
-           "step_sens_row"]
+__all__ = ["as_layout", "is_plain", "jacobian_block", "offsets", "shape_offsets", "shape_terms",
+           "simulate_into", "sensitivities_into", "step", "step_sens", "step_sens_row"]
 
 
 @njit(cache=True)
@@ -37,6 +50,54 @@ def offsets(layout):
     i_a1 = i_g0 + 1
     i_a2 = i_a1 + n1a
     return i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2
+
+
+@njit(cache=True)
+def shape_offsets(layout):
+    """Index of the generalised Duhem block's parameters: (f2, g1, ad); -1 where absent."""
+    nf, ng, directional = layout[7], layout[8], layout[9]
+    i_ext = offsets(layout)[7] + layout[2]
+    i_f2 = i_ext if nf > 0 else -1
+    i_g1 = i_ext + nf if ng > 0 else -1
+    i_ad = i_ext + nf + ng if directional else -1
+    return i_f2, i_g1, i_ad
+
+
+@njit(cache=True)
+def shape_terms(theta, layout, w1p, sd):
+    """The generalised eq. (7)'s coefficients at ``w1(k-1) = w1p``, direction ``sd``.
+
+    Returns ``(A, F, G, dF, dG)``: the rate ``alpha (1 + ad s)``, the anhysteretic curve
+    ``F(w1p)`` without its ``f0 sgn`` part, the slope ``G(w1p) + gd s`` and the derivatives of
+    ``F`` and ``G`` with respect to ``w1p``.
+    """
+    i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
+    i_f2, i_g1, i_ad = shape_offsets(layout)
+    A = theta[i_alpha]
+    F = theta[i_f1] * w1p
+    dF = theta[i_f1]
+    G = theta[i_g0]
+    dG = 0.0
+    pw = w1p
+    for j in range(layout[7]):  # f2 v^2, f3 v^3
+        dF += (j + 2) * theta[i_f2 + j] * pw
+        pw *= w1p
+        F += theta[i_f2 + j] * pw
+    pw = 1.0
+    for j in range(layout[8]):  # g1 v, g2 v^2
+        dG += (j + 1) * theta[i_g1 + j] * pw
+        pw *= w1p
+        G += theta[i_g1 + j] * pw
+    if i_ad >= 0:
+        A = A * (1.0 + theta[i_ad] * sd)
+        G += theta[i_ad + 1] * sd
+    return A, F, G, dF, dG
+
+
+@njit(cache=True, inline="always")
+def is_plain(layout):
+    """Whether the layout is the paper's eq. (7) (no generalised shape terms)."""
+    return layout[7] == 0 and layout[8] == 0 and layout[9] == 0
 
 
 @njit(cache=True, inline="always")
@@ -69,7 +130,11 @@ def step(theta, layout, U, W1, W2, Y, k):
     w1p = W1[k - 1]
     w2p = W2[k - 1]
     dw1 = w1 - w1p
-    W2[k] = w2p + alpha * (f0 * sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g0 * dw1
+    if is_plain(layout):
+        W2[k] = w2p + alpha * (f0 * sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g0 * dw1
+    else:
+        A, F, G, dF, dG = shape_terms(theta, layout, w1p, sgn(dw1))
+        W2[k] = w2p + A * (f0 * sgn(w1p) + F - w2p) * abs(dw1) + G * dw1
     # eq. (2), b20 = 1
     y = W2[k - q2]
     for j in range(1, n2b + 1):
@@ -117,15 +182,18 @@ def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
         S1[ks, i_a1 + i - 1] -= W1[k - i]
     sd = sgn(dw1)
     absd = abs(dw1)
-    for p in range(npar):
-        ddw1 = S1[ks, p] - S1[ks - 1, p]
-        dG = f1 * S1[ks - 1, p] - S2[ks - 1, p]
-        S2[ks, p] = S2[ks - 1, p] + alpha * (dG * absd + G * sd * ddw1) + g0 * ddw1
-    S2[ks, i_alpha] += G * absd
-    S2[ks, i_f1] += alpha * w1p * absd
-    if i_f0 >= 0:
-        S2[ks, i_f0] += alpha * sgn(w1p) * absd
-    S2[ks, i_g0] += dw1
+    if is_plain(layout):
+        for p in range(npar):
+            ddw1 = S1[ks, p] - S1[ks - 1, p]
+            dG = f1 * S1[ks - 1, p] - S2[ks - 1, p]
+            S2[ks, p] = S2[ks - 1, p] + alpha * (dG * absd + G * sd * ddw1) + g0 * ddw1
+        S2[ks, i_alpha] += G * absd
+        S2[ks, i_f1] += alpha * w1p * absd
+        if i_f0 >= 0:
+            S2[ks, i_f0] += alpha * sgn(w1p) * absd
+        S2[ks, i_g0] += dw1
+    else:
+        _shape_sens(theta, layout, S1, S2, ks, w1p, W2[k - 1], dw1)
     for p in range(npar):
         sy = S2[ks - q2, p]
         for j in range(1, n2b + 1):
@@ -137,6 +205,41 @@ def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
         SY[ks, i_b2 + j - 1] += W2[k - q2 - j]
     for i in range(1, n2a + 1):
         SY[ks, i_a2 + i - 1] -= Y[k - i]
+
+
+@njit(cache=True)
+def _shape_sens(theta, layout, S1, S2, ks, w1p, w2p, dw1):
+    """Row ``ks`` of ``S2`` for the generalised eq. (7) (see the module docstring)."""
+    i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
+    i_f2, i_g1, i_ad = shape_offsets(layout)
+    npar = theta.shape[0]
+    sd = sgn(dw1)
+    absd = abs(dw1)
+    A, F, G, dF, dG = shape_terms(theta, layout, w1p, sd)
+    f0 = theta[i_f0] if i_f0 >= 0 else 0.0
+    E = f0 * sgn(w1p) + F - w2p
+    for p in range(npar):
+        ddw1 = S1[ks, p] - S1[ks - 1, p]
+        dE = dF * S1[ks - 1, p] - S2[ks - 1, p]
+        S2[ks, p] = (S2[ks - 1, p] + A * (dE * absd + E * sd * ddw1) + G * ddw1
+                     + dG * S1[ks - 1, p] * dw1)
+    rate = 1.0 + theta[i_ad] * sd if i_ad >= 0 else 1.0
+    S2[ks, i_alpha] += rate * E * absd
+    S2[ks, i_f1] += A * w1p * absd
+    if i_f0 >= 0:
+        S2[ks, i_f0] += A * sgn(w1p) * absd
+    S2[ks, i_g0] += dw1
+    pw = w1p
+    for j in range(layout[7]):
+        pw *= w1p
+        S2[ks, i_f2 + j] += A * pw * absd
+    pw = 1.0
+    for j in range(layout[8]):
+        pw *= w1p
+        S2[ks, i_g1 + j] += pw * dw1
+    if i_ad >= 0:
+        S2[ks, i_ad] += theta[i_alpha] * sd * E * absd
+        S2[ks, i_ad + 1] += sd * dw1
 
 
 @njit(cache=True)
@@ -188,6 +291,25 @@ def jacobian_block(theta, layout, U, W1, W2, Y, S1, S2, SY, P, k0, dtheta, J):
     return True
 
 
-def as_layout(n1a: int, n1b: int, n2a: int, n2b: int, q1: int, q2: int, f0: bool) -> np.ndarray:
-    """Pack a structure into the integer layout the kernels take."""
-    return np.array([n1a, n1b, n2a, n2b, q1, q2, int(bool(f0))], dtype=np.int64)
+def as_layout(n1a: int, n1b: int, n2a: int, n2b: int, q1: int, q2: int, f0: bool,
+              nf: int = 0, ng: int = 0, directional: bool = False) -> np.ndarray:
+    """Pack a structure into the integer layout the kernels take.
+
+    Parameters
+    ----------
+    n1a, n1b, n2a, n2b, q1, q2 : int
+        Orders and delays of L1 and L2.
+    f0 : bool
+        Whether the ``f0 sgn`` term is in the model.
+    nf, ng : int
+        Number of ``f2, f3 ..`` and ``g1, g2 ..`` terms of the generalised Duhem block.
+    directional : bool
+        Whether the block has the direction-dependent ``ad, gd``.
+
+    Returns
+    -------
+    ndarray
+        Ten integers.
+    """
+    return np.array([n1a, n1b, n2a, n2b, q1, q2, int(bool(f0)), nf, ng, int(bool(directional))],
+                    dtype=np.int64)

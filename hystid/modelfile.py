@@ -55,6 +55,7 @@ __all__ = ["FORMAT", "KINDS", "VERSION", "ModelFileError", "file_sha256", "load_
            "make_provenance", "model_document", "save_model"]
 
 _DUHEM_KEYS = ("n1a", "n1b", "n2a", "n2b", "q1", "q2", "f0")
+_SHAPE_KEYS = ("f_order", "g_order", "directional")
 _PI_KEYS = ("n_operators", "n1a", "n1b", "n2a", "n2b", "q1", "q2")
 
 
@@ -121,7 +122,7 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
         raise ModelFileError(f"{where}: 'params' must be a mapping of parameter names to numbers")
     try:
         if kind == "duhem":
-            structure = Structure(**_structure(doc, _DUHEM_KEYS, where))
+            structure = Structure(**_structure(doc, _DUHEM_KEYS, where, _SHAPE_KEYS))
             check_structure_size(structure)
             model = DuhemSandwich(params, structure, **common,
                                   rest_memory=_number(doc, "rest_memory", where, default=0.0))
@@ -211,21 +212,23 @@ def _number(doc: Mapping[str, Any], key: str, where: str, default: float | None 
     return float(value)
 
 
-def _structure(doc: Mapping[str, Any], keys: tuple[str, ...], where: str) -> dict[str, Any]:
+def _structure(doc: Mapping[str, Any], keys: tuple[str, ...], where: str,
+               optional: tuple[str, ...] = ()) -> dict[str, Any]:
     data = doc.get("structure")
     if not isinstance(data, Mapping):
         raise ModelFileError(f"{where}: 'structure' must be a mapping with {', '.join(keys)}")
-    unknown = sorted(set(data) - set(keys))
+    unknown = sorted(set(data) - set(keys) - set(optional))
     missing = [k for k in keys if k not in data]
     if unknown or missing:
-        raise ModelFileError(f"{where}: 'structure' expected the keys {', '.join(keys)}; "
+        extra = f" (optional: {', '.join(optional)})" if optional else ""
+        raise ModelFileError(f"{where}: 'structure' expected the keys {', '.join(keys)}{extra}; "
                              f"missing {missing}, unknown {unknown}")
     out: dict[str, Any] = {}
-    for key in keys:
+    for key in (*keys, *(k for k in optional if k in data)):
         value = data[key]
-        if key == "f0":
+        if key in ("f0", "directional"):
             if not isinstance(value, bool):
-                raise ModelFileError(f"{where}: structure 'f0' must be true or false, got "
+                raise ModelFileError(f"{where}: structure {key!r} must be true or false, got "
                                      f"{value!r}")
         elif isinstance(value, bool) or not isinstance(value, int):
             raise ModelFileError(f"{where}: structure {key!r} must be an integer, got {value!r}")

@@ -34,13 +34,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import control as ct
 import numpy as np
 
-from . import blocks
-from .model import InitialCondition, params_vector
-from .operating import Envelope, Placed, warn_admissibility
+from .operating import Envelope
 from .pi_operator import (  # the operator; re-exported here, where the sandwich is
     _check_thresholds,
     _initial_states,
@@ -55,8 +54,7 @@ from .pi_operator import (  # the operator; re-exported here, where the sandwich
     play_operator,
 )
 from .poly import is_stable
-from .response import SandwichResponse
-from .signals import finite_signal
+from .sandwich import InitialCondition, Sandwich
 from .thresholds import pi_thresholds
 
 __all__ = [
@@ -172,7 +170,7 @@ def unit_gain_numerator(a: np.ndarray, b_rest: np.ndarray) -> np.ndarray:
     return np.concatenate([[1.0 + np.sum(a) - np.sum(b_rest)], b_rest])
 
 
-class PISandwich(Placed):
+class PISandwich(Sandwich):
     """Sandwich model L1 -> Prandtl-Ishlinskii H -> L2 (eqs. 29-31).
 
     Parameters
@@ -221,25 +219,16 @@ class PISandwich(Placed):
         units: Mapping[str, str] | None = None,
     ) -> None:
         self.thresholds = _check_thresholds(thresholds)
-        self.structure = structure or PIStructure(n_operators=len(self.thresholds))
-        if self.structure.n_operators != len(self.thresholds):
+        structure = structure or PIStructure(n_operators=len(self.thresholds))
+        if structure.n_operators != len(self.thresholds):
             raise ValueError(
-                f"thresholds: expected {self.structure.n_operators} values for the structure, "
+                f"thresholds: expected {structure.n_operators} values for the structure, "
                 f"got {len(self.thresholds)}"
             )
-        if not (np.isfinite(fs) and fs > 0):
-            raise ValueError(f"fs must be a positive finite number of Hz, got {fs!r}")
-        self.fs = float(fs)
-        self.name = name
-        self.theta = params_vector(params, self.structure.names)
-        self._place(u_rest, offset, envelope, units)
+        super().__init__(params, structure, fs, name, u_rest=u_rest, offset=offset,
+                         envelope=envelope, units=units)
 
     # ----------------------------------------------------------------- parameters
-    @property
-    def params(self) -> dict[str, float]:
-        """Free parameter values by name."""
-        return dict(zip(self.structure.names, map(float, self.theta), strict=True))
-
     def _part(self, key: str) -> np.ndarray:
         return np.array(self.theta[self.structure.slices()[key]])
 
@@ -299,31 +288,17 @@ class PISandwich(Placed):
         r = self.thresholds
         return bool(self.mu[0] > 0 and np.all(W > 0) and r[0] == 0 and np.all(np.diff(r) > 0))
 
+    @property
+    def num1(self) -> np.ndarray:
+        """Full numerator of L1 from its delay on: ``[b11, b12, ..]`` (eq. 29)."""
+        return self.b1
+
+    @property
+    def num2(self) -> np.ndarray:
+        """Full numerator of L2 from its delay on: ``[b21, b22, ..]`` (eq. 31)."""
+        return self.b2
+
     # ----------------------------------------------------------------- python-control bridge
-    @property
-    def dt(self) -> float:
-        """Sampling period in seconds."""
-        return 1.0 / self.fs
-
-    def _tf(self, a, b, q, inputs, outputs, name) -> ct.TransferFunction:
-        m = max(len(a), q + len(b) - 1)
-        num = np.zeros(m + 1)
-        num[q : q + len(b)] = b
-        den = np.zeros(m + 1)
-        den[0] = 1.0
-        den[1 : 1 + len(a)] = a
-        return ct.tf(num, den, self.dt, inputs=inputs, outputs=outputs, name=name)
-
-    @property
-    def L1(self) -> ct.TransferFunction:
-        """Amplifier + filter (eq. 29): discrete transfer function u -> w1, unit DC gain."""
-        return self._tf(self.a1, self.b1, self.structure.q1, "u", "w1", "L1")
-
-    @property
-    def L2(self) -> ct.TransferFunction:
-        """Flexure hinge + load (eq. 31): discrete transfer function w2 -> y, unit DC gain."""
-        return self._tf(self.a2, self.b2, self.structure.q2, "w2", "y", "L2")
-
     @property
     def H(self) -> ct.NonlinearIOSystem:
         """PI hysteresis (eq. 30): discrete nonlinear system w1 -> w2 (see :func:`pi_block`)."""
@@ -333,23 +308,6 @@ class PISandwich(Placed):
     def H_inverse(self) -> ct.NonlinearIOSystem:
         """The exact inverse of :attr:`H` (w2 -> w1), for hysteresis compensation."""
         return pi_inverse_block(self.thresholds, self.mu, dt=self.dt, name="H_inv")
-
-    def to_control(self) -> ct.InterconnectedSystem:
-        """The whole sandwich as a python-control interconnected system.
-
-        Returns
-        -------
-        control.InterconnectedSystem
-            Input ``u``; outputs ``y, w1, w2``; states those of ``L1`` (``tf2ss`` with
-            ``method='scipy'``), the play operators ``p0 ..`` and ``L2``, in that order.
-            Parameters ``pi_mu0 .. pi_r0 ..`` can be overridden in
-            :func:`control.input_output_response`. Use :meth:`control_state` for initial states.
-        """
-        l1 = ct.tf2ss(self.L1, method="scipy", inputs="u", outputs="w1", name="L1")
-        l2 = ct.tf2ss(self.L2, method="scipy", inputs="w2", outputs="y", name="L2")
-        return ct.interconnect(
-            [l1, self.H, l2], inputs="u", outputs=["y", "w1", "w2"], name=self.name
-        )
 
     def operator_state(
         self, x0: InitialCondition | None = None, p0: np.ndarray | Sequence[float] | None = None
@@ -376,75 +334,33 @@ class PISandwich(Placed):
         w1 = (x0 or InitialCondition()).window("w1", 1)[0]
         return np.maximum(w1 - self.thresholds, np.minimum(w1 + self.thresholds, 0.0))
 
-    def control_state(
-        self, x0: InitialCondition | None = None, p0: np.ndarray | Sequence[float] | None = None
-    ) -> np.ndarray:
-        """State vector of :meth:`to_control` that continues from the past ``x0``.
-
-        Parameters
-        ----------
-        x0 : InitialCondition, optional
-            Past values of ``u, w1, w2, y`` (at rest by default).
-        p0 : array_like, optional
-            Play-operator states; see :meth:`operator_state`.
-
-        Returns
-        -------
-        ndarray
-            The states of ``L1``, ``H`` and ``L2`` in the order of :meth:`to_control`.
-        """
-        x0 = x0 or InitialCondition()
-        n = self.structure.history + 1
-        l1 = ct.tf2ss(self.L1, method="scipy")
-        l2 = ct.tf2ss(self.L2, method="scipy")
-        x1 = blocks.state_from_past(l1, x0.window("u", n), x0.window("w1", n))
-        x2 = blocks.state_from_past(l2, x0.window("w2", n), x0.window("y", n))
-        return np.concatenate([x1, self.operator_state(x0, p0), x2])
+    def _h_state(self, x0: InitialCondition, **state: Any) -> np.ndarray:
+        unknown = set(state) - {"p0"}
+        if unknown:
+            raise TypeError(f"the PI block takes the state p0, got {sorted(unknown)}")
+        return self.operator_state(x0, state.get("p0"))
 
     @classmethod
-    def from_control(
+    def _from_blocks(
         cls,
-        L1: ct.TransferFunction | ct.InterconnectedSystem,
-        H: ct.NonlinearIOSystem | None = None,
-        L2: ct.TransferFunction | None = None,
+        L1: ct.TransferFunction,
+        H: ct.NonlinearIOSystem,
+        L2: ct.TransferFunction,
         *,
         structure: PIStructure | None = None,
         prefix: str = "pi",
         name: str = "PI sandwich",
+        u_rest: float = 0.0,
+        offset: float = 0.0,
     ) -> PISandwich:
-        """Build a model from python-control objects.
+        """The model from its three blocks (see :meth:`Sandwich.from_control`).
 
         Any DC gains of ``L1`` and ``L2`` are moved into ``H`` exactly: with ``L1 = g1 L1'``
         and ``L2 = g2 L2'`` (unit-gain ``L1', L2'``) the weights become ``g1 g2 mu_i`` and the
-        thresholds ``r_i / |g1|`` (a play operator is positively homogeneous).
-
-        Parameters
-        ----------
-        L1, H, L2 : control systems
-            Transfer functions for L1 and L2 and a :func:`pi_block` for H, or a single
-            :class:`control.InterconnectedSystem` made by :meth:`to_control`.
-        structure : PIStructure, optional
-            Orders and delays to read; the paper's by default.
-        prefix : str
-            Parameter-name prefix of ``H``.
-        name : str
-            Name of the returned model.
-
-        Returns
-        -------
-        PISandwich
-            The model.
+        thresholds ``r_i / |g1|`` (a play operator is positively homogeneous). ``structure``
+        gives the orders and delays to read (the paper's by default), ``prefix`` the parameter
+        names of ``H``.
         """
-        if isinstance(L1, ct.InterconnectedSystem) and H is None and L2 is None:
-            sys = L1
-            subs = {s.name: s for s in sys.syslist}
-            if not {"L1", "H", "L2"} <= subs.keys():
-                raise ValueError(f"expected subsystems L1, H, L2 in {sys.name!r}, got {list(subs)}")
-            L1, H, L2 = ct.ss2tf(subs["L1"]), subs["H"], ct.ss2tf(subs["L2"])
-        if H is None or L2 is None:
-            raise ValueError("from_control needs L1, H and L2, or one InterconnectedSystem")
-        if not (L1.dt and L1.dt == L2.dt == H.dt):
-            raise ValueError(f"blocks must share one discrete dt; got {L1.dt}, {H.dt}, {L2.dt}")
         n = H.nstates
         s = structure or PIStructure(n_operators=n)
         if s.n_operators != n:
@@ -466,58 +382,17 @@ class PISandwich(Placed):
         for prefix_, vec, g in (("b1", b1, g1), ("b2", b2, g2)):
             values.update({f"{prefix_}{j + 1}": v / g for j, v in enumerate(vec) if j > 0})
         values.update({f"mu{i}": g1 * g2 * m for i, m in enumerate(mu)})
-        return cls(values, r / abs(g1), s, fs=1.0 / L1.dt, name=name)
+        return cls(values, r / abs(g1), s, fs=1.0 / L1.dt, name=name, u_rest=u_rest,
+                   offset=offset)
 
     # ----------------------------------------------------------------- simulation
-    def simulate(
-        self,
-        u: np.ndarray | Sequence[float],
-        x0: InitialCondition | None = None,
-        p0: np.ndarray | Sequence[float] | None = None,
-        *,
-        check: bool = True,
-    ) -> SandwichResponse:
-        """Simulate the sandwich with the compiled kernel.
-
-        Parameters
-        ----------
-        u : array_like
-            Input samples u(0) .. u(N-1), in the record's units.
-        x0 : InitialCondition, optional
-            Past signal values relative to the rest; at rest by default.
-        p0 : array_like, optional
-            Play-operator states; see :meth:`operator_state`.
-        check : bool
-            Warn when the input leaves the model's envelope (also in ``response.warnings``).
-
-        Returns
-        -------
-        SandwichResponse
-            A :class:`control.TimeResponseData`: input ``u``, output ``y``, states ``w1``,
-            ``w2`` (each also an attribute); unpacks as ``t, y``.
-        """
-        u = finite_signal(u, "u")
-        x0 = x0 or InitialCondition()
-        P = self.structure.history
-        U, W1, W2, Y = (
-            np.concatenate([x0.window(k, P), np.zeros(len(u))]) for k in ("u", "w1", "w2", "y")
-        )
-        U[P:] = u - self.u_rest
-        p = self.operator_state(x0, p0)
+    def _run(self, U: np.ndarray, W1: np.ndarray, W2: np.ndarray, Y: np.ndarray, P: int,
+             x0: InitialCondition, **state: Any) -> None:
+        p = self._h_state(x0, **state)
         s = self.structure
         pi_simulate_into(self.a1, self.b1, s.q1, self.mu, self.thresholds, self.a2, self.b2,
                          s.q2, U, W1, W2, Y, p, P)
-        t = np.arange(len(u)) / self.fs
-        resp = SandwichResponse(t, u, W1[P:], W2[P:], Y[P:] + self.offset, name=self.name,
-                                units=self.units)
-        if check and self.envelope is not None:
-            resp.warnings = self.envelope.violations(u)
-            warn_admissibility(resp.warnings, self.name)
-        return resp
-
 
     def __repr__(self) -> str:
         lin = ", ".join(f"{k}={v:.6g}" for k, v in self.coefficients.items())
         return f"PISandwich({lin}, N={len(self.thresholds)}, fs={self.fs:g})"
-
-

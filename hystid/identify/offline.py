@@ -151,7 +151,7 @@ def linear_start(
     values = {"alpha": alpha, "f1": gain, "g0": gain, "f0": 0.0}
     for prefix, poly in (("a1", A1), ("a2", A2), ("b1", B1), ("b2", B2)):
         values.update({f"{prefix}{i + 1}": c for i, c in enumerate(poly)})
-    theta = np.array([values[n] for n in s.names])
+    theta = np.array([values.get(n, 0.0) for n in s.names])  # a linear start: no shape terms
     if with_offset:
         return theta, float(constant / np.sum(den))
     return theta
@@ -245,7 +245,10 @@ def to_normalised(theta: np.ndarray, structure: Structure, u_scale: float,
 
 
 def _rescale(theta, structure, su, sy, inverse):
-    factor = {"alpha": 1.0 / su, "f1": sy / su, "g0": sy / su, "f0": sy}
+    factor = {"alpha": 1.0 / su, "f1": sy / su, "g0": sy / su, "f0": sy,
+              # the generalised block: F(w1) and G(w1) dw1 are in w2 units, w1 in u units
+              "f2": sy / su**2, "f3": sy / su**3, "g1": sy / su**2, "g2": sy / su**3,
+              "gd": sy / su}
     out = np.array(theta, dtype=float)
     for name, f in factor.items():
         if name in structure.names:

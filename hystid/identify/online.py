@@ -321,7 +321,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         npar = len(theta)
         cap = self.window + self.block
         self._ints = np.zeros(_NINTS, dtype=np.int64)
-        self._ints[:7] = self.structure.layout
+        self._ints[:10] = self.structure.layout
         self._ints[_I_NPAR], self._ints[_I_W], self._ints[_I_CAP] = npar, self.window, cap
         self._buf = np.zeros(_buffer_size(npar, cap))
         self._bind_views()

@@ -30,8 +30,8 @@ _NSCAL = 12
  _S_SHORT, _S_LONG, _S_SIG, _S_TRACK) = range(12)
 _NSET = 12
 # ints layout: the structure's layout (7 entries), then sizes and the cursor
-_I_NPAR, _I_W, _I_CAP, _I_POS = 7, 8, 9, 10
-_NINTS = 11
+_I_NPAR, _I_W, _I_CAP, _I_POS = 10, 11, 12, 13
+_NINTS = 14
 
 
 # =========================================================================== compiled kernels
@@ -241,7 +241,7 @@ def rpem_run(buf, ints, u_in, y_in, history, diagnostics):
     """The recursion over a chunk: :func:`_rpem_sample` per sample, rows of history kept."""
     (est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym, S1, S2,
      SY, w) = _views(buf, ints)
-    layout = ints[:7].copy()
+    layout = ints[:10].copy()
     npar = ints[_I_NPAR]
     nd = diagnostics.shape[1]
     for n in range(u_in.shape[0]):
@@ -259,7 +259,7 @@ def rpem_one(buf, ints, u, y):
     (est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym, S1, S2,
      SY, w) = _views(buf, ints)
     _rpem_sample(est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, W1, W2, Yh, Ym,
-                 S1, S2, SY, w, ints, ints[:7], u, y)
+                 S1, S2, SY, w, ints, ints[:10], u, y)
     return int(scal[_NREC])
 
 
