@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["MAX_BATCH_SAMPLES", "MAX_MAGNITUDE", "MAX_MODEL_BYTES", "MAX_NESTING",
-           "MAX_RECURSIVE_SAMPLES", "check_magnitudes",
-           "check_delays_fit", "check_fit_size",
+           "MAX_RECURSIVE_SAMPLES", "PLAIN_DUHEM_LAYOUT", "check_magnitudes",
+           "check_delays_fit", "check_fit_size", "check_plain_duhem",
            "check_model", "check_structure_size", "read_plain_text", "too_deep"]
 
 #: Largest size of a model file read (a model of the largest structure is a few kB).
@@ -54,6 +54,8 @@ MAX_POLE_RADIUS = 1.0 - 1e-9
 MAX_ORDER = 10
 #: Largest delay (samples) of L1 or L2 of a model.
 MAX_DELAY = 1000
+#: Entries of the plain Duhem sandwich's kernel layout ``[n1a, n1b, n2a, n2b, q1, q2, f0]``.
+PLAIN_DUHEM_LAYOUT = 7
 
 def read_plain_text(path: str, what: str = "model file",
                     limit: int = MAX_MODEL_BYTES) -> str:
@@ -277,3 +279,42 @@ def check_magnitudes(record: Any, where: str | None = None) -> None:
                              f"at sample {k} (expected values of magnitude at most "
                              f"{MAX_MAGNITUDE:g}: squares of such numbers overflow; rescale "
                              "the record, e.g. to SI or micro units)")
+
+
+def check_plain_duhem(layout: Any, option: str) -> None:
+    """Refuse a structure richer than the plain Duhem sandwich of eqs. (1), (7), (2).
+
+    Kernels written for the plain sandwich read the first :data:`PLAIN_DUHEM_LAYOUT` entries of
+    the layout and the parameters they name; a richer structure (a hysteresis block with more
+    shape parameters, its options in further layout entries and its parameters appended to
+    theta) would be computed as a plain Duhem without a word. This check refuses it instead.
+
+    Parameters
+    ----------
+    layout : array_like of int
+        The structure's kernel layout (:attr:`hystid.model.Structure.layout`).
+    option : str
+        The option that supports only the plain sandwich, for the message (e.g.
+        ``"method='ekf'"``).
+
+    Raises
+    ------
+    ValueError
+        When the layout does not have exactly :data:`PLAIN_DUHEM_LAYOUT` entries: longer (with
+        entries beyond the seventh, zero or not) or shorter.
+    """
+    entries = np.asarray(layout).ravel()
+    if entries.size == PLAIN_DUHEM_LAYOUT:
+        return
+    if entries.size < PLAIN_DUHEM_LAYOUT:
+        found = f"only {entries.size} entries (expected {PLAIN_DUHEM_LAYOUT})"
+    else:
+        extra = entries[PLAIN_DUHEM_LAYOUT:]
+        what = (f"hysteresis-shape entries {extra.tolist()}" if np.any(extra != 0)
+                else f"{extra.size} further entries (zero)")
+        found = f"{what} after the seventh, which it would ignore and compute a plain Duhem"
+    raise ValueError(
+        f"{option} supports only the plain Duhem sandwich of eqs. (1), (7), (2) (a layout of "
+        f"{PLAIN_DUHEM_LAYOUT} entries [n1a, n1b, n2a, n2b, q1, q2, f0]); this structure's "
+        f"layout has {found}. Use a plain Structure with {option}"
+    )

@@ -28,6 +28,7 @@ import numpy as np
 from ..identify.result import IdentificationResult
 from ..model import DuhemSandwich, Structure
 from ..records import Record
+from ..validate import check_plain_duhem
 from .effects import EFFECTS, AugmentedSandwich, effect_dict, family_of
 from .refit import refit
 from .result import DiagnosisResult, EffectOutcome
@@ -212,6 +213,12 @@ def diagnose(
         model = model.model
     if model is not None and not isinstance(model, DuhemSandwich):
         raise DiagnosisError(f"model: expected a DuhemSandwich, got {type(model).__name__}")
+    try:  # before any fit: the augmented sandwich takes only the plain Duhem
+        for given in (model.structure if model is not None else None, structure):
+            if given is not None:
+                check_plain_duhem(given.layout, "diagnose")
+    except ValueError as err:
+        raise DiagnosisError(str(err)) from err
     if model is not None and not np.isclose(model.fs, fs, rtol=1e-9):
         raise DiagnosisError(f"model: sampling rate {model.fs:g} Hz differs from the records' "
                              f"{fs:g} Hz")

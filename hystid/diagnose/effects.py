@@ -52,6 +52,7 @@ from numba import njit
 from ..kernels import offsets, sgn
 from ..model import DuhemSandwich, InitialCondition, SandwichResponse
 from ..signals import finite_signal
+from ..validate import check_plain_duhem
 
 __all__ = [
     "EFFECTS",
@@ -69,6 +70,8 @@ __all__ = [
 
 #: Longest input dead time the kernel accepts, in samples.
 MAX_DELAY = 64
+#: The augmented model, as named when it refuses a structure richer than the plain Duhem.
+_OPTION = "the diagnosis' augmented sandwich (AugmentedSandwich, diagnose)"
 #: Lags of the logarithmic creep bank and the decades between their time constants.
 N_LOG = 5
 LOG_STEP = 0.75
@@ -268,6 +271,11 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     creep, ``YL`` the output of L2, ``M`` the extra modes and ``Y`` the measured-like output.
     Entries before ``start`` are the past and are read, never written (except ``UD``, rebuilt
     from ``U``). The creep lags start at zero, the series mode at rest at ``YL[start - 1]``.
+
+    The sandwich's step (:func:`hystid.kernels.step`) is fused here with the effects that act
+    inside it; with every effect off (``phi`` zero) this kernel is that step on ``U``, which
+    ``tests/test_step_once.py`` checks against :func:`hystid.kernels.simulate_into` to 1e-12.
+    Only the plain Duhem sandwich's layout is read (:func:`hystid.validate.check_plain_duhem`).
     """
     n1a, n1b, n2a, n2b, q1, q2 = layout[0], layout[1], layout[2], layout[3], layout[4], layout[5]
     i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
@@ -398,6 +406,7 @@ class _Workspace:
         self.arrays = [np.zeros(P + n) for _ in range(8)]
 
     def run(self, theta, layout, phi, dt) -> tuple[np.ndarray, ...]:
+        check_plain_duhem(layout, _OPTION)
         UD, W1, W2, V, C, YL, M, Y = self.arrays
         P = self.P
         W1[:P] = self.past["w1"]
@@ -472,6 +481,7 @@ class AugmentedSandwich:
     ) -> None:
         if not isinstance(model, DuhemSandwich):
             raise TypeError(f"model: expected a DuhemSandwich, got {type(model).__name__}")
+        check_plain_duhem(model.structure.layout, _OPTION)
         self.model = model
         self.effects = {k: dict(v) for k, v in (effects or {}).items()}
         self.phi = effect_vector(self.effects)

@@ -14,7 +14,8 @@ in the state (its variance would be zero).
 
 Why the EKF (filterpy's :class:`~filterpy.kalman.ExtendedKalmanFilter`) and not the unscented
 filter: the transition is piecewise polynomial in the augmented state, so its Jacobian is exact
-and cheap (computed here in closed form by a compiled kernel, with ``d|dw1|/dx = sgn(dw1)
+and cheap (the sandwich's own step and sensitivity kernels, :func:`hystid.kernels.step` and
+:func:`~hystid.kernels.step_sens_row`, seeded with the state windows: ``d|dw1|/dx = sgn(dw1)
 d(dw1)/dx`` away from the Duhem block's non-smooth point and ``sgn(0) = 0`` on it, ``d sgn/dx =
 0``). The unscented filter needs ``2n + 1`` transitions per sample and a Cholesky factor of P.
 Tried on the reference stage with the same state and guards, filterpy's UKF (Merwe sigma points)
@@ -44,9 +45,10 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from numba import njit
 
-from ..kernels import offsets, sgn
+from ..kernels import step_sens_row
 from ..model import DuhemSandwich, Structure
 from ..records import Record
+from ..validate import check_plain_duhem
 from ._recursive import admissible
 from .base import Estimator, as_sample, record_signals
 from .constraints import is_admissible, project_admissible
@@ -83,76 +85,47 @@ def transition(x, ubuf, layout, m1, m2, m3, xn, F):
 
     ``x`` holds the windows of w1, w2, y (most recent first) and theta; ``ubuf[j] = u(k-j)``.
     Writes ``xn`` and ``F`` in place.
+
+    The sandwich's step is not written here: the windows are laid out as the past of the
+    extended signal arrays of :mod:`hystid.kernels` and one :func:`~hystid.kernels.step_sens_row`
+    computes w1(k), w2(k), y(k) (by :func:`~hystid.kernels.step`) and their gradients. Its
+    sensitivity columns are theta's and then one per window entry: ``theta`` is handed over
+    with a zero appended for each window entry (no parameter of the step sits there, so those
+    columns get no explicit term) and the past rows are seeded with ``d x_i / d x_i = 1``.
     """
-    n1a, n1b, n2a, n2b, q1, q2 = layout[0], layout[1], layout[2], layout[3], layout[4], layout[5]
-    i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
     n = x.shape[0]
     ns = m1 + m2 + m3
+    npar = n - ns
     o2, oy = m1, m1 + m2  # where the w2 and y windows start
-    alpha = x[ns + i_alpha]
-    f0 = x[ns + i_f0] if i_f0 >= 0 else 0.0
-    f1 = x[ns + i_f1]
-    g0 = x[ns + i_g0]
-    F[:, :] = 0.0
-    g1 = np.zeros(n)
-    g2 = np.zeros(n)
-    gy = np.zeros(n)
-
-    # eq. (1): w1(k) = u(k-q1) + sum_j b1j u(k-q1-j) - sum_i a1i w1(k-i)
-    w1 = ubuf[q1]
-    for j in range(1, n1b + 1):
-        w1 += x[ns + i_b1 + j - 1] * ubuf[q1 + j]
-        g1[ns + i_b1 + j - 1] = ubuf[q1 + j]
-    for i in range(1, n1a + 1):
-        a = x[ns + i_a1 + i - 1]
-        w1 -= a * x[i - 1]
-        g1[i - 1] -= a
-        g1[ns + i_a1 + i - 1] -= x[i - 1]
-
-    # eq. (7): w2(k) = w2(k-1) + alpha G |dw1| + g0 dw1,  G = f0 sgn(w1(k-1)) + f1 w1(k-1) - w2(k-1)
-    w1p = x[0]
-    w2p = x[o2]
-    d = w1 - w1p
-    absd = abs(d)
-    sd = sgn(d)  # d|dw1|/d(dw1), 0 at the kink
-    sp = sgn(w1p)
-    G = f0 * sp + f1 * w1p - w2p
-    w2 = w2p + alpha * G * absd + g0 * d
-    for p in range(n):
-        gd = g1[p] - (1.0 if p == 0 else 0.0)
-        gG = (f1 if p == 0 else 0.0) - (1.0 if p == o2 else 0.0)
-        g2[p] = (1.0 if p == o2 else 0.0) + alpha * (gG * absd + G * sd * gd) + g0 * gd
-    g2[ns + i_alpha] += G * absd
-    g2[ns + i_f1] += alpha * w1p * absd
-    if i_f0 >= 0:
-        g2[ns + i_f0] += alpha * sp * absd
-    g2[ns + i_g0] += d
-
-    # eq. (2): y(k) = w2(k-q2) + sum_j b2j w2(k-q2-j) - sum_i a2i y(k-i)
-    y = 0.0
-    for j in range(0, n2b + 1):
-        c = 1.0 if j == 0 else x[ns + i_b2 + j - 1]
-        lag = q2 + j
-        if lag == 0:
-            v = w2
-            for p in range(n):
-                gy[p] += c * g2[p]
-        else:
-            v = x[o2 + lag - 1]
-            gy[o2 + lag - 1] += c
-        y += c * v
-        if j > 0:
-            gy[ns + i_b2 + j - 1] += v
-    for i in range(1, n2a + 1):
-        a = x[ns + i_a2 + i - 1]
-        y -= a * x[oy + i - 1]
-        gy[oy + i - 1] -= a
-        gy[ns + i_a2 + i - 1] -= x[oy + i - 1]
+    mu = ubuf.shape[0]
+    # extended arrays: index P is sample k, P - i is k - i (the step reads no further back)
+    P = max(max(m1, m2), max(m3, mu - 1))
+    U = np.zeros(P + 1)
+    W1 = np.zeros(P + 1)
+    W2 = np.zeros(P + 1)
+    Y = np.zeros(P + 1)
+    nc = npar + ns
+    S1 = np.zeros((P + 1, nc))
+    S2 = np.zeros((P + 1, nc))
+    SY = np.zeros((P + 1, nc))
+    th = np.zeros(nc)
+    th[:npar] = x[ns:]
+    for j in range(mu):
+        U[P - j] = ubuf[j]
+    for start, m, A, S in ((0, m1, W1, S1), (o2, m2, W2, S2), (oy, m3, Y, SY)):
+        for i in range(m):
+            A[P - 1 - i] = x[start + i]
+            S[P - 1 - i, npar + start + i] = 1.0
+    step_sens_row(th, layout, U, W1, W2, Y, S1, S2, SY, P, P)
 
     # new state: the new samples first, the windows shifted by one, theta unchanged
-    for start, m, v, g in ((0, m1, w1, g1), (o2, m2, w2, g2), (oy, m3, y, gy)):
-        xn[start] = v
-        F[start, :] = g
+    F[:, :] = 0.0
+    for start, m, A, S in ((0, m1, W1, S1), (o2, m2, W2, S2), (oy, m3, Y, SY)):
+        xn[start] = A[P]
+        for p in range(ns):
+            F[start, p] = S[P, npar + p]
+        for p in range(npar):
+            F[start, ns + p] = S[P, p]
         for i in range(1, m):
             xn[start + i] = x[start + i - 1]
             F[start + i, start + i - 1] = 1.0
@@ -306,6 +279,7 @@ class KalmanIdentifier(Estimator):
         self.structure = structure or Structure()
         if not isinstance(self.structure, Structure):
             raise ValueError(f"structure: expected a Structure, got {type(structure).__name__}")
+        check_plain_duhem(self.structure.layout, "method='ekf' (KalmanIdentifier)")
         if not (np.isscalar(fs) and np.isfinite(fs) and fs > 0):
             raise ValueError(f"fs: expected a positive finite number of Hz, got {fs!r}")
         if not (np.isscalar(r) and np.isfinite(r) and r > 0):
