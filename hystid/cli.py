@@ -151,7 +151,7 @@ def _holdout_fraction(text: str) -> float:
 #: Methods of each hysteresis block (``--model``) that keep a parameter history.
 #: The members of the model family (``hystid.identify.members.MEMBERS``; a test keeps the two
 #: equal, so that the parser does not import the models).
-MODEL_NAMES = ("duhem", "pi", "pi-stage")
+MODEL_NAMES = ("duhem", "gduhem", "pi", "pi-stage")
 _HISTORY_METHODS = {"duhem": ("online", "eria", "ekf"), "pi": ("online", "eria")}
 
 

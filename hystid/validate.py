@@ -300,21 +300,20 @@ def check_plain_duhem(layout: Any, option: str) -> None:
     Raises
     ------
     ValueError
-        When the layout does not have exactly :data:`PLAIN_DUHEM_LAYOUT` entries: longer (with
-        entries beyond the seventh, zero or not) or shorter.
+        When the layout has fewer than :data:`PLAIN_DUHEM_LAYOUT` entries or a non-zero
+        entry after them (the generalised Duhem block's ``nf, ng, directional``).
     """
     entries = np.asarray(layout).ravel()
-    if entries.size == PLAIN_DUHEM_LAYOUT:
-        return
     if entries.size < PLAIN_DUHEM_LAYOUT:
         found = f"only {entries.size} entries (expected {PLAIN_DUHEM_LAYOUT})"
     else:
         extra = entries[PLAIN_DUHEM_LAYOUT:]
-        what = (f"hysteresis-shape entries {extra.tolist()}" if np.any(extra != 0)
-                else f"{extra.size} further entries (zero)")
-        found = f"{what} after the seventh, which it would ignore and compute a plain Duhem"
+        if not np.any(extra != 0):
+            return
+        found = (f"hysteresis-shape entries {extra.tolist()} after the seventh (a generalised "
+                 "Duhem block), which it would ignore and compute a plain Duhem")
     raise ValueError(
-        f"{option} supports only the plain Duhem sandwich of eqs. (1), (7), (2) (a layout of "
-        f"{PLAIN_DUHEM_LAYOUT} entries [n1a, n1b, n2a, n2b, q1, q2, f0]); this structure's "
+        f"{option} supports only the plain Duhem sandwich of eqs. (1), (7), (2) (the layout "
+        f"[n1a, n1b, n2a, n2b, q1, q2, f0] with no shape terms); this structure's "
         f"layout has {found}. Use a plain Structure with {option}"
     )

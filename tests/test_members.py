@@ -55,12 +55,12 @@ def test_every_swing_threshold_is_reversed_by_the_input_it_was_placed_on():
 
 # --------------------------------------------------------------------------- members
 def test_members_and_the_identify_entry_point():
-    assert tuple(MEMBERS) == ("duhem", "pi", "pi-stage")
+    assert tuple(MEMBERS) == ("duhem", "gduhem", "pi", "pi-stage")
     assert set(AUTO_CANDIDATES) <= set(MEMBERS)
     from hystid.cli import MODEL_NAMES
 
     assert MODEL_NAMES == tuple(MEMBERS)  # the parser's list, kept without importing models
-    with pytest.raises(ValueError, match="model: expected 'auto' or one of duhem, pi"):
+    with pytest.raises(ValueError, match="model: expected 'auto' or one of duhem, gduhem, pi"):
         member("bouc")
     rec = reference_record(0.05, seed=0)
     with pytest.raises(ValueError, match="structure: applies to model='duhem' only"):

@@ -368,6 +368,10 @@ def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
     duhem = isinstance(model, DuhemSandwich)
     if kind == KIND_DUHEM and not duhem:
         kind = KIND_PI
+    if kind == KIND_DUHEM:
+        from ..validate import check_plain_duhem
+
+        check_plain_duhem(model.structure.layout, "the Duhem inverse (compensation='inverse')")
     if kind == KIND_DUHEM and not model.params["alpha"] > 0:
         raise ValueError(f"model: alpha must be positive, got {model.params['alpha']!r}")
     bound = check_bound(duhem_bound)

@@ -256,6 +256,11 @@ def compensate(
         if not hasattr(model, name):
             raise ValueError(f"model: expected an identified sandwich model (no {name!r}), got "
                              f"{model!r}")
+    if compensation == "inverse" and getattr(model, "kind", "") == "duhem":
+        from ..validate import check_plain_duhem
+
+        check_plain_duhem(model.structure.layout, "the Duhem inverse (compensation='inverse'; "
+                          "compensation='linear' takes any member)")
     y = finite_signal(y_ref, "y_ref", min_size=2)
     try:
         limits = envelope_limits(model, margin) if u_limits is None else \

@@ -336,6 +336,10 @@ def c_sources(
         When the compensator cannot be built with the ``compensator`` options given, or a
         number is not finite.
     """
+    if isinstance(model, DuhemSandwich):
+        from ..validate import check_plain_duhem
+
+        check_plain_duhem(model.structure.layout, "the C export")
     from .. import __version__
 
     duhem = isinstance(model, DuhemSandwich)

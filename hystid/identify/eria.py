@@ -31,6 +31,7 @@ from numba import njit
 
 from ..kernels import offsets, step
 from ..model import Structure
+from ..validate import check_plain_duhem
 from ._recursive import RecursiveIdentifier, admissible, extended, keep_tail
 
 __all__ = ["ERIA", "DIAGNOSTICS"]
@@ -249,6 +250,7 @@ class ERIA(RecursiveIdentifier):
         self.lambda_inv_min = float(lambda_inv_min)
         self.internal = internal
         super().__init__(structure, fs, theta0, epsilon)
+        check_plain_duhem(self.structure.layout, "method='eria'")
 
     def _allocate(self) -> None:
         from .offline import initial_theta

@@ -6,6 +6,9 @@ block, its structure and the fit that identifies it:
 
 ======================  ===================================================================
 ``duhem``               the paper's Duhem sandwich, experimental structure (eqs. 24-25)
+``gduhem``              a generalised Duhem block (eq. 7 with a cubic anhysteretic curve
+                        ``F(w1)`` and a quadratic slope ``G(w1)``, see :mod:`hystid.kernels`)
+                        between a static L1 and a third-order L2
 ``pi``                  the paper's PI sandwich (eqs. 29-31, 40 plays), thresholds inside the
                         input's largest swing (:func:`hystid.thresholds.swing_thresholds`)
 ``pi-stage``            a PI operator of 20 plays between a static L1 and a third-order L2
@@ -128,6 +131,10 @@ PI_NFEV = 40
 MEMBERS: dict[str, Member] = {m.name: m for m in (
     Member("duhem", "duhem", Structure(),
            "Duhem sandwich, the paper's experimental structure (eqs. 24-25)"),
+    Member("gduhem", "duhem",
+           Structure(n1a=0, n1b=0, q1=0, n2a=3, n2b=2, q2=1, f_order=3, g_order=2),
+           "generalised Duhem (cubic anhysteretic curve, quadratic slope), static L1, "
+           "third-order L2"),
     Member("pi", "pi", PIStructure(),
            "PI sandwich, the paper's structure (eqs. 29-31), thresholds within the largest swing",
            {"thresholds": "swing", "max_nfev": PI_NFEV}),
