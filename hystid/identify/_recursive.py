@@ -36,7 +36,8 @@ def keep_tail(window: np.ndarray, ext: np.ndarray) -> None:
 
 @njit(cache=True)
 def admissible(theta, layout, kmax):
-    """theta is finite, alpha > 0 and L1, L2 stable and minimum phase (Assumption 1)."""
+    """theta is finite, alpha > 0 (with ``|ad| < 1`` for a direction-dependent block) and L1,
+    L2 stable and minimum phase (Assumption 1)."""
     return admissible_into(theta, layout, kmax, np.empty(theta.shape[0]))
 
 
@@ -55,6 +56,8 @@ def admissible_into(theta, layout, kmax, work):
     i_a2 = i_a1 + n1a
     if theta[i_alpha] <= 0.0:
         return False
+    if layout[9] and abs(theta[i_a2 + n2a + layout[7] + layout[8]]) >= 1.0:
+        return False  # the generalised block's rates alpha (1 +- ad) must stay positive
     return (
         schur_cohn_into(theta, i_a1, n1a, kmax, work)
         and schur_cohn_into(theta, i_a2, n2a, kmax, work)

@@ -213,6 +213,8 @@ def is_admissible(
         return False
     if theta[structure.names.index("alpha")] <= 0:
         return False
+    if "ad" in structure.names and not abs(theta[structure.names.index("ad")]) < 1.0:
+        return False  # the generalised block's rates alpha (1 +- ad) stay positive
     return all(schur_stable(np.ascontiguousarray(theta[g]), 1.0 - margin)
                for g in polynomial_groups(structure))
 
@@ -237,6 +239,9 @@ def project_admissible(theta: np.ndarray, structure: Structure, kmax: float = 0.
     theta = np.array(theta, dtype=float)
     ia = structure.names.index("alpha")
     theta[ia] = max(theta[ia], ALPHA_MIN)
+    if "ad" in structure.names:
+        i = structure.names.index("ad")
+        theta[i] = np.clip(theta[i], -kmax, kmax)
     for g in polynomial_groups(structure):
         k = poly_to_reflection(theta[g])
         if np.any(~np.isfinite(k)) or np.any(np.abs(k) > kmax):

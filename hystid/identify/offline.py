@@ -182,8 +182,15 @@ class _Reparam(Reflections):
         super().__init__(polynomial_groups(structure), len(structure.names), (self.ialpha,))
         #: entries of z that the envelope bound depends on (alpha, L1's polynomials)
         self.l1_and_alpha = [self.ialpha] + [
-            structure.names.index(n) for n in structure.names if n[:2] in ("a1", "b1")]
+            structure.names.index(n) for n in structure.names if n[:2] in ("a1", "b1")
+            or n == "ad"]
+        #: the generalised block's direction term, kept inside (-AD_MAX, AD_MAX)
+        self.iad = structure.names.index("ad") if "ad" in structure.names else None
 
+
+#: Fits keep the generalised block's direction term ``|ad|`` below this: both rates
+#: ``alpha (1 +- ad)`` stay positive (a branch that never settles is not a hysteresis loop).
+AD_MAX = 0.95
 
 #: Fits keep ``alpha max |L1| min(2 A sin(w/2), slew)`` (condition 8 over every sine inside the
 #: training input's envelope, :meth:`DuhemSandwich.envelope_bound`) below this.
@@ -475,6 +482,8 @@ class _OutputError:
         lo, hi = np.r_[lo, -np.inf, -np.inf], np.r_[hi, np.inf, np.inf]
         if self.admissible:
             lo[self.rp.ialpha] = WIPE_OUT / max(self.env_n.u_max - self.env_n.u_min, 1e-12)
+        if self.rp.iad is not None:
+            lo[self.rp.iad], hi[self.rp.iad] = -AD_MAX, AD_MAX
         with np.errstate(over="ignore", invalid="ignore"):
             return least_squares(self.fun, np.clip(z0, lo, hi), jac=self.jac,
                                  bounds=(lo, hi), method="trf", ftol=tol, xtol=tol, gtol=tol,
