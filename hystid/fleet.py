@@ -47,8 +47,8 @@ KINDS = ("identify", "diagnose")
 #: File name endings taken as records when a folder is given.
 RECORD_SUFFIXES = (".csv", ".txt", ".npz", ".mat", ".h5", ".hdf5")
 #: Columns every result row has (parameters follow as ``param_<name>``).
-BASE_COLUMNS = ("name", "status", "error", "train", "val", "held_out", "method", "samples",
-                "fs", "u_rest", "offset", "rms_model", "rms_static_line", "rms_linear",
+BASE_COLUMNS = ("name", "status", "error", "train", "val", "held_out", "method", "model",
+                "samples", "fs", "u_rest", "offset", "rms_model", "rms_static_line", "rms_linear",
                 "beats_baselines", "accepted", "best", "rms_nominal", "rms_final", "noise_floor",
                 "gap_closed", "seed", "seconds", "worker", "fingerprint")
 
@@ -223,7 +223,9 @@ def run_job(job: Job, kind: str = "identify", settings: dict[str, Any] | None = 
         ``diagnose``: :func:`hystid.diagnose.diagnose` and the same comparison for its
         nominal model.
     settings : dict, optional
-        ``method`` (identify), ``holdout`` (share of ``train`` held out without ``val``,
+        ``method`` and ``model`` (identify: the estimator and the member of the model family,
+        as :func:`hystid.identify.identify` takes them; ``"batch"`` and ``"duhem"`` by
+        default), ``holdout`` (share of ``train`` held out without ``val``,
         default 0.4), ``fs``, ``columns`` (for :func:`hystid.records.load_record`),
         ``effects``, ``initial`` (diagnose).
     seed : int
@@ -290,8 +292,10 @@ def _identify_row(train, vals, settings: dict[str, Any]) -> dict[str, Any]:
 
     fit_on, held, label = _split(train, vals, settings)
     method = settings.get("method") or "batch"
-    result = identify(fit_on, method=method)
-    return {"method": result.method, "held_out": label, **_model_columns(result.model, fit_on),
+    result = identify(fit_on, method=method, model=settings.get("model") or "duhem")
+    model = result.info.get("model") or getattr(result.model, "kind", "")
+    return {"method": result.method, "model": model, "held_out": label,
+            **_model_columns(result.model, fit_on),
             **_held_out_columns(result.model, fit_on, held)}
 
 

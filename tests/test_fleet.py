@@ -188,3 +188,21 @@ def test_sources_and_refusals(fleet_dir, tmp_path):
     with pytest.raises(FleetError, match="not written by hystid fleet"):
         run_fleet([Job("x", "x.csv")], foreign, progress=False)
     assert (foreign / "identify.csv").read_text() == "a,b\n1,2\n"
+
+
+def test_a_job_takes_any_member_of_the_model_family(fleet_dir):
+    """The fleet identifies through the one ``identify(model=..., method=...)``: a PI member's
+    row carries its own parameters and names the member; a bad name is a failed row."""
+    from hystid.fleet import run_job
+    from hystid.records import load_record
+
+    job = Job("offset", str(fleet_dir / "offset.csv"), (str(fleet_dir / "held" / "offset.npz"),))
+    row = run_job(job, "identify", {"model": "pi-stage"})
+    assert row["status"] == "ok", row["error"]
+    assert row["model"] == "pi-stage" and "param_mu0" in row
+    record = load_record(job.train)
+    direct = identify(record, model="pi-stage")
+    assert row["param_mu0"] == pytest.approx(direct.model.params["mu0"], rel=1e-9)
+    assert row["samples"] == record.n
+    bad = run_job(job, "identify", {"model": "bouc"})
+    assert bad["status"] == "failed" and "model: expected 'auto' or one of" in bad["error"]

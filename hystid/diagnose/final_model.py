@@ -28,7 +28,7 @@ from ..records import Record
 __all__ = ["FINAL_MEMBERS", "FinalModel", "final_model"]
 
 #: The members tried as the hysteresis itself (besides the nominal Duhem sandwich).
-FINAL_MEMBERS = ("pi-stage",)
+FINAL_MEMBERS = ("gduhem", "pi-stage")
 #: A candidate replaces a simpler one only when it is better by more than this share.
 MARGIN = 0.1
 

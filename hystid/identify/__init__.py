@@ -123,6 +123,7 @@ def identify(
         result = _run_recursive(record, method, structure, progress, settings)
     if selection is not None:
         result.info["structure_selection"] = selection
+    result.info.setdefault("model", "duhem")
     return result
 
 
@@ -144,7 +145,9 @@ def _identify_member(record: Record, method: str, structure: Any, model: str,
     if chosen.kind == "pi" and method not in ("batch", "online"):
         raise ValueError(f"method: the PI sandwich is identified by 'batch' or 'online' (its "
                          f"recursive identifier), got {method!r}")
-    return chosen.fit(record, method, progress=progress, **settings)
+    result = chosen.fit(record, method, progress=progress, **settings)
+    result.info["model"] = chosen.name
+    return result
 
 
 def _run_recursive(record: Record, method: str, structure: Structure | None,
