@@ -133,3 +133,15 @@ def test_get_params_rebuilds_an_equal_estimator(name, record):
     with pytest.raises(ValueError, match="unknown parameter"):
         est.set_params(not_a_setting=1)
     assert est.set_params(**{first: params[first]}) is est
+
+
+@pytest.mark.parametrize("name", ESTIMATORS)
+def test_fit_is_written_once_in_the_base(name):
+    """``fit`` is the base's (restart, then ``partial_fit``); an estimator adapts its restart
+    (``_restart``), never the whole-record run itself."""
+    from hystid.identify.base import Estimator
+
+    cls = type(ESTIMATORS[name]())
+    owners = [k.__name__ for k in cls.__mro__ if "fit" in vars(k)]
+    assert owners == ["Estimator"], owners
+    assert cls.fit is Estimator.fit

@@ -201,8 +201,14 @@ class Estimator(ABC):
         IdentificationResult
             The estimate with its history; the same for two calls on the same record.
         """
-        self.reset()
+        self._restart(record)
         return self.partial_fit(record, progress=progress)
+
+    def _restart(self, record: Any) -> None:
+        """Back to the start before a whole-record :meth:`fit` (:meth:`reset`); estimators
+        whose start depends on the record (its range, its first samples) override this, never
+        :meth:`fit` itself."""
+        self.reset()
 
     @property
     @abstractmethod

@@ -545,27 +545,10 @@ class KalmanIdentifier(Estimator):
             return self
         return self.initialize()
 
-    def fit(
-        self, record: Record, progress: Callable[[int, int], None] | None = None
-    ) -> IdentificationResult:
-        """Restart (:meth:`initialize`, with the record's prefix for ``theta0="linear"``) and
-        run the filter over a whole record.
-
-        Parameters
-        ----------
-        record : Record
-            Input ``u`` and measured output ``y`` sampled at ``fs``, starting at rest.
-        progress : callable, optional
-            Called as ``progress(k, n)`` every 1 000 samples and at the end.
-
-        Returns
-        -------
-        IdentificationResult
-            See :meth:`partial_fit`.
-        """
+    def _restart(self, record: Record) -> None:
+        """:meth:`initialize`, with the record's prefix for ``theta0="linear"``."""
         record_signals(record, self.fs)
         self.initialize(record if isinstance(self.theta0, str) else None)
-        return self.partial_fit(record, progress=progress)
 
     def partial_fit(
         self, record: Record, progress: Callable[[int, int], None] | None = None

@@ -687,23 +687,9 @@ class PIStageOnline(Estimator):
         self.resolve_seconds_ += time.perf_counter() - t0
 
     # ----------------------------------------------------------------- a record
-    def fit(self, record: Record,
-            progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
-        """Restart (:meth:`reset`) and run over a whole record.
-
-        Parameters
-        ----------
-        record : Record
-            Input and measured output at :attr:`fs`, with more excited samples than the
-            warm-up.
-        progress : callable, optional
-            Called as ``progress(k, n)`` after each chunk of samples.
-
-        Returns
-        -------
-        IdentificationResult
-            As :meth:`partial_fit`.
-        """
+    def _restart(self, record: Record) -> None:
+        """:meth:`reset`, and a record refused whose excited part is shorter than the
+        warm-up."""
         u, _, name = record_signals(record, self.fs)
         self.reset()
         moved = np.flatnonzero(np.abs(u - u[0]) > 1e-6 * max(float(self.thresholds[-1]),
@@ -712,7 +698,6 @@ class PIStageOnline(Estimator):
             raise ValueError(f"record {name!r}: {len(u) - (moved[0] if len(moved) else len(u))}"
                              f" excited samples are too few for the on-line PI identifier "
                              f"(expected more than the warm-up, {self.warmup})")
-        return self.partial_fit(record, progress=progress)
 
     def partial_fit(self, record: Record,
                     progress: Callable[[int, int], None] | None = None) -> IdentificationResult:

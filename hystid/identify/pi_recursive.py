@@ -615,24 +615,9 @@ class PIRecursiveIdentifier(Estimator):
                       self._p, self._SP, start, y, history, errors, yhats, self._K)
 
     # ----------------------------------------------------------------- a record
-    def fit(
-        self, record: Record, progress: Callable[[int, int], None] | None = None
-    ) -> IdentificationResult:
-        """Restart (:meth:`reset`) and run over a whole record, from rest.
-
-        Parameters
-        ----------
-        record : Record
-            Input ``u`` and measured output ``y`` at :attr:`fs`; it must hold more samples than
-            the warm-up.
-        progress : callable, optional
-            Called as ``progress(k, n)`` after each chunk of samples.
-
-        Returns
-        -------
-        IdentificationResult
-            As :meth:`partial_fit`; the same for two calls on the same record.
-        """
+    def _restart(self, record: Record) -> None:
+        """:meth:`reset`, thresholds placed over the record's range when not given, and a record
+        refused that is shorter than the warm-up."""
         u, _, name = record_signals(record, self.fs)
         self.reset()
         self._place(u)
@@ -646,7 +631,6 @@ class PIRecursiveIdentifier(Estimator):
                         "of the thresholds: the warm-up lasts until it has")
             raise ValueError(f"record {name!r}: {len(u)} samples are too few for the PI "
                              f"recursion (expected at least {need})")
-        return self.partial_fit(record, progress=progress)
 
     def _place(self, u: np.ndarray) -> None:
         """Start with the given thresholds, or with thresholds placed over ``u``'s range."""
