@@ -30,8 +30,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["as_layout", "is_plain", "jacobian_block", "offsets", "shape_offsets", "shape_terms",
-           "simulate_into", "sensitivities_into", "step", "step_sens", "step_sens_row"]
+__all__ = ["as_layout", "duhem_w2", "is_plain", "jacobian_block", "offsets", "shape_offsets",
+           "shape_terms", "simulate_into", "sensitivities_into", "step", "step_sens",
+           "step_sens_row"]
 
 
 @njit(cache=True)
@@ -110,6 +111,16 @@ def sgn(x):
     return 0.0
 
 
+@njit(cache=True, inline="always")
+def duhem_w2(alpha, f0, f1, g0, w1p, w2p, dw1):
+    """The paper's eq. (7): ``w2(k)`` from ``w2(k-1)``, ``w1(k-1)`` and ``dw1(k)``.
+
+    The one compiled writing of the plain block's step: :func:`step` and the Duhem inverse
+    (:mod:`hystid.compensate.duhem_inverse`) call it.
+    """
+    return w2p + alpha * (f0 * sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g0 * dw1
+
+
 @njit(cache=True)
 def step(theta, layout, U, W1, W2, Y, k):
     """Compute w1(k), w2(k), y(k) at index ``k`` from the entries before it (eqs. 1, 7, 2)."""
@@ -131,7 +142,7 @@ def step(theta, layout, U, W1, W2, Y, k):
     w2p = W2[k - 1]
     dw1 = w1 - w1p
     if is_plain(layout):
-        W2[k] = w2p + alpha * (f0 * sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g0 * dw1
+        W2[k] = duhem_w2(alpha, f0, f1, g0, w1p, w2p, dw1)
     else:
         A, F, G, dF, dG = shape_terms(theta, layout, w1p, sgn(dw1))
         W2[k] = w2p + A * (f0 * sgn(w1p) + F - w2p) * abs(dw1) + G * dw1

@@ -59,7 +59,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..kernels import sgn
+from ..kernels import duhem_w2, sgn
 
 __all__ = [
     "BOUND",
@@ -91,8 +91,7 @@ def duhem_gap(w1p, w2p, f0, f1):
 @njit(cache=True)
 def duhem_forward(w1, w1p, w2p, alpha, f0, f1, g0):
     """``w2(k)`` from ``w1(k)`` and the state ``w1(k-1), w2(k-1)`` (eq. 7)."""
-    d = w1 - w1p
-    return w2p + alpha * duhem_gap(w1p, w2p, f0, f1) * abs(d) + g0 * d
+    return duhem_w2(alpha, f0, f1, g0, w1p, w2p, w1 - w1p)
 
 
 @njit(cache=True)
