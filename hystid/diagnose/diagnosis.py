@@ -413,6 +413,7 @@ def diagnose(
         o = outcomes[best]
         o.status, o.round = "accepted", rnd
         o.params = effect_dict(rf.phi, [best])[best]
+        o.at_bound = [b for b in rf.at_bound if b.startswith(f"{best}.")]
         o.rms_train_after, o.rms_val_after, o.test = ev_best.rms_train, ev_best.rms_val, test
         o.cumulative = {"rms_val_before": rms_before, "rms_val": ev_best.rms_val,
                         "p_value": test["p_value"], "rel_reduction": test["rel_reduction"]}

@@ -179,6 +179,22 @@ def duhem_margin(theta: np.ndarray, structure, phi: np.ndarray, w1: np.ndarray) 
     return float(alpha * (1.0 + abs(phi[8]) + abs(phi[27])) * np.max(np.abs(level) * dw))
 
 
+#: A fitted parameter within this share of its range's width from a bound is at the bound.
+AT_BOUND = 1e-3
+#: Bounds that are physics (a creep gain is not negative, a curve stays monotone, a dead time
+#: stays within the kernel's buffer, a time constant within the record), never widened.
+PHYSICAL_BOUNDS = frozenset({0, 1, 7, 11, 15, 16, 17, 18, 23, 24})
+#: How a guessed range widens by a factor ``w``: gains and asymmetries linearly about zero (an
+#: asymmetry stays below 1), log-ranges by ``log w`` upwards (a damping at most 1).
+WIDENABLE = {
+    4: lambda lo, hi, w: (lo * w, hi * w),
+    19: lambda lo, hi, w: (lo * w, hi * w),
+    6: lambda lo, hi, w: (lo, min(hi + np.log(w), 0.0)),
+    10: lambda lo, hi, w: (lo - np.log(w), hi + np.log(w)),
+    22: lambda lo, hi, w: (lo - np.log(w), hi + np.log(w)),
+}
+
+
 class Parametrisation:
     """``z`` <-> (theta, phi) for the nominal parameters and a set of active effects.
 
@@ -199,10 +215,15 @@ class Parametrisation:
         Whether the nominal parameters are free (False: the effects' parameters alone). With
         them, the sensor offset (:data:`NOMINAL_SLOTS`) is free too: it is a parameter of the
         nominal model, as in :func:`hystid.identify.offline.fit_output_error`.
+    widen : float
+        Factor on the search ranges of the forms whose bounds are a guess, not physics
+        (:data:`WIDENABLE`: mode gains and damping, rate limits); 1 for the default ranges.
     """
 
     def __init__(self, model: DuhemSandwich, active: Sequence[str], duration: float,
-                 step_scale: float = 1.0, w1_scale: float = 1.0, free_theta: bool = True) -> None:
+                 step_scale: float = 1.0, w1_scale: float = 1.0, free_theta: bool = True,
+                 widen: float = 1.0) -> None:
+        self.widen = float(widen)
         self.structure = model.structure
         self.fs = model.fs
         self.active = tuple(active)
@@ -285,7 +306,44 @@ class Parametrisation:
             28: (-0.95, 0.95),
             29: (-0.95, 0.95),
         }
-        return table.get(slot, (-np.inf, np.inf))
+        lo, hi = table.get(slot, (-np.inf, np.inf))
+        if self.widen != 1.0 and slot in WIDENABLE:
+            lo, hi = WIDENABLE[slot](lo, hi, self.widen)
+        return lo, hi
+
+    def at_bound(self, z: np.ndarray, share: float = AT_BOUND) -> list[str]:
+        """The effect parameters that sit at a bound of their search range.
+
+        Parameters
+        ----------
+        z : ndarray
+            Search coordinates.
+        share : float
+            Closeness to a bound, as a share of the range's width.
+
+        Returns
+        -------
+        list of str
+            ``"form.param (value at its upper|lower bound)"`` for each such parameter of the
+            active forms.
+        """
+        lo, hi = self.bounds()
+        out = []
+        for form in self.active:
+            e = EFFECTS[form]
+            for name, slot in zip(e.params, e.slots, strict=True):
+                if slot not in self.slots:
+                    continue
+                i = self.ntheta + self.slots.index(slot)
+                a, b = lo[i], hi[i]
+                if not (np.isfinite(a) and np.isfinite(b)) or slot in PHYSICAL_BOUNDS:
+                    continue
+                side = ("upper" if z[i] >= b - share * (b - a) else
+                        "lower" if z[i] <= a + share * (b - a) else "")
+                if side:
+                    out.append(f"{form}.{name} ({self._inv(slot, z[i]):.4g} at its {side} "
+                               "bound)")
+        return out
 
     def to_z(self, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
         """Search coordinates of a parameter pair.
@@ -366,6 +424,11 @@ class RefitResult:
         Residual evaluations (Jacobian columns counted).
     margin : float
         ``alpha |dw1|`` of condition (8) at the solution.
+    at_bound : list of str
+        The effect parameters at a bound of their search range
+        (:meth:`Parametrisation.at_bound`).
+    widen : float
+        The factor the guessed search ranges were widened by (1: the default ranges).
     """
 
     theta: np.ndarray
@@ -375,6 +438,8 @@ class RefitResult:
     message: str
     nfev: int = 0
     margin: float = float("nan")
+    at_bound: list[str] = field(default_factory=list)
+    widen: float = 1.0
 
 
 class _Problem:
@@ -441,7 +506,8 @@ def _judge(problem: _Problem, z: np.ndarray, message: str) -> RefitResult:
     elif not margin < 2.0:
         ok, msg = False, (f"the solution leaves the Duhem stability condition (8) "
                           f"(alpha |dw1| reaches {margin:.3g}, expected < 2)")
-    return RefitResult(theta, phi, cost, ok, msg, problem.calls, margin)
+    return RefitResult(theta, phi, cost, ok, msg, problem.calls, margin,
+                       problem.par.at_bound(z))
 
 
 def refit(
@@ -457,6 +523,7 @@ def refit(
     effect_nfev: int = 15,
     joint_starts: int = 1,
     profile: np.ndarray | None = None,
+    widen: float = 1.0,
 ) -> RefitResult:
     """Least-squares refit of the nominal parameters and the active effects' parameters.
 
@@ -495,6 +562,8 @@ def refit(
         less its projection on them, i.e. with the held parameters' linear response profiled
         out, so that the new effect does not take the place of what they would absorb (a
         creep left alone with the nominal parameters held turns into a slow ramp).
+    widen : float
+        Factor on the guessed search ranges (see :class:`Parametrisation`).
 
     Returns
     -------
@@ -509,7 +578,8 @@ def refit(
     calls = 0
     messages: list[str] = []
     if new:
-        par_e = Parametrisation(model, new, duration, step_scale, w1_scale, free_theta=False)
+        par_e = Parametrisation(model, new, duration, step_scale, w1_scale, free_theta=False,
+                                widen=widen)
         found = []
         for phi0 in starts:
             problem = _Problem(model, data, par_e, phi0, profile)
@@ -528,7 +598,7 @@ def refit(
         joint_from = [phi for _, phi in found[:max(joint_starts, 1)]]
     else:
         joint_from = [np.array(starts[0], float)]
-    par = Parametrisation(model, active, duration, step_scale, w1_scale)
+    par = Parametrisation(model, active, duration, step_scale, w1_scale, widen=widen)
     best: RefitResult | None = None
     for phi0 in joint_from:
         joint = _Problem(model, data, par, phi0)
@@ -546,4 +616,5 @@ def refit(
         return RefitResult(model.theta.copy(), joint_from[0], np.inf, False,
                            "; ".join(messages), calls)
     best.nfev = calls
+    best.widen = widen
     return best

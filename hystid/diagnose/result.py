@@ -69,6 +69,10 @@ class EffectOutcome:
         :data:`ALIKE`): the records cannot tell them apart.
     family : str
         The effect family the form belongs to.
+    at_bound : list of str
+        Its fitted parameters that ended at a bound of their search range, after the guessed
+        ranges were widened (:data:`hystid.diagnose.rounds.WIDEN`): the form does not fit the
+        data well, whatever it stands for.
     """
 
     name: str
@@ -85,6 +89,7 @@ class EffectOutcome:
     cumulative: dict[str, float] | None = None
     alike: dict[str, float] = field(default_factory=dict)
     family: str = ""
+    at_bound: list[str] = field(default_factory=list)
 
     @property
     def accepted(self) -> bool:
@@ -117,6 +122,7 @@ class EffectOutcome:
             "cumulative": self.cumulative,
             "alike": self.alike,
             "message": self.message,
+            "at_bound": self.at_bound,
         })
 
 
@@ -341,6 +347,10 @@ def summary_text(result: DiagnosisResult) -> str:
                              f"{c['rms_val_before']:.4g} -> {c['rms_val']:.4g}{unit} "
                              f"({100 * c['rel_reduction']:+.1f} %, p = {c['p_value']:.2g}); "
                              f"gap closed so far {_pct(c.get('gap_closed'))}")
+                if e.at_bound:
+                    lines.append(f"    at a bound of its range (widened): "
+                                 f"{'; '.join(e.at_bound)} -- the form does not fit the data "
+                                 "well; it may stand in for something else")
         lines.append(f"final: held-out RMS {result.nominal['rms_val']:.4g} -> "
                      f"{result.final['rms_val']:.4g}{unit} "
                      f"({_pct(result.final['gap_closed'])} of the gap to the {floor['kind']} "

@@ -38,6 +38,8 @@ DEFAULT_EFFECTS = tuple(n for n in EFFECT_NAMES if n not in IN_NOMINAL)
 #: A later round runs only when the reduction it needs leaves the held-out RMS above this share
 #: of the floor (no model explains the sensor noise).
 NOISE_REACH = 0.9
+#: Factor an accepted form's guessed search ranges widen by when a parameter ends at a bound.
+WIDEN = 4.0
 
 #: Fewest samples in the train part and in the held-out part.
 MIN_TRAIN_SAMPLES = 2000
@@ -370,6 +372,16 @@ class _Greedy:
                       max_nfev=60)
         if not whole.ok:
             return head
+        if any(b.startswith(f"{name}.") for b in whole.at_bound):
+            say(f"{name}: {'; '.join(whole.at_bound)}; refitting with the ranges widened "
+                f"{WIDEN:g}x")
+            wide = refit(start, tr, active, [whole.phi], base_phi=whole.phi,
+                         step_scale=self.ev.scales[0], w1_scale=self.ev.scales[1],
+                         max_nfev=60, widen=WIDEN)
+            if wide.ok and wide.cost < whole.cost:
+                whole = wide
+            else:
+                whole.widen = WIDEN  # tried: the wider range did not fit better
         m = DuhemSandwich(whole.theta, self.model.structure, fs=self.model.fs)
         ev_w = ev(m, whole.phi, self.drift or name == "drift")
         if not ev_w.finite:
@@ -540,8 +552,13 @@ def _extends(name: str, active: list[str]) -> bool:
 
 def _candidate_info(name: str, rf: RefitResult, test: dict, ev: _Evaluation) -> dict[str, Any]:
     """A refitted form's figures in a round's record."""
-    return {"status": "refitted", "rms_val_after": ev.rms_val, "p_value": test["p_value"],
-            "rel_reduction": test["rel_reduction"], "params": effect_dict(rf.phi, [name])[name]}
+    out = {"status": "refitted", "rms_val_after": ev.rms_val, "p_value": test["p_value"],
+           "rel_reduction": test["rel_reduction"], "params": effect_dict(rf.phi, [name])[name]}
+    if rf.at_bound:
+        out["at_bound"] = list(rf.at_bound)
+    if rf.widen != 1.0:
+        out["widened"] = rf.widen
+    return out
 
 
 def _held_out_test(state: _Greedy, name: str, ev: _Evaluation) -> dict[str, float]:
