@@ -12,8 +12,33 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-__all__ = ["PAPER_TRANSIENT_S", "Validation", "error_scale", "plot_convergence", "plot_validation",
-           "validate", "zoom_window", "noise_level", "LOOP_SPAN"]
+__all__ = ["PAPER_TRANSIENT_S", "Validation", "error_scale", "gap_closed", "plot_convergence",
+           "plot_validation", "validate", "zoom_window", "noise_level", "LOOP_SPAN"]
+
+
+def gap_closed(nominal: float, value: float, floor: float) -> float:
+    """The one definition of the gap closed: ``(nominal - value) / (nominal - floor)``.
+
+    The gap is what separates the nominal model's held-out RMS from the floor (sensor noise or
+    the repeatability of the stage, whichever is higher); a model scored alike closes this
+    share of it (1: down to the floor; negative: worse than the nominal model).
+
+    Parameters
+    ----------
+    nominal : float
+        The nominal model's held-out RMS.
+    value : float
+        The other model's held-out RMS, scored as the nominal one was.
+    floor : float
+        The floor.
+
+    Returns
+    -------
+    float
+        The share; 0 when the nominal model is already at the floor.
+    """
+    gap = nominal - floor
+    return float((nominal - value) / gap) if gap > 0 else 0.0
 
 #: The paper drops the first 0.0017 s of the validation (51 samples at 30 kHz).
 PAPER_TRANSIENT_S = 0.0017

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..identify.result import IdentificationResult
+from ..metrics import gap_closed
 from ..model import DuhemSandwich, Structure
 from ..records import Record
 from ..validate import check_plain_duhem
@@ -426,10 +427,8 @@ def diagnose(
     floor = {"noise_floor_rms": nf, "repeat_floor_rms": repeat,
              "rms": max(nf, repeat) if repeat is not None else nf,
              "kind": "repeatability" if repeat is not None and repeat > nf else "sensor noise"}
-    gap = nom.rms_val - floor["rms"]
-
     def closed(rms):
-        return float((nom.rms_val - rms) / gap) if gap > 0 else 0.0
+        return gap_closed(nom.rms_val, rms, floor["rms"])
 
     for o in outcomes.values():
         if o.rms_val_after is not None:
@@ -449,7 +448,8 @@ def diagnose(
 
     base_placed = placed(base_model, phi0)
     aug = AugmentedSandwich(placed(state.model, state.phi), final_effects)
-    nominal_info = {"rms_val": nom.rms_val, "rms_train": nom.rms_train, "gap": gap,
+    nominal_info = {"rms_val": nom.rms_val, "rms_train": nom.rms_train,
+                    "gap": nom.rms_val - floor["rms"],
                     "params": base_model.params, "name": nominal.name,
                     "admissibility": admissibility, "margin_val": nom.margin_val}
     if first_fit is not None:

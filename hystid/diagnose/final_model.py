@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..baselines import rest_zero, simulate_from_rest
+from ..metrics import gap_closed
 from ..records import Record
 
 __all__ = ["FINAL_MEMBERS", "FinalModel", "final_model"]
@@ -174,10 +175,8 @@ def final_model(
         rms = _scores(model, held)
         rows.append({"candidate": name, "what": what, "rms": rms,
                      "mean_rms": float(np.mean(rms))})
-    nominal = rows[0]["mean_rms"]
-    gap = nominal - floor
     for r in rows:
-        r["gap_closed"] = float((nominal - r["mean_rms"]) / gap) if gap > 0 else 0.0
+        r["gap_closed"] = gap_closed(rows[0]["mean_rms"], r["mean_rms"], floor)
     chosen = rows[0]
     for r in rows[1:]:
         if r["mean_rms"] < (1.0 - margin) * chosen["mean_rms"]:

@@ -369,8 +369,9 @@ class Where:
     series: dict = field(default_factory=dict, repr=False)
 
     @property
-    def gap(self) -> float:
-        """RMS error above the noise floor."""
+    def above_noise(self) -> float:
+        """RMS error less the sensor-noise floor (the gap itself is measured to the higher of
+        the noise and the repeatability floors, :func:`hystid.metrics.gap_closed`)."""
         return self.rms - self.noise["rms"]
 
     def to_dict(self) -> dict[str, Any]:
@@ -384,7 +385,7 @@ class Where:
         return {
             "rms": self.rms,
             "noise_floor_rms": self.noise["rms"],
-            "gap": self.gap,
+            "above_noise": self.above_noise,
             "noise": self.noise,
             "time": self.time,
             "frequency": self.frequency,
@@ -718,9 +719,10 @@ def noise_floor_of(segments: list[Segment]) -> dict:
 def _findings(w: Where) -> list[str]:
     out: list[tuple[float, str]] = []
     nf = w.noise["rms"]
-    gap = w.rms - nf
-    out.append((1e9, f"held-out RMS error {w.rms:.4g} against a noise floor of {nf:.4g} "
-                     f"(gap {gap:.3g}, {100 * gap / max(w.rms, 1e-300):.0f} % of the error)"))
+    above = w.above_noise
+    out.append((1e9, f"held-out RMS error {w.rms:.4g} against a sensor-noise floor of {nf:.4g} "
+                     f"({above:.3g} above it, {100 * above / max(w.rms, 1e-300):.0f} % of the "
+                     "error)"))
     if w.rms < 1.05 * nf:
         out.append((1e8, "the error is at the noise floor: nothing to localise"))
         return [s for _, s in sorted(out, key=lambda x: -x[0])]
