@@ -90,8 +90,10 @@ class FinalModel:
         -------
         list of str
         """
-        lines = ["model the diagnosis ends in (mean held-out RMS, each record zeroed on its "
-                 "rest output):"]
+        lines = ["model the diagnosis ends in (mean held-out RMS, each record run whole from rest "
+                 "and zeroed on its rest output, as hystid.baselines.compare scores; the rounds "
+                 "above score after the transient, from the record's level, so their RMS and "
+                 "gap closed differ for the same model):"]
         for r in self.rows:
             mark = "  <- model.json" if r["candidate"] == self.chosen else ""
             lines.append(f"  {r['candidate']:<28} {r['mean_rms']:.4g} {unit}, "
