@@ -21,7 +21,7 @@ from _common import table, write_json
 from bench_stage_a import STAGE_A
 
 from hystid.diagnose import diagnose
-from hystid.diagnose.final_model import final_model
+from hystid.diagnose.final_model import FINAL_MEMBERS, final_model
 from hystid.records import load_record
 
 #: The README blocks this script renders (see ``benchmarks/readme.py``).
@@ -29,13 +29,15 @@ README_BLOCKS = {"stage-a-diagnosis": "render"}
 COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_stage_a_diagnosis.py"
 
 
-def measure(quick: bool = False) -> dict:
+def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS) -> dict:
     """Diagnose prbn_1 against each held-out input and keep the final model's figures.
 
     Parameters
     ----------
     quick : bool
         The triangle only.
+    members : tuple of str
+        The members tried as the hysteresis itself (the diagnosis' default by default).
 
     Returns
     -------
@@ -55,7 +57,7 @@ def measure(quick: bool = False) -> dict:
             t0 = time.perf_counter()
             res = diagnose(train, [val], repeats=[rep], progress=False)
             t1 = time.perf_counter()
-            final = final_model(res, train, [val])
+            final = final_model(res, train, [val], members=members)
             t2 = time.perf_counter()
         rows.append({"val": val.name, "accepted": list(res.accepted),
                      "diagnosis": {"nominal": res.nominal["rms_val"],
@@ -103,10 +105,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="the triangle only")
+    parser.add_argument("--members", default=",".join(FINAL_MEMBERS),
+                        help="members tried as the hysteresis itself, comma-separated (default "
+                        f"{','.join(FINAL_MEMBERS)}; the README block is of the default)")
     args = parser.parse_args()
-    payload = measure(args.quick)
+    members = tuple(m.strip() for m in args.members.split(",") if m.strip())
+    payload = measure(args.quick, members)
     print(render(payload))
-    print(f"\nwritten {write_json('stage_a_diagnosis', payload)}")
+    name = "stage_a_diagnosis" if members == FINAL_MEMBERS else "stage_a_diagnosis_members"
+    print(f"\nwritten {write_json(name, payload)}")
 
 
 if __name__ == "__main__":
