@@ -1,7 +1,8 @@
 """Gross faults of a record that the fit cannot see: warned about, never silently fitted.
 
 Each check is robust (median absolute deviations, quantiles) and returns sentences for the
-identification's warnings; none changes the data or the fit:
+identification's warnings; none changes the data (the batch fits leave a burst's samples out of
+their cost, :func:`burst_spans`):
 
 * :func:`output_bursts` -- the output leaps away and back within a short stretch while the
   input moves smoothly (a sensor glitch, a loose connector);
@@ -13,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BURST_SIGMAS", "DRIFT_SHARE", "output_bursts", "output_is_drift", "record_warnings"]
+__all__ = ["BURST_SIGMAS", "DRIFT_SHARE", "burst_spans", "output_bursts", "output_is_drift",
+           "record_warnings"]
 
 #: A leap of the output is this many robust standard deviations of its sample-to-sample steps.
 BURST_SIGMAS = 20.0
@@ -41,6 +43,28 @@ def output_bursts(u: np.ndarray, y: np.ndarray, longest: float = 0.1) -> list[st
     list of str
         One sentence per burst found (at most three).
     """
+    return [note for _, note in _bursts(u, y, longest)]
+
+
+def burst_spans(u: np.ndarray, y: np.ndarray, longest: float = 0.1) -> list[tuple[int, int]]:
+    """The samples of each burst of :func:`output_bursts`, ``(first, stop)``.
+
+    Parameters
+    ----------
+    u, y : ndarray
+        Input and output samples.
+    longest : float
+        Longest burst, as a share of the record.
+
+    Returns
+    -------
+    list of (int, int)
+        The first sample away and the first sample back, per burst.
+    """
+    return [span for span, _ in _bursts(u, y, longest)]
+
+
+def _bursts(u: np.ndarray, y: np.ndarray, longest: float) -> list[tuple[tuple[int, int], str]]:
     if len(y) < 8:
         return []
     dy, du = np.diff(y), np.abs(np.diff(u))
@@ -56,10 +80,11 @@ def output_bursts(u: np.ndarray, y: np.ndarray, longest: float = 0.1) -> list[st
                 and np.sign(dy[j]) == -np.sign(dy[k]) and abs(dy[j]) > 0.5 * abs(dy[k])]
         if back:
             j = back[0]
-            out.append(f"the output leaps by {dy[k]:+.4g} at sample {k + 1} and back by "
-                       f"{dy[j]:+.4g} at sample {j + 1} ({j - k} samples) while the input "
-                       "moves smoothly: a sensor glitch? the fit follows it; crop it out "
-                       "(--crop) or clean the record")
+            out.append(((k + 1, j + 1),
+                        f"the output leaps by {dy[k]:+.4g} at sample {k + 1} and back by "
+                        f"{dy[j]:+.4g} at sample {j + 1} ({j - k} samples) while the input "
+                        "moves smoothly: a sensor glitch? the batch fits leave those samples "
+                        "out (crop them, --crop, or clean the record)"))
         if len(out) == 3:
             break
     return out

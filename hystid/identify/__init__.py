@@ -95,13 +95,27 @@ def identify(
     methods run on the record less its rest level (input) and its output at rest, which is
     taken from the leading rest segment (see :mod:`hystid.identify.prepare`).
     """
-    from ..validate import check_delays_fit
-
     _check_call(record, structure)
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    from .prepare import without_input_glitches
+
+    record, mended = without_input_glitches(record)
     if model != "duhem":
-        return _identify_member(record, method, structure, model, progress, settings)
+        result = _identify_member(record, method, structure, model, progress, settings)
+    else:
+        result = _identify_duhem(record, method, structure, progress, settings)
+    if mended:
+        result.info["warnings"] = mended + list(result.info.get("warnings", []))
+    return result
+
+
+def _identify_duhem(record: Record, method: str, structure: Any,
+                    progress: Callable[[int, int], None] | None,
+                    settings: dict) -> IdentificationResult:
+    """``identify`` for the Duhem sandwich (its structure given, or chosen with ``"auto"``)."""
+    from ..validate import check_delays_fit
+
     selection = None
     if isinstance(structure, str):
         if structure != "auto":

@@ -34,10 +34,10 @@ import numpy as np
 
 from ..operating import Envelope
 from ..records import Record
-from ..records_checks import record_warnings
+from ..records_checks import burst_spans, record_warnings
 
 __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "check_excitation",
-           "prepare", "rest_level", "scales"]
+           "input_glitches", "prepare", "rest_level", "scales", "without_input_glitches"]
 
 #: Samples of a leading constant segment needed to call a record "at rest".
 REST_SAMPLES = 10
@@ -273,6 +273,84 @@ def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
     return far | spike | pinned, notes
 
 
+#: Longest run of input samples taken for a recording glitch (a stage is not driven that way).
+MAX_GLITCH = 3
+
+
+def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]], list[str]]:
+    """Runs of input samples that were recorded wrong: the stage never saw them.
+
+    A run of at most :data:`MAX_GLITCH` samples, inside the record, more than
+    :data:`FAR_SPREADS` input spreads (2 % to 98 % quantiles) from the median input, while the
+    output over the run and the samples after it stays within the spread of its own
+    sample-to-sample steps (an input that really went there would move the stage). A model run
+    through such a sample would carry its memory (the hysteresis state, the filters) for the
+    rest of the record.
+
+    Parameters
+    ----------
+    u, y : ndarray
+        Input and output samples.
+
+    Returns
+    -------
+    runs : list of (int, int)
+        ``(first, stop)`` of each run.
+    notes : list of str
+        One sentence per run.
+    """
+    lo, med, hi = np.quantile(u, [0.02, 0.5, 0.98])
+    spread = max(float(hi - lo), 1e-300)
+    far = np.abs(u - med) > FAR_SPREADS * spread
+    runs, notes = [], []
+    step = float(np.quantile(np.abs(np.diff(y)), 0.99)) if len(y) > 1 else 0.0
+    k = 0
+    while k < len(u):
+        if not far[k]:
+            k += 1
+            continue
+        stop = k
+        while stop < len(u) and far[stop]:
+            stop += 1
+        inside = k > 0 and stop < len(u)
+        if inside and stop - k <= MAX_GLITCH:
+            window = y[k - 1:min(len(y), stop + 5 * MAX_GLITCH)]
+            if np.max(np.abs(window - y[k - 1])) <= 3.0 * max(step, 1e-300) * (stop - k + 1):
+                runs.append((k, stop))
+                notes.append(f"the input reads {u[k]:.4g} at sample {k}"
+                             + (f" (to {stop - 1})" if stop - k > 1 else "")
+                             + f", {abs(u[k] - med) / spread:.0f} input spreads from its median, "
+                             "while the output does not move: a recording glitch; identified "
+                             "with the input interpolated over it")
+        k = stop
+    return runs, notes
+
+
+def without_input_glitches(record: Record) -> tuple[Record, list[str]]:
+    """The record with its input glitches (:func:`input_glitches`) interpolated over.
+
+    Parameters
+    ----------
+    record : Record
+        The record as given (left unchanged).
+
+    Returns
+    -------
+    Record
+        The same record when there is no glitch, else a copy with the input mended.
+    list of str
+        What was mended.
+    """
+    runs, notes = input_glitches(record.u, record.y)
+    if not runs:
+        return record, []
+    u = np.array(record.u, dtype=float)
+    for k, stop in runs:
+        u[k:stop] = np.interp(np.arange(k, stop), [k - 1, stop], [u[k - 1], u[stop]])
+    return Record(u, record.y.copy(), record.fs, units=dict(record.units),
+                  name=record.name), notes
+
+
 def burn_in(u: np.ndarray, at_rest: bool, limit: float = 0.25, sweeps: float = 2.0) -> int:
     """Leading samples to leave out of the cost of a record that does not start at rest.
 
@@ -325,6 +403,8 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     u_scale, y_med, y_scale = scales(u, y, u_rest)
     bad, notes = bad_samples(y)
     notes += record_warnings(u, y, record.fs)
+    for first, stop in burst_spans(u, y):
+        bad[first:stop] = True
     y_ref = float(np.median(y[:n_lead][~bad[:n_lead]])) if at_rest and (~bad[:n_lead]).any() \
         else y_med
     if not at_rest:
