@@ -9,7 +9,13 @@ the stable inverse of L2.
   (backward in time, which is stable for them), the delay by reading the signal ahead. For a
   minimum-phase block it is the exact inverse; with zeros outside the unit circle it is the
   exact *stable* inverse, which acts before the signal moves (pre-actuation, as long as the
-  slowest of those zeros needs: :attr:`StableInverse.preview`).
+  slowest of those zeros needs: :attr:`StableInverse.preview`). A block resting before the
+  first sample cannot have had the pre-actuation that falls there: the state it would have left
+  is made up over the first :attr:`StableInverse.settle` samples, after which the output is
+  exact.
+* :func:`inverse_filter` is that inverse as a causal filter read with a fixed delay (the
+  anti-causal part a FIR of its impulse response), run by :func:`inverse_run`; with
+  :func:`lti_push` for the other linear stages it is what the exported C step runs too.
 """
 
 from __future__ import annotations
@@ -228,7 +234,17 @@ def lti_push(xl, yl, num, den, x):
 
 @njit(cache=True)
 def lti_run(x, num, den, out):
-    """:func:`lti_push` from rest over ``x`` into ``out`` (``len(out) <= len(x)``)."""
+    """:func:`lti_push` from rest over ``x``.
+
+    Parameters
+    ----------
+    x : ndarray
+        Input samples (at least ``len(out)``).
+    num, den : ndarray
+        As for :func:`lti_push`.
+    out : ndarray
+        Receives the first ``len(out)`` output samples.
+    """
     xl = np.zeros(num.shape[0])
     yl = np.zeros(den.shape[0] - 1)
     for k in range(out.shape[0]):
@@ -246,6 +262,15 @@ def inverse_run(x, num, den, fir, delay, lag, A, B, gain, out):
     fall before sample 0 (pre-actuation the resting block cannot have had): they drive the
     block's state ``A, B`` instead, and ``gain @ state`` is added to the first ``len(gain)``
     values of ``w`` (see :func:`inverse_filter`).
+
+    Parameters
+    ----------
+    x : ndarray
+        The wanted output, deviations from the rest.
+    num, den, fir, delay, lag, A, B, gain
+        The fields of :class:`InverseFilter`.
+    out : ndarray
+        Receives ``w(0) .. w(len(out) - 1)``.
     """
     xl = np.zeros(num.shape[0])
     vl = np.zeros(den.shape[0] - 1)
