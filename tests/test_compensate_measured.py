@@ -158,6 +158,16 @@ def test_non_minimum_phase_l2_is_inverted_stably_and_said():
     assert result.preview > 300  # the planner's look-ahead plus the anti-causal part
 
 
+def test_a_zero_too_near_the_circle_cuts_the_anti_causal_inverse_and_says_so():
+    model = _placed_model(params={"b21": 1.00001}, structure=Structure(n2b=1))  # zero -1.00001
+    y = _quiet(model.simulate, _smooth_input(2000, 500)).y
+    result = hc.compensate(model, y, warn=False)
+    # the cut FIR (one zero: it reads one sample further), L1's delay, the planner's preview
+    assert result.preview == linear_parts.MAX_RUNOUT + 1 + model.structure.q1 \
+        + hc.DEFAULT_PREVIEW
+    assert any("cut at" in w and "approximate" in w for w in result.warnings)
+
+
 def test_reference_off_rest_is_warned_and_anchor_reference_follows_it():
     model = _placed_model()
     y = _quiet(model.simulate, _smooth_input(3000, 500)).y + 0.05  # sensor zero moved 50 nm

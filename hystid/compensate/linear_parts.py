@@ -43,7 +43,7 @@ UNIT_CIRCLE_MARGIN = 1e-6
 ANTICAUSAL_DECAY = 1e-15
 #: Longest anti-causal run-out, in samples (zeros very near the unit circle are cut there); the
 #: anti-causal part costs one multiply-add per sample of it, per sample.
-MAX_RUNOUT = 100_000
+MAX_RUNOUT = 20_000
 #: Longest stretch over which the pre-actuation cut at the start is made up, in samples.
 MAX_SETTLE = 1_000
 
@@ -274,22 +274,23 @@ def inverse_run(x, num, den, fir, delay, lag, A, B, gain, out):
     """
     xl = np.zeros(num.shape[0])
     vl = np.zeros(den.shape[0] - 1)
-    fl = np.zeros(fir.shape[0])
+    nf = fir.shape[0]
+    fl = np.zeros(2 * nf)  # each v twice: the last nf in order at fl[slot + 1 .. slot + nf]
     ns = A.shape[0]
     xs = np.zeros(ns)
     tmp = np.zeros(ns)
     nk = gain.shape[0]
     corr = np.zeros(nk)
-    pre = lag + fir.shape[0] - 1
-    nf = fir.shape[0]
+    pre = lag + nf - 1
+    slot = nf - 1
     for c in range(delay, out.shape[0] + delay + pre):
         v = lti_push(xl, vl, num, den, x[c])
-        for j in range(nf - 1):
-            fl[j] = fl[j + 1]
-        fl[nf - 1] = v
+        slot = slot + 1 if slot + 1 < nf else 0
+        fl[slot] = v
+        fl[slot + nf] = v
         w = 0.0
         for j in range(nf):
-            w += fir[j] * fl[j]
+            w += fir[j] * fl[slot + 1 + j]
         k = c - delay - pre
         if k < 0:  # before sample 0: the block's state the cut pre-actuation would have left
             for i in range(ns):

@@ -55,7 +55,7 @@ from .compensator import (
     _Chain,
     _run,
 )
-from .linear_parts import InverseFilter, dc_delay, inverse_filter, lti_run
+from .linear_parts import MAX_RUNOUT, InverseFilter, dc_delay, inverse_filter, lti_run
 
 __all__ = ["DEFAULT_MARGIN", "Compensation", "CompensationWarning", "compensate",
            "envelope_limits"]
@@ -385,6 +385,11 @@ def compensate(
                      "before the reference does (pre-actuation); what of it would fall before "
                      f"the first sample, where the stage rests, is made up over the first "
                      f"{l2.settle} samples (the output is exact from there on)")
+        if l2.fir.size - 1 >= MAX_RUNOUT:
+            notes.append(f"L2's zeros outside the unit circle lie so near it that its "
+                         f"anti-causal inverse is cut at {MAX_RUNOUT} samples before it has "
+                         "decayed: the inverse is approximate (a reference model that keeps "
+                         "those zeros avoids this)")
     result = Compensation(np.arange(y.size) / model.fs, y, u, y_pred, y_des, run.status,
                           plan.u_limits, int(plan.preview), y_rest,
                           {"u": _unit(model, "u"), "y": _unit(model, "y")},

@@ -413,9 +413,10 @@ void hystid_ff_init(hystid_ff_state *s)
     for (i = 0; i < HYSTID_FF_L2_NY; i++) {
         s->lv[i] = 0.0;
     }
-    for (i = 0; i < HYSTID_FF_L2_NF; i++) {
+    for (i = 0; i < 2 * HYSTID_FF_L2_NF; i++) {
         s->fl[i] = 0.0;
     }
+    s->slot = HYSTID_FF_L2_NF - 1;
     for (i = 0; i < HYSTID_FF_L2_NS; i++) {
         s->xs[i] = 0.0;
     }
@@ -469,13 +470,13 @@ double hystid_ff_step(hystid_ff_state *s, double r)
         return s->u;
     }
     v = hx_lti_push(s->lx, HYSTID_FF_L2_NX, s->lv, HX_FF_L2_ND, hx_ff_l2_num, hx_ff_l2_den, ym);
-    for (j = 0; j < HYSTID_FF_L2_NF - 1; j++) {
-        s->fl[j] = s->fl[j + 1];
-    }
-    s->fl[HYSTID_FF_L2_NF - 1] = v;
+    /* each v twice: the last HYSTID_FF_L2_NF in order at fl[slot + 1 .. slot + NF] */
+    s->slot = s->slot + 1 < HYSTID_FF_L2_NF ? s->slot + 1 : 0;
+    s->fl[s->slot] = v;
+    s->fl[s->slot + HYSTID_FF_L2_NF] = v;
     w = 0.0;
     for (j = 0; j < HYSTID_FF_L2_NF; j++) {
-        w += hx_ff_l2_fir[j] * s->fl[j];
+        w += hx_ff_l2_fir[j] * s->fl[s->slot + 1 + j];
     }
     k -= HX_FF_L2_PRE;
 #if HX_FF_L2_PRE > 0
