@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import signal
 
-from hystid import DuhemSandwich
+import hystid.compensate as hc
+from hystid import DuhemSandwich, Structure
 from hystid.cli import main
-from hystid.compensate import feedforward
-from hystid.compensate.compensator import smoothing_model
-from hystid.export import c_sources, export_c, ff_chain, ff_options, rpem_start
+from hystid.export import c_sources, export_c, ff_options, ff_plan, rpem_start
 from hystid.identify.online import rpem_run
 from hystid.operating import Envelope
 from hystid.pi import PISandwich, PIStructure, pi_thresholds
@@ -136,7 +136,8 @@ def pi_model(placed: bool) -> PISandwich:
     n = 12
     params = {"a11": -0.6, "a12": 0.05, "b12": 0.1, "a21": -1.2, "a22": 0.4, "b22": 0.05,
               **{f"mu{i}": 0.3 / (1 + i) for i in range(n)}}
-    place = {"u_rest": 1.5, "offset": 0.3} if placed else {}
+    place = {"u_rest": 1.5, "offset": 0.3, "envelope": Envelope(0.0, 10.0, 0.5)} if placed \
+        else {}
     return PISandwich(params, pi_thresholds((0.0, 10.0), n), PIStructure(n_operators=n),
                       fs=10_000.0, **place)
 
@@ -183,27 +184,19 @@ def test_model_step_matches_simulate(name, tmp_path):
 
 
 @needs_cc
-def test_model_compensator_and_rpem_match_on_stage_a(tmp_path):
+def test_model_and_rpem_match_on_stage_a(tmp_path):
     """A model identified on measured stage A (rest level -5.34 V, a sensor offset): the
-    model on two records, the compensator (limits widened to the stage's) and the RPEM step
-    warm-started on a record."""
+    model on two records and the RPEM step warm-started on a record."""
     from hystid.records import load_record
 
     model = stage_a_model()
     assert model.u_rest != 0 and model.offset != 0 and model.rest_memory != 0
     prbn = load_record(STAGE_A / "prbn_1.csv")
-    options = {"u_limits": (-120.0, 120.0)}
-    texts = c_sources(model, compensator=options, rpem_record=prbn)
+    texts = c_sources(model, rpem_record=prbn)
     exe = build(texts, tmp_path)
     for rec in (prbn, load_record(STAGE_A / "sine50_1.csv")):
         assert_close(run(exe, "model", rec.u)[:, 0], model.simulate(rec.u, check=False).y)
     sine = load_record(STAGE_A / "sine50_1.csv")
-    r = sine.y[:3_000]  # a measured displacement, record units
-    ff = feedforward(model, r - model.offset, full_output=True, **ff_options(model, **options))
-    D = ff_chain(model, **options).advance
-    out = run(exe, "ff", np.concatenate([r, np.full(D, r[-1])]))
-    assert_close(out[D:, 0], ff.u + model.u_rest)
-    assert not np.all(ff.status & 4)  # not simply saturated
     n = 4_000
     ident = rpem_start(model, prbn)
     history = np.empty((n, len(model.theta)))
@@ -213,47 +206,151 @@ def test_model_compensator_and_rpem_match_on_stage_a(tmp_path):
 
 
 # --------------------------------------------------------------------------- compensator
-def _ff_case(model, r, tmp_path, **options):
-    """The C compensator on a reference in record units against
-    ``feedforward(model, r - offset, **ff_options(model, ...)) + u_rest``."""
-    exe = build(c_sources(model, compensator=options or None), tmp_path)
-    D = ff_chain(model, **options).advance
-    ff = feedforward(model, r - model.offset, full_output=True, **ff_options(model, **options))
+def _ff_case(model, r: np.ndarray, tmp_path: Path, **options) -> hc.Compensation:
+    """The C compensator on a reference in record units, fed the reference and then
+    ``HYSTID_FF_DELAY`` copies of its last value, against ``compensate(model, r, ...)`` sample
+    by sample: the command, the desired output and the status (the first ``HYSTID_FF_DELAY``
+    calls return the rest command)."""
+    texts = c_sources(model, compensator=options or None)
+    exe = build(texts, tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = hc.compensate(model, r, **ff_options(model, **options), warn=False)
+    D = res.preview
+    assert f"#define HYSTID_FF_DELAY {D}\n" in texts["hystid_model.h"]
+    assert D == ff_plan(model, **options).preview
     out = run(exe, "ff", np.concatenate([r, np.full(D, r[-1])]))
-    rest = out[:D]
-    assert np.all(rest[:, 0] == rest[0, 0])
-    assert_close(out[D:, 0], ff.u + model.u_rest)
-    assert_close(out[D:, 1], ff.yd + model.offset)
-    np.testing.assert_array_equal(out[D:, 2].astype(int), ff.status)
-    return ff
+    assert out.shape == (r.size + D, 3)
+    assert np.all(out[:D, 0] == out[0, 0])  # the rest command while the preview is read in
+    assert_close(out[D:, 0], res.u)
+    assert_close(out[D:, 1], res.y_des)
+    np.testing.assert_array_equal(out[D:, 2].astype(int), res.status)
+    assert np.ptp(res.u) > 0
+    return res
+
+
+def triangle(model, amplitude: float, seconds: float = 0.2, hz: float = 20.0) -> np.ndarray:
+    """A triangle scan about the model's output at rest, reached from rest (record units)."""
+    from hystid.compensate.command import scan_for
+
+    return scan_for(model, "triangle", hz, amplitude, seconds)
+
+
+def own_output(model, n: int, seed: int = 0, noise: float = 0.0) -> np.ndarray:
+    """What the model outputs for a smooth input moving from its first sample, with sensor-like
+    noise: a reference that moves at once (the pre-actuation a zero outside the circle needs
+    falls before it)."""
+    env = model.envelope
+    rng = np.random.default_rng(seed)
+    x = signal.filtfilt(*signal.butter(2, 0.01), rng.standard_normal(n))
+    x = np.abs(x - x[0]) / np.max(np.abs(x - x[0]))  # from 0, in 0..1
+    wide = env.u_max - model.u_rest if env.u_max - model.u_rest > model.u_rest - env.u_min \
+        else env.u_min - model.u_rest
+    u = np.clip(model.u_rest + 0.8 * wide * x, env.u_min, env.u_max)
+    y = model.simulate(u, check=False).y
+    return y + noise * np.ptp(y) * rng.standard_normal(n)
+
+
+def nmp_duhem() -> DuhemSandwich:
+    """The placed Duhem model with a zero of L2 outside the unit circle (at -1.5)."""
+    base = placed_duhem()
+    return DuhemSandwich({**base.params, "b21": 1.5}, Structure(n2b=1), fs=base.fs,
+                         name="nmp", u_rest=base.u_rest, offset=base.offset,
+                         rest_memory=base.rest_memory, envelope=base.envelope,
+                         units=base.units)
+
+
+@pytest.fixture(scope="module")
+def pi_stage():
+    """The pi-stage member identified on a simulated stage A (L2 third order, a zero outside
+    the unit circle)."""
+    from hystid.identify import identify
+    from hystid.testing import stage_a_like
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(stage_a_like("prbn", seconds=1.0, rest_seconds=0.5, seed=0),
+                         model="pi-stage").model
+    assert np.any(np.abs(np.roots(model.b2)) > 1.0)
+    return model
 
 
 @needs_cc
-def test_ff_step_matches_feedforward_with_reversal_planning(tmp_path):
-    model = reference_model()
-    t = np.arange(6_000) / model.fs
-    r = 3.5 * (1 - np.cos(2 * np.pi * 20 * t))
-    ff = _ff_case(model, r, tmp_path)
-    assert ff.preview == 300 and np.any(ff.status & 8) and np.any(ff.status == 0)
+def test_ff_step_matches_compensate_with_reversal_planning(tmp_path):
+    model = placed_duhem()
+    res = _ff_case(model, triangle(model, 3.0), tmp_path)
+    assert res.preview == 300 + model.structure.q1 + model.structure.q2
+    assert np.any(res.status & 8) and np.any(res.status == 0)  # far branches taken
+    assert res.u_limits == hc.envelope_limits(model)
 
 
 @needs_cc
-@pytest.mark.parametrize("option", ["exact", "smoother"])
-def test_ff_step_matches_with_a_reference_model(option, tmp_path):
-    model = reference_model()
-    t = np.arange(4_000) / model.fs
-    r = 3.5 * (1 - np.cos(2 * np.pi * 30 * t))
-    M = "exact" if option == "exact" else smoothing_model(31, model.dt)
-    _ff_case(model, r, tmp_path, reference_model=M, u_limits=(-20.0, 20.0))
+def test_ff_step_matches_with_a_reference_model_and_the_reference_anchor(tmp_path):
+    model = placed_duhem()
+    r = triangle(model, 3.0) + 0.05  # the sensor zero moved by 50 nm
+    res = _ff_case(model, r, tmp_path, reference_model=hc.smoothing_model(31, model.dt),
+                   anchor="reference")
+    s = model.structure
+    assert res.y_rest == r[0] and res.preview == 300 + 15 + s.q1 + s.q2
+
+
+@needs_cc
+def test_ff_step_matches_the_central_line_inverse(tmp_path):
+    model = placed_duhem()
+    _ff_case(model, triangle(model, 3.0), tmp_path, compensation="linear")
+
+
+@needs_cc
+def test_ff_step_makes_up_the_cut_pre_actuation_like_compensate(tmp_path):
+    """L2 with a zero outside the circle and a reference moving at once: the C step makes up
+    the pre-actuation before the first sample as compensate does (and the planner runs on it)."""
+    model = nmp_duhem()
+    r = own_output(model, 3_000)
+    res = _ff_case(model, r, tmp_path)
+    assert res.settle > 0 and np.ptp(r[:res.settle]) > 1e-3 * np.ptp(r)  # moves within it
+    assert np.any(res.status & 8)
 
 
 @needs_cc
 @pytest.mark.parametrize("placed", [False, True])
 def test_ff_step_matches_for_a_pi_model(placed, tmp_path):
     model = pi_model(placed)
-    t = np.arange(3_000) / model.fs
-    r = 0.9 * (1 - np.cos(2 * np.pi * 25 * t))
-    _ff_case(model, r, tmp_path, u_limits=(-20.0, 20.0))
+    _ff_case(model, triangle(model, 1.5, seconds=0.3), tmp_path, u_limits=(-20.0, 20.0))
+
+
+@needs_cc
+@pytest.mark.parametrize("reference", ["triangle", "measured-like"])
+def test_ff_step_matches_for_the_pi_stage(reference, pi_stage, tmp_path):
+    model = pi_stage
+    if reference == "triangle":
+        res = _ff_case(model, triangle(model, 4.0, seconds=0.3), tmp_path)
+    else:
+        res = _ff_case(model, own_output(model, 4_000, seed=1, noise=2e-4), tmp_path,
+                       anchor="reference")
+        assert res.settled_relative_error < 1e-9 < res.relative_error
+    assert res.settle > 0 and np.all(res.exact)
+
+
+@needs_cc
+@pytest.mark.parametrize("member", ["duhem", "pi-stage"])
+def test_ff_step_matches_compensate_on_a_measured_displacement(member, tmp_path):
+    """Stage A: the member identified on prbn_1, the reference a displacement measured on
+    another record (its sensor zero moved: the rest anchored at its first sample), smoothed as
+    the benchmark asks for it, and raw."""
+    from hystid.identify import identify
+    from hystid.records import load_record
+
+    path = STAGE_A / "prbn_1.csv"
+    if not path.exists():
+        pytest.skip(f"measured stage A record not found at {path}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(load_record(path), model=member).model
+    r = load_record(STAGE_A / "sine50_1.csv").y[:6_000]
+    res = _ff_case(model, r, tmp_path / "smooth", anchor="reference",
+                   reference_model=hc.smoothing_model(21, model.dt))
+    assert not np.all(res.status & 4)  # not simply saturated
+    _ff_case(model, r, tmp_path / "raw")
 
 
 def test_ff_limits_default_to_the_envelope_in_record_units():
@@ -261,22 +358,43 @@ def test_ff_limits_default_to_the_envelope_in_record_units():
     env = model.envelope
     pad = 0.1 * (env.u_max - env.u_min)
     low, high = ff_options(model)["u_limits"]
-    assert np.isclose(low + model.u_rest, env.u_min - pad)
-    assert np.isclose(high + model.u_rest, env.u_max + pad)
-    assert ff_options(model, u_limits=(-1.0, 2.0))["u_limits"] == (-1.0 - model.u_rest,
-                                                                   2.0 - model.u_rest)
+    assert (low, high) == pytest.approx((env.u_min - pad, env.u_max + pad))
+    assert ff_options(model, u_limits=(-1.0, 2.0))["u_limits"] == (-1.0, 2.0)
+    assert ff_options(model, margin=0.0)["u_limits"] == (env.u_min, env.u_max)
     head = c_sources(model)["hystid_model.h"]
-    assert f"#define HYSTID_FF_U_MIN ({env.u_min - pad - model.u_rest + model.u_rest!r})" in head
+    assert f"#define HYSTID_FF_U_MIN ({low!r})" in head
+    with pytest.raises(ValueError, match="unknown"):
+        ff_options(model, smoother=3)
+
+
+def test_a_model_without_envelope_is_exported_without_compensator_unless_limits_given():
+    model = reference_model()
+    assert model.envelope is None
+    notes: list[str] = []
+    assert "#define HYSTID_NO_FF 1" in c_sources(model, notes=notes)["hystid_model.h"]
+    assert notes and "envelope" in notes[0]
+    head = c_sources(model, compensator={"u_limits": (0.0, 10.0)})["hystid_model.h"]
+    assert "HYSTID_NO_FF" not in head and "#define HYSTID_FF_U_MAX 10.0" in head
 
 
 def test_pi_without_inverse_is_exported_without_compensator():
-    model = pi_model(False)
+    model = pi_model(True)
     model.theta[model.structure.slices()["mu"]] = -0.1
     notes: list[str] = []
-    texts = c_sources(model, notes=notes)
+    texts = c_sources(model, notes=notes, compensator=None)
     assert "#define HYSTID_NO_FF 1" in texts["hystid_model.h"]
     assert "hystid_ff_step" not in texts["hystid_model.c"]
     assert notes and "no exact inverse" in notes[0]
+    with pytest.raises(ValueError, match="no exact inverse"):
+        c_sources(model, compensator={"u_limits": (0.0, 10.0)})
+
+
+def test_a_model_kind_without_c_is_refused_by_name():
+    from hystid.baselines import LinearModel
+
+    lin = LinearModel.__new__(LinearModel)
+    with pytest.raises(ValueError, match="LinearModel cannot be exported"):
+        c_sources(lin)
 
 
 # --------------------------------------------------------------------------- on-line identifier
@@ -389,7 +507,17 @@ def test_cli_export_options(tmp_path, capsys):
     src = (tmp_path / "out" / "hystid_model.c").read_text()
     assert src != c_sources(model, compensator={"u_limits": (-6.0, 6.0), "preview": 50})[
         "hystid_model.c"]  # the record changed the RPEM's starting covariance
-    for bad in (["--u-limits", "6,-6"], ["--preview", "-1"], ["--rpem-sigma", "0"]):
+    assert main(["export", str(model_file), "--c", str(tmp_path / "smooth"), "--smooth", "21",
+                 "--anchor", "reference", "--margin", "0", "--quiet"]) == 0
+    src = (tmp_path / "smooth" / "hystid_model.c").read_text()
+    head = (tmp_path / "smooth" / "hystid_model.h").read_text()
+    plan = ff_plan(model, reference_model=hc.smoothing_model(21, model.dt), anchor="reference",
+                   margin=0.0)
+    assert "#define HX_FF_ANCHOR_REFERENCE 1" in src and "#define HX_FF_LEAD 10" in src
+    assert f"#define HYSTID_FF_DELAY {plan.preview}\n" in head and plan.lead == 10
+    assert f"#define HYSTID_FF_U_MAX {model.envelope.u_max!r}" in head
+    for bad in (["--u-limits", "6,-6"], ["--preview", "-1"], ["--rpem-sigma", "0"],
+                ["--smooth", "4"], ["--margin", "-1"], ["--anchor", "sensor"]):
         with pytest.raises(SystemExit) as exc:
             main(["export", str(model_file), "--c", str(tmp_path / "x"), *bad])
         assert exc.value.code == 2

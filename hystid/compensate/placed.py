@@ -11,10 +11,18 @@ rest, ``at_rest()``)::
 * **Placement.** The model's output at rest (its sensor offset plus what L2 makes of the Duhem
   state the stage remembers at rest) is taken off the reference; the command gets the rest
   level back. The compensator starts from the model's own state at rest.
-* **L2 inverted dynamically**, by its stable inverse over the whole reference
-  (:func:`~hystid.compensate.linear_parts.stable_inverse`): exact for a minimum-phase L2; zeros
-  outside the unit circle are inverted anti-causally (pre-actuation over
-  :attr:`Compensation.preview` samples), which a :class:`CompensationWarning` says.
+* **L2 inverted dynamically**, by its stable inverse
+  (:func:`~hystid.compensate.linear_parts.inverse_filter`): exact for a minimum-phase L2; zeros
+  outside the unit circle are inverted anti-causally (pre-actuation within
+  :attr:`Compensation.preview` samples), which a :class:`CompensationWarning` says. The stage
+  rests before the reference's first sample, so the pre-actuation that would fall there is made
+  up over the first :attr:`Compensation.settle` samples (least output error there, the output
+  exact afterwards).
+* **Causal stages.** Every stage (the reference model, L2's inverse, the hysteresis and L1
+  inverses) is a recursion read with a fixed delay: the command for a reference sample needs
+  the reference :attr:`Compensation.preview` samples ahead and nothing else, so the same
+  command comes out of a real-time step that returns it that many samples late (the C export,
+  :mod:`hystid.export`). The reference is held at its last value after its end.
 * **Limits from the envelope.** By default the command stays inside the range of the input
   the model was identified on, widened by ``margin`` of its span at each end (the tolerance the
   admissibility check itself allows).
@@ -32,7 +40,6 @@ from typing import Any
 
 import control as ct
 import numpy as np
-from scipy import signal
 
 from ..operating import warn_admissibility
 from ..signals import finite_signal
@@ -43,10 +50,12 @@ from .compensator import (
     KIND_LINEAR,
     NOT_EXACT,
     SATURATED,
+    Feedforward,
     _build,
+    _Chain,
     _run,
 )
-from .linear_parts import dc_delay, stable_inverse
+from .linear_parts import MAX_RUNOUT, InverseFilter, dc_delay, inverse_filter, lti_run
 
 __all__ = ["DEFAULT_MARGIN", "Compensation", "CompensationWarning", "compensate",
            "envelope_limits"]
@@ -91,6 +100,11 @@ class Compensation:
         Units of ``u`` and ``y``.
     warnings : list of str
         What limits the command (saturation, inexact steps, admissibility, approximations).
+    settle : int
+        Output samples at the start where the model may miss the reference although every step
+        is exact: L2's zeros outside the unit circle need pre-actuation, and what of it would
+        fall before the first sample (the stage rests there) is made up over these samples
+        (0 for a minimum-phase L2). See :attr:`settled_relative_error`.
     """
 
     t: np.ndarray
@@ -104,6 +118,7 @@ class Compensation:
     y_rest: float
     units: dict[str, str]
     warnings: list[str] = field(default_factory=list)
+    settle: int = 0
 
     @property
     def exact(self) -> np.ndarray:
@@ -113,9 +128,13 @@ class Compensation:
     @property
     def relative_error(self) -> float:
         """RMS of ``y_pred - y_des`` over the RMS of ``y_des`` about the rest output."""
-        scale = float(np.sqrt(np.mean((self.y_des - self.y_rest) ** 2)))
-        err = float(np.sqrt(np.mean((self.y_pred - self.y_des) ** 2)))
-        return err / scale if scale > 0 else err
+        return _relative(self.y_pred - self.y_des, self.y_des - self.y_rest)
+
+    @property
+    def settled_relative_error(self) -> float:
+        """:attr:`relative_error` from sample :attr:`settle` on (where L2 is inverted exactly)."""
+        k = min(self.settle, self.u.size - 1)
+        return _relative(self.y_pred[k:] - self.y_des[k:], self.y_des[k:] - self.y_rest)
 
     def to_dict(self) -> dict[str, Any]:
         """A summary (no signals) for JSON reports.
@@ -123,12 +142,20 @@ class Compensation:
         Returns
         -------
         dict
-            Limits, preview, exactness, relative error and warnings.
+            Limits, preview, exactness, relative errors and warnings.
         """
         return {"u_limits": list(self.u_limits), "preview": self.preview,
                 "samples": int(self.u.size), "exact_share": float(np.mean(self.exact)),
-                "relative_error": self.relative_error, "units": dict(self.units),
-                "warnings": list(self.warnings)}
+                "relative_error": self.relative_error, "settle": self.settle,
+                "settled_relative_error": self.settled_relative_error,
+                "units": dict(self.units), "warnings": list(self.warnings)}
+
+
+def _relative(err: np.ndarray, dev: np.ndarray) -> float:
+    """RMS of ``err`` over the RMS of ``dev`` (``err``'s RMS when ``dev`` is zero)."""
+    scale = float(np.sqrt(np.mean(dev ** 2)))
+    rms = float(np.sqrt(np.mean(err ** 2)))
+    return rms / scale if scale > 0 else rms
 
 
 def envelope_limits(model: Any, margin: float = DEFAULT_MARGIN) -> tuple[float, float]:
@@ -170,9 +197,9 @@ def _rest(model: Any) -> tuple[float, float]:
     return float(past.window("w2", 1)[0]), float(past.window("y", 1)[0])
 
 
-def _through_model(reference_model: ct.LTI, lead: int | None, dev: np.ndarray,
-                   dt: float) -> tuple[np.ndarray, int]:
-    """``dev`` through the reference model ``M`` from rest, advanced by its lead."""
+def _reference_filter(reference_model: ct.LTI, lead: int | None,
+                      dt: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """``(num, den, lead)`` of the reference model ``M`` in powers of ``z^-1`` (``den[0] = 1``)."""
     if not isinstance(reference_model, ct.LTI) or not reference_model.dt \
             or not np.isclose(float(reference_model.dt), dt):
         raise ValueError(f"reference_model: expected a discrete SISO system with dt = {dt:g} s, "
@@ -186,9 +213,96 @@ def _through_model(reference_model: ct.LTI, lead: int | None, dev: np.ndarray,
     if lead < 0:
         raise ValueError(f"reference_lead: expected a non-negative number of samples, got {lead}")
     pad = len(den) - len(num)  # z-domain orders: pad the numerator to powers of z^-1
-    ym = signal.lfilter(np.r_[np.zeros(max(pad, 0)), num], den,
-                        np.concatenate([dev, np.full(lead, dev[-1])]))
-    return ym[lead:], lead
+    num = np.r_[np.zeros(max(pad, 0)), num]
+    return (np.ascontiguousarray(num / den[0]), np.ascontiguousarray(den / den[0]), lead)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """What :func:`compensate` runs, stage by stage, each a causal recursion read with a fixed
+    delay (the exported C step runs the same stages one sample at a time)::
+
+        r - y_rest --M (lead)--> y_des - y_rest --L2 stable inverse--> w2d --chain--> u - u_rest
+    """
+
+    y_rest: float  # the model's output at rest (record units); anchor "reference": r(0)
+    anchor: str
+    m_num: np.ndarray  # the reference model (empty: none)
+    m_den: np.ndarray
+    lead: int
+    l2: InverseFilter
+    chain: _Chain
+    rest: float  # the hysteresis block's output at rest (the chain's start)
+    u_rest: float
+    u_limits: tuple[float, float]
+
+    @property
+    def preview(self) -> int:
+        """Samples of reference read ahead of each command sample (the C step's delay)."""
+        return self.lead + self.l2.preview + self.chain.advance
+
+    def run(self, y: np.ndarray, y_rest: float) -> tuple[Feedforward, np.ndarray]:
+        """The chain's output over ``y`` (held at its end) and the desired output ``y_des``."""
+        n = y.size
+        dev = y - y_rest
+        dev = np.concatenate([dev, np.full(self.preview, dev[-1])])  # the reference held
+        if self.m_num.size:
+            ym = np.empty(dev.size)
+            lti_run(dev, self.m_num, self.m_den, ym)
+            ym = ym[self.lead:]
+        else:
+            ym = dev
+        w2d = self.l2.run(ym, n + self.chain.advance) + self.rest
+        return _run(self.chain, w2d, n=n, rest=self.rest), ym[:n] + y_rest
+
+
+def _plan(model: Any, *, u_limits: tuple[float, float] | None = None,
+          margin: float = DEFAULT_MARGIN, reference_model: ct.LTI | None = None,
+          reference_lead: int | None = None, preview: int | None = None,
+          duhem_bound: float = DUHEM_BOUND, compensation: str = "inverse",
+          anchor: str = "model") -> _Plan:
+    """The stages of :func:`compensate` for ``model`` with its options (checked here)."""
+    if compensation not in ("inverse", "linear"):
+        raise ValueError(f"compensation: expected 'inverse' or 'linear', got {compensation!r}")
+    for name in ("u_rest", "offset", "L2", "simulate", "fs"):
+        if not hasattr(model, name):
+            raise ValueError(f"model: expected an identified sandwich model (no {name!r}), got "
+                             f"{model!r}")
+    if compensation == "inverse" and getattr(model, "kind", "") == "duhem":
+        from ..validate import check_plain_duhem
+
+        check_plain_duhem(model.structure.layout, "the Duhem inverse (compensation='inverse'; "
+                          "compensation='linear' takes any member)")
+    try:
+        limits = envelope_limits(model, margin) if u_limits is None else \
+            tuple(float(v) for v in u_limits)
+    except TypeError as err:
+        raise ValueError(f"u_limits: expected (low, high), got {u_limits!r}") from err
+    if len(limits) != 2 or not (np.all(np.isfinite(limits)) and limits[0] < limits[1]):
+        raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")
+    if anchor not in ("model", "reference"):
+        raise ValueError(f"anchor: expected 'model' or 'reference', got {anchor!r}")
+    w2_rest, y_rest_rel = _rest(model)
+    if reference_model is not None:
+        m_num, m_den, lead = _reference_filter(reference_model, reference_lead, model.dt)
+    elif reference_lead:
+        raise ValueError("reference_lead: only meaningful with a reference model")
+    else:
+        m_num, m_den, lead = np.zeros(0), np.ones(1), 0
+    chain = _build(model, kind=COMPENSATIONS[compensation],
+                   u_limits=(limits[0] - model.u_rest, limits[1] - model.u_rest),
+                   reference_model=None, preview=preview, duhem_bound=duhem_bound,
+                   l2_identity=True)
+    chain_kind = int(chain.ispec[0])
+    if chain_kind == KIND_DUHEM:  # the inverse starts from the Duhem state remembered at rest
+        rest = w2_rest
+    elif chain_kind == KIND_LINEAR or not w2_rest:  # the central line through the rest point
+        rest = 0.0
+    else:
+        raise ValueError("model: a hysteresis state at rest is only handled for the Duhem block")
+    return _Plan(float(model.offset) + y_rest_rel, anchor, m_num, m_den, lead,
+                 inverse_filter(model.L2), chain, float(rest), float(model.u_rest),
+                 (float(limits[0]), float(limits[1])))
 
 
 def compensate(
@@ -250,29 +364,11 @@ def compensate(
     Compensation
         The command, the model's predicted output and how exact it is.
     """
-    if compensation not in ("inverse", "linear"):
-        raise ValueError(f"compensation: expected 'inverse' or 'linear', got {compensation!r}")
-    for name in ("u_rest", "offset", "L2", "simulate", "fs"):
-        if not hasattr(model, name):
-            raise ValueError(f"model: expected an identified sandwich model (no {name!r}), got "
-                             f"{model!r}")
-    if compensation == "inverse" and getattr(model, "kind", "") == "duhem":
-        from ..validate import check_plain_duhem
-
-        check_plain_duhem(model.structure.layout, "the Duhem inverse (compensation='inverse'; "
-                          "compensation='linear' takes any member)")
+    plan = _plan(model, u_limits=u_limits, margin=margin, reference_model=reference_model,
+                 reference_lead=reference_lead, preview=preview, duhem_bound=duhem_bound,
+                 compensation=compensation, anchor=anchor)
     y = finite_signal(y_ref, "y_ref", min_size=2)
-    try:
-        limits = envelope_limits(model, margin) if u_limits is None else \
-            tuple(float(v) for v in u_limits)
-    except TypeError as err:
-        raise ValueError(f"u_limits: expected (low, high), got {u_limits!r}") from err
-    if len(limits) != 2 or not (np.all(np.isfinite(limits)) and limits[0] < limits[1]):
-        raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")
-    if anchor not in ("model", "reference"):
-        raise ValueError(f"anchor: expected 'model' or 'reference', got {anchor!r}")
-    w2_rest, y_rest_rel = _rest(model)
-    y_rest = float(y[0]) if anchor == "reference" else float(model.offset) + y_rest_rel
+    y_rest = float(y[0]) if anchor == "reference" else plan.y_rest
     notes: list[str] = []
     start = abs(float(y[0]) - y_rest)
     if start > START_TOLERANCE * max(float(np.ptp(y)), 1e-300):
@@ -280,43 +376,29 @@ def compensate(
                      f"model's output at rest ({y_rest:.6g}): the stage cannot jump there, the "
                      "first samples are not tracked (anchor='reference' takes the reference's "
                      "start as the rest)")
-    dev = y - y_rest
-    lead = 0
-    if reference_model is not None:
-        dev, lead = _through_model(reference_model, reference_lead, dev, model.dt)
-    elif reference_lead:
-        raise ValueError("reference_lead: only meaningful with a reference model")
-    y_des = dev + y_rest
-    kind = COMPENSATIONS[compensation]
-    chain = _build(model, kind=kind, u_limits=(limits[0] - model.u_rest,
-                                               limits[1] - model.u_rest),
-                   reference_model=None, preview=preview, duhem_bound=duhem_bound,
-                   l2_identity=True)
-    inv = stable_inverse(model.L2, dev, extra=chain.advance, y_rest=0.0)
-    chain_kind = int(chain.ispec[0])
-    if chain_kind == KIND_DUHEM:  # the inverse starts from the Duhem state remembered at rest
-        rest, w2d = w2_rest, inv.signal + w2_rest
-    elif chain_kind == KIND_LINEAR:  # the central line through the rest point
-        rest, w2d = 0.0, inv.signal
-    elif w2_rest:
-        raise ValueError("model: a hysteresis state at rest is only handled for the Duhem block")
-    else:
-        rest, w2d = 0.0, inv.signal
-    run = _run(chain, w2d, n=y.size, rest=rest)
-    u = run.u + model.u_rest
+    run, y_des = plan.run(y, y_rest)
+    u = run.u + plan.u_rest
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         y_pred = np.asarray(model.simulate(u, check=False).y, float)
-    y_pred += y_rest - (float(model.offset) + y_rest_rel)  # the sensor zero anchored
-    if not inv.minimum_phase:
-        zeros = ", ".join(f"{z:.4g}" for z in inv.outside)
+    y_pred += y_rest - plan.y_rest  # the sensor zero anchored
+    l2 = plan.l2
+    if l2.lag:
+        zeros = ", ".join(f"{z:.4g}" for z in l2.outside)
         notes.append(f"L2 has zeros outside the unit circle ({zeros}): inverted by its stable "
-                     f"non-causal inverse, which moves the command up to {inv.preview} samples "
-                     "before the reference does (pre-actuation)")
-    total_preview = chain.advance + inv.preview + lead
+                     f"non-causal inverse, which moves the command up to {l2.preview} samples "
+                     "before the reference does (pre-actuation); what of it would fall before "
+                     f"the first sample, where the stage rests, is made up over the first "
+                     f"{l2.settle} samples (the output is exact from there on)")
+        if l2.fir.size - 1 >= MAX_RUNOUT:
+            notes.append(f"L2's zeros outside the unit circle lie so near it that its "
+                         f"anti-causal inverse is cut at {MAX_RUNOUT} samples before it has "
+                         "decayed: the inverse is approximate (a reference model that keeps "
+                         "those zeros avoids this)")
     result = Compensation(np.arange(y.size) / model.fs, y, u, y_pred, y_des, run.status,
-                          (float(limits[0]), float(limits[1])), int(total_preview), y_rest,
-                          {"u": _unit(model, "u"), "y": _unit(model, "y")})
+                          plan.u_limits, int(plan.preview), y_rest,
+                          {"u": _unit(model, "u"), "y": _unit(model, "y")},
+                          settle=l2.settle)
     admissibility = _admissibility(model, result)
     result.warnings = notes + admissibility
     if warn:

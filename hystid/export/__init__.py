@@ -7,6 +7,6 @@ step, the feed-forward compensator's step and the on-line identifier's step (see
 
 from __future__ import annotations
 
-from .c import C_FILES, c_sources, export_c, ff_chain, ff_options, rpem_start
+from .c import C_FILES, c_sources, export_c, ff_options, ff_plan, rpem_start
 
-__all__ = ["C_FILES", "c_sources", "export_c", "ff_chain", "ff_options", "rpem_start"]
+__all__ = ["C_FILES", "c_sources", "export_c", "ff_options", "ff_plan", "rpem_start"]

@@ -1,11 +1,14 @@
-"""C99 text of the feed-forward compensator: the chain of
-:mod:`hystid.compensate.compensator` (``_push_reference``, ``chain_step``) and the Duhem
-reversal planner of :mod:`hystid.compensate.duhem_inverse` (``plan_step`` and its helpers),
-written to do the same arithmetic in the same order.
+"""C99 text of the feed-forward compensator of :func:`hystid.compensate.compensate`, one
+sample at a time: the placement, the reference model and L2's stable inverse
+(:func:`hystid.compensate.linear_parts.lti_push` and :func:`~hystid.compensate.linear_parts.
+inverse_run`), the chain of :mod:`hystid.compensate.compensator` (``_push_reference``,
+``chain_step``) and the Duhem reversal planner of :mod:`hystid.compensate.duhem_inverse`
+(``plan_step`` and its helpers), written to do the same arithmetic in the same order.
 
 The chain state is the flat vector of the Python compensator (``[x_M | y_M line | w2d line |
 past u | past w1 | hysteresis state]``) at the offsets the generator defines (``HX_FF_*``
-macros, ``hx_ff_*`` arrays, from the ``ispec``/``fpar`` arrays of the Python chain).
+macros, ``hx_ff_*`` arrays, from the ``ispec``/``fpar`` arrays of the Python chain); with L2
+inverted ahead of the chain its reference lines hold ``w2d``.
 """
 
 from __future__ import annotations
@@ -344,51 +347,42 @@ static double hx_plan_step(const double *W, int n, double w1p, double w2p, doubl
 }
 """
 
-#: The compensator chain: reference path, hysteresis inverse, L1 inverse, internal model.
+#: The compensator: placement, reference model, L2's stable inverse, then the chain (hysteresis
+#: inverse, L1 inverse, internal model).
 FF_CHAIN = r"""
+static double hx_lti_push(double *xl, int nn, double *yl, int nd, const double *num,
+                          const double *den, double x)
+{
+    double acc = 0.0;
+    int i, j;
+    for (i = 0; i < nn - 1; i++) {
+        xl[i] = xl[i + 1];
+    }
+    xl[nn - 1] = x;
+    for (i = 0; i < nn; i++) {
+        acc += num[i] * xl[nn - 1 - i];
+    }
+    for (j = 1; j <= nd; j++) {
+        acc -= den[j] * yl[nd - j];
+    }
+    for (i = 0; i < nd - 1; i++) {
+        yl[i] = yl[i + 1];
+    }
+    if (nd > 0) {
+        yl[nd - 1] = acc;
+    }
+    return acc;
+}
+
 static void hx_ff_push_reference(double *x, double r)
 {
-    double ym, w2;
+    double w2;
     int i;
-#if HX_FF_NM > 0
-    double xm_new[HX_FF_NM], acc;
-    int j;
-    ym = HX_FF_DM * r;
-    for (i = 0; i < HX_FF_NM; i++) {
-        ym += hx_ff_cm[i] * x[HX_FF_OFF_M + i];
-    }
-    for (i = 0; i < HX_FF_NM; i++) {
-        acc = hx_ff_bm[i] * r;
-        for (j = 0; j < HX_FF_NM; j++) {
-            acc += hx_ff_am[i * HX_FF_NM + j] * x[HX_FF_OFF_M + j];
-        }
-        xm_new[i] = acc;
-    }
-    for (i = 0; i < HX_FF_NM; i++) {
-        x[HX_FF_OFF_M + i] = xm_new[i];
-    }
-#else
-    ym = r;
-#endif
     for (i = 0; i < HX_FF_LY - 1; i++) {
         x[HX_FF_OFF_Y + i] = x[HX_FF_OFF_Y + i + 1];
     }
-    x[HX_FF_OFF_Y + HX_FF_LY - 1] = ym;
-#if HX_FF_L2MODE == 0
-    w2 = ym / HX_FF_K2;
-#else
-    {
-        int j2;
-        w2 = ym;
-        for (i = 1; i <= HX_FF_N2A; i++) {
-            w2 += hx_ff_a2[i - 1] * x[HX_FF_OFF_Y + HX_FF_LY - 1 - i];
-        }
-        for (j2 = 1; j2 <= HX_FF_N2B; j2++) {
-            w2 -= hx_ff_b2t[j2 - 1] * x[HX_FF_OFF_W + HX_FF_LW - j2];
-        }
-        w2 /= HX_FF_B2LEAD;
-    }
-#endif
+    x[HX_FF_OFF_Y + HX_FF_LY - 1] = r;
+    w2 = r / HX_FF_K2;
     for (i = 0; i < HX_FF_LW - 1; i++) {
         x[HX_FF_OFF_W + i] = x[HX_FF_OFF_W + i + 1];
     }
@@ -401,27 +395,127 @@ void hystid_ff_init(hystid_ff_state *s)
     for (i = 0; i < HX_FF_NX; i++) {
         s->x[i] = 0.0;
     }
+    for (i = HX_FF_OFF_Y; i < HX_FF_OFF_U; i++) {
+        s->x[i] = HX_FF_REST; /* the reference lines settled at the rest */
+    }
+#if HX_FF_KIND == 0
+    s->x[HX_FF_OFF_H] = HX_FF_REST; /* the Duhem state remembered at rest */
+#endif
+    for (i = 0; i < HYSTID_FF_M_NX; i++) {
+        s->mx[i] = 0.0;
+    }
+    for (i = 0; i < HYSTID_FF_M_NY; i++) {
+        s->my[i] = 0.0;
+    }
+    for (i = 0; i < HYSTID_FF_L2_NX; i++) {
+        s->lx[i] = 0.0;
+    }
+    for (i = 0; i < HYSTID_FF_L2_NY; i++) {
+        s->lv[i] = 0.0;
+    }
+    for (i = 0; i < 2 * HYSTID_FF_L2_NF; i++) {
+        s->fl[i] = 0.0;
+    }
+    s->slot = HYSTID_FF_L2_NF - 1;
+    for (i = 0; i < HYSTID_FF_L2_NS; i++) {
+        s->xs[i] = 0.0;
+    }
+    for (i = 0; i < HYSTID_FF_SETTLE; i++) {
+        s->corr[i] = 0.0;
+    }
+    for (i = 0; i < HYSTID_FF_YD_LINE; i++) {
+        s->ydl[i] = 0.0;
+    }
+    s->y_rest = HX_FF_Y_REST;
     s->n = 0;
     s->u = HYSTID_FF_REST_COMMAND;
-    s->yd = 0.0;
+    s->yd = HX_FF_Y_REST;
     s->status = 0;
 }
 
 double hystid_ff_step(hystid_ff_state *s, double r)
 {
     double *x = s->x;
-    double w1p, w1c, u, w1;
+    double dev, ym, v, w, w2d, w1p, w1c, u, w1;
+    long k;
     int i, j, status = 0;
 #if HX_FF_KIND == 1
     double pinv[HX_FF_NPI], tail, cum;
 #endif
-    hx_ff_push_reference(x, r - HX_FF_R_SHIFT);
-    if (s->n < HYSTID_FF_DELAY) {
-        /* priming: the first HYSTID_FF_DELAY references are read in, the stage rests */
-        s->n += 1;
+    k = s->n;
+    s->n += 1;
+#if HX_FF_ANCHOR_REFERENCE
+    if (k == 0) {
+        s->y_rest = r; /* the stage rests at the reference's first sample */
+    }
+#endif
+    dev = r - s->y_rest;
+    /* the reference model M, read HX_FF_LEAD samples late */
+#if HX_FF_M
+    ym = hx_lti_push(s->mx, HYSTID_FF_M_NX, s->my, HX_FF_M_ND, hx_ff_m_num, hx_ff_m_den, dev);
+    k -= HX_FF_LEAD;
+    if (k < 0) {
         return s->u;
     }
-    s->yd = x[HX_FF_OFF_Y + HX_FF_LY - 1 - (HX_FF_Q + HX_FF_P)] + HX_FF_R_SHIFT;
+#else
+    ym = dev;
+#endif
+    for (i = 0; i < HYSTID_FF_YD_LINE - 1; i++) {
+        s->ydl[i] = s->ydl[i + 1];
+    }
+    s->ydl[HYSTID_FF_YD_LINE - 1] = ym;
+    /* L2's stable inverse: its delay read ahead, the causal part, the anti-causal FIR */
+    k -= HX_FF_L2_DELAY;
+    if (k < 0) {
+        return s->u;
+    }
+    v = hx_lti_push(s->lx, HYSTID_FF_L2_NX, s->lv, HX_FF_L2_ND, hx_ff_l2_num, hx_ff_l2_den, ym);
+    /* each v twice: the last HYSTID_FF_L2_NF in order at fl[slot + 1 .. slot + NF] */
+    s->slot = s->slot + 1 < HYSTID_FF_L2_NF ? s->slot + 1 : 0;
+    s->fl[s->slot] = v;
+    s->fl[s->slot + HYSTID_FF_L2_NF] = v;
+    w = 0.0;
+    for (j = 0; j < HYSTID_FF_L2_NF; j++) {
+        w += hx_ff_l2_fir[j] * s->fl[s->slot + 1 + j];
+    }
+    k -= HX_FF_L2_PRE;
+#if HX_FF_L2_PRE > 0
+    if (k < 0) {
+        /* pre-actuation before the first sample: the state it would have left L2 in */
+        double tmp[HYSTID_FF_L2_NS], acc;
+        for (i = 0; i < HYSTID_FF_L2_NS; i++) {
+            acc = 0.0;
+            for (j = 0; j < HYSTID_FF_L2_NS; j++) {
+                acc += hx_ff_l2_a[i * HYSTID_FF_L2_NS + j] * s->xs[j];
+            }
+            acc += hx_ff_l2_b[i] * w;
+            tmp[i] = acc;
+        }
+        for (i = 0; i < HYSTID_FF_L2_NS; i++) {
+            s->xs[i] = tmp[i];
+        }
+        if (k == -1) {
+            for (i = 0; i < HYSTID_FF_SETTLE; i++) {
+                acc = 0.0;
+                for (j = 0; j < HYSTID_FF_L2_NS; j++) {
+                    acc += hx_ff_l2_gain[i * HYSTID_FF_L2_NS + j] * s->xs[j];
+                }
+                s->corr[i] = acc;
+            }
+        }
+        return s->u;
+    }
+    if (k < HYSTID_FF_SETTLE) {
+        w += s->corr[k];
+    }
+#endif
+    w2d = w + HX_FF_REST;
+    /* the chain: hysteresis inverse, L1 inverse, internal model */
+    hx_ff_push_reference(x, w2d);
+    if (k < HX_FF_ADVANCE) {
+        return s->u; /* priming: the chain reads w2d HX_FF_ADVANCE samples ahead */
+    }
+    s->yd = s->ydl[0] + s->y_rest;
     w1p = x[HX_FF_OFF_W1 + HX_FF_H1 - 1];
     (void)w1p; /* the Duhem block's state only */
 #if HX_FF_KIND == 0
@@ -437,7 +531,7 @@ double hystid_ff_step(hystid_ff_state *s, double r)
     }
 #elif HX_FF_KIND == 1
     {
-        double w2d = x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P];
+        double w2c = x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P];
         tail = 0.0;
         for (i = HX_FF_NPI - 1; i >= 0; i--) {
             pinv[i] = tail;
@@ -450,8 +544,8 @@ double hystid_ff_step(hystid_ff_state *s, double r)
         }
         w1c = 0.0;
         for (i = 0; i < HX_FF_NPI; i++) {
-            w1c += hx_ff_mu_inv[i] * hx_max(w2d - hx_ff_r_inv[i],
-                                            hx_min(w2d + hx_ff_r_inv[i], pinv[i]));
+            w1c += hx_ff_mu_inv[i] * hx_max(w2c - hx_ff_r_inv[i],
+                                            hx_min(w2c + hx_ff_r_inv[i], pinv[i]));
         }
     }
 #else

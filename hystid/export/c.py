@@ -14,13 +14,17 @@ What each function is:
 * ``hystid_model_step`` -- ``model.simulate(u).y`` one sample at a time: the recorded input in
   (record units), the displacement out (record units, the sensor offset included), from rest
   (the Duhem state at the model's ``rest_memory``).
-* ``hystid_ff_step`` -- :func:`hystid.compensate.feedforward` one sample at a time, in the
-  record's units (the reference less the sensor offset in, the command plus the rest level
-  out; limits from the model's envelope by default, see :func:`ff_options`). The Python
-  function reads the reference ``advance`` samples ahead (the delays of L1 and L2 and the
-  reversal planner's preview); a causal step cannot, so the C step returns the command for
-  the reference ``HYSTID_FF_DELAY = advance`` samples earlier (during the first
-  ``HYSTID_FF_DELAY`` calls, the rest command).
+* ``hystid_ff_step`` -- :func:`hystid.compensate.compensate` one sample at a time, in the
+  record's units (the reference as the sensor reads it in, the command as the amplifier takes
+  it out; the rest level and the model's output at rest, or the reference's first sample with
+  ``anchor="reference"``; limits from the model's envelope by default; L2 inverted by its
+  stable inverse, the pre-actuation cut at the start made up; see :func:`ff_options`).
+  ``compensate`` reads the reference ``preview`` samples ahead (the reference model's lead, L2's
+  delay and pre-actuation, L1's delay and the reversal planner's preview); a causal step
+  cannot, so the C step returns the command for the reference ``HYSTID_FF_DELAY = preview``
+  samples earlier (during the first ``HYSTID_FF_DELAY`` calls, the rest command). Fed the
+  reference followed by ``HYSTID_FF_DELAY`` copies of its last value, it returns
+  ``compensate(model, r).u`` after those first calls.
 * ``hystid_rpem_step`` -- one sample of the on-line identifier's recursion
   (:func:`hystid.identify.online.rpem_run`), warm-started from the saved model (see
   :func:`hystid.export.rpem.rpem_start`); Duhem models only. The start-up solve of
@@ -44,12 +48,12 @@ from ._c_rpem import RPEM_STEP
 from .rpem import rpem_start
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..compensate.compensator import _Chain
+    from ..compensate.placed import _Plan
     from ..identify.online import OnlineIdentifier
     from ..pi import PISandwich
     from ..records import Record
 
-__all__ = ["C_FILES", "ENVELOPE_MARGIN", "c_sources", "export_c", "ff_chain", "ff_options",
+__all__ = ["C_FILES", "FF_KEYS", "c_sources", "export_c", "ff_options", "ff_plan",
            "rpem_start"]
 
 #: The files :func:`export_c` writes.
@@ -121,55 +125,51 @@ def _model_part(model: DuhemSandwich | PISandwich) -> tuple[str, str]:
     return head, src
 
 
-#: Share of the identified input span the exported compensator's default limits add at each
-#: end of the model's envelope.
-ENVELOPE_MARGIN = 0.1
-_FF_KEYS = ("u_limits", "reference_model", "reference_lead", "preview", "duhem_bound")
+#: The keyword arguments of :func:`hystid.compensate.compensate` the exported compensator takes.
+FF_KEYS = ("u_limits", "margin", "reference_model", "reference_lead", "preview", "duhem_bound",
+           "compensation", "anchor")
 
 
 def ff_options(model: DuhemSandwich | PISandwich, **options: Any) -> dict[str, Any]:
-    """The keyword arguments of :func:`hystid.compensate.feedforward` the export runs with.
+    """The keyword arguments of :func:`hystid.compensate.compensate` the export runs with.
 
-    The exported step works in the record's units: it takes the reference with the sensor
-    offset in and returns the command with the rest level in, i.e. it is
-    ``feedforward(model, r - offset, **ff_options(model)) + u_rest``. So ``u_limits`` given here
-    are in the record's units and returned relative to the rest; by default they are the
-    model's input envelope widened by :data:`ENVELOPE_MARGIN` of its span at each end, or,
-    without an envelope, ``feedforward``'s own default. The other options not given take
-    ``feedforward``'s defaults.
+    The exported step is ``compensate(model, r, **ff_options(model, ...))`` one sample at a
+    time, in the record's units (the reference as the sensor reads it in, the command as the
+    amplifier takes it out). The options not given take ``compensate``'s defaults; the limits
+    are resolved: ``u_limits`` when given, else the model's envelope widened by ``margin``
+    (:func:`~hystid.compensate.envelope_limits`).
 
     Parameters
     ----------
     model : DuhemSandwich or PISandwich
         The model.
     **options
-        ``u_limits`` (record units), ``reference_model``, ``reference_lead``, ``preview``,
-        ``duhem_bound``.
+        Any of :data:`FF_KEYS`.
 
     Returns
     -------
     dict
-        All five options, ``u_limits`` relative to the rest level.
-    """
-    from ..compensate import compensator as comp
+        Every key of :data:`FF_KEYS`, ``u_limits`` in the record's units.
 
-    unknown = sorted(set(options) - set(_FF_KEYS))
+    Raises
+    ------
+    ValueError
+        For an unknown option, or no ``u_limits`` for a model without an envelope.
+    """
+    from ..compensate import placed
+
+    unknown = sorted(set(options) - set(FF_KEYS))
     if unknown:
-        raise ValueError(f"compensator options: unknown {unknown} (expected {list(_FF_KEYS)})")
-    params = inspect.signature(comp.feedforward).parameters
-    kw = {k: options.get(k, params[k].default) for k in _FF_KEYS}
-    if "u_limits" in options:
-        low, high = (float(v) - model.u_rest for v in options["u_limits"])
-        kw["u_limits"] = (low, high)
-    elif model.envelope is not None:
-        env = model.envelope
-        pad = ENVELOPE_MARGIN * (env.u_max - env.u_min)
-        kw["u_limits"] = (env.u_min - pad - model.u_rest, env.u_max + pad - model.u_rest)
+        raise ValueError(f"compensator options: unknown {unknown} (expected {list(FF_KEYS)})")
+    params = inspect.signature(placed.compensate).parameters
+    kw = {k: options.get(k, params[k].default) for k in FF_KEYS}
+    if kw["u_limits"] is None:
+        kw["u_limits"] = placed.envelope_limits(model, kw["margin"])
     return kw
 
 
-def ff_chain(model: DuhemSandwich | PISandwich, **options: Any) -> _Chain:
-    """The compensator chain the exported ``hystid_ff_step`` runs (see :func:`ff_options`).
+def ff_plan(model: DuhemSandwich | PISandwich, **options: Any) -> _Plan:
+    """The stages the exported ``hystid_ff_step`` runs (see :func:`ff_options`).
 
     Parameters
     ----------
@@ -180,57 +180,92 @@ def ff_chain(model: DuhemSandwich | PISandwich, **options: Any) -> _Chain:
 
     Returns
     -------
-    hystid.compensate.compensator._Chain
-        The arrays of the compiled chain of :func:`hystid.compensate.feedforward`.
+    hystid.compensate.placed._Plan
+        What :func:`hystid.compensate.compensate` runs; its ``preview`` is the step's delay
+        ``HYSTID_FF_DELAY``.
     """
-    from ..compensate import compensator as comp
+    from ..compensate import placed
 
-    return comp._build(model, kind=comp.KIND_DUHEM, **ff_options(model, **options))
+    return placed._plan(model, **ff_options(model, **options))
 
 
-def _ff_part(chain: _Chain, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
+def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
     """(header text, source text) of the compensator."""
     from ..compensate import compensator as comp
 
+    chain, l2 = plan.chain, plan.l2
     ispec, fpar = chain.ispec, chain.fpar
     kind = int(ispec[comp._KIND])
-    if kind not in (comp.KIND_DUHEM, comp.KIND_PI, comp.KIND_LINEAR):
-        raise ValueError(f"compensator kind {kind} cannot be exported")
+    names = {comp.KIND_DUHEM: "Duhem", comp.KIND_PI: "Prandtl-Ishlinskii",
+             comp.KIND_LINEAR: "central-line"}
+    if kind not in names:
+        raise ValueError(f"compensator kind {kind} cannot be exported (the C step has the Duhem, "
+                         "Prandtl-Ishlinskii and central-line inverses)")
     rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX])) + model.u_rest
     P = int(ispec[comp._P])
-    head = (f"\n/* Feed-forward compensator: hystid.compensate.feedforward(model, r - offset) + "
-            f"u_rest, in the\n   record's units. The step takes the reference r(n) and returns "
-            f"the command for\n   r(n - HYSTID_FF_DELAY): the Python compensator reads the "
-            f"reference {chain.advance} samples ahead\n   (delays q1 + q2 = {chain.delay}, "
-            f"planner preview {P}{f', reference lead {chain.lead}' if chain.lead else ''}). */\n"
-            + _define("HYSTID_FF_DELAY", chain.advance) + _define("HYSTID_FF_PREVIEW", P)
+    M = bool(plan.m_num.size)
+    ns = int(l2.A.shape[0])
+    where = "the first reference sample" if plan.anchor == "reference" else \
+        "the model's output at rest"
+    head = (f"\n/* Feed-forward compensator: hystid.compensate.compensate(model, r) one sample "
+            f"at a time ({names[kind]}\n   inverse), in the record's units: the reference as the "
+            f"sensor reads it in, the command as the\n   amplifier takes it out (limits "
+            f"{plan.u_limits[0]!r} .. {plan.u_limits[1]!r}; the stage rests at {where}).\n"
+            f"   compensate() reads the reference {plan.preview} samples ahead (reference "
+            f"model lead {plan.lead}, L2's delay\n   {l2.delay} and pre-actuation {l2.pre}, L1's "
+            f"delay {chain.delay}, reversal planner {P}): the step takes r(n) and\n   returns "
+            f"the command for r(n - HYSTID_FF_DELAY). */\n"
+            + _define("HYSTID_FF_DELAY", plan.preview) + _define("HYSTID_FF_PREVIEW", P)
+            + _define("HYSTID_FF_SETTLE", max(l2.settle, 1))
             + _define("HYSTID_FF_NX", int(ispec[comp._NX]))
-            + _define("HYSTID_FF_U_MIN", float(fpar[comp._UMIN]) + model.u_rest)
-            + _define("HYSTID_FF_U_MAX", float(fpar[comp._UMAX]) + model.u_rest)
+            + _define("HYSTID_FF_M_NX", max(plan.m_num.size, 1))
+            + _define("HYSTID_FF_M_NY", max(plan.m_den.size - 1, 1))
+            + _define("HYSTID_FF_L2_NX", l2.num.size)
+            + _define("HYSTID_FF_L2_NY", max(l2.den.size - 1, 1))
+            + _define("HYSTID_FF_L2_NF", l2.fir.size) + _define("HYSTID_FF_L2_NS", max(ns, 1))
+            + _define("HYSTID_FF_YD_LINE", l2.preview + chain.advance + 1)
+            + _define("HYSTID_FF_U_MIN", plan.u_limits[0])
+            + _define("HYSTID_FF_U_MAX", plan.u_limits[1])
             + "/* the command returned while the first HYSTID_FF_DELAY references are read in */\n"
             + _define("HYSTID_FF_REST_COMMAND", rest)
-            + "typedef struct hystid_ff_state {\n    double x[HYSTID_FF_NX]; /* the Python "
-            "compensator's state vector */\n    double gaps[HYSTID_FF_PREVIEW + 1]; /* planner "
-            "scratch */\n    long n;\n    double u, yd;\n    int status;\n} hystid_ff_state;\n\n"
+            + "typedef struct hystid_ff_state {\n"
+            "    double x[HYSTID_FF_NX]; /* the Python chain's state vector */\n"
+            "    double gaps[HYSTID_FF_PREVIEW + 1]; /* planner scratch */\n"
+            "    double mx[HYSTID_FF_M_NX], my[HYSTID_FF_M_NY]; /* reference model */\n"
+            "    double lx[HYSTID_FF_L2_NX], lv[HYSTID_FF_L2_NY]; /* L2^-1, causal part */\n"
+            "    double fl[2 * HYSTID_FF_L2_NF]; /* L2^-1, anti-causal part */\n"
+            "    int slot;\n"
+            "    double xs[HYSTID_FF_L2_NS], corr[HYSTID_FF_SETTLE]; /* pre-actuation made up */\n"
+            "    double ydl[HYSTID_FF_YD_LINE]; /* desired output, aligned with the command */\n"
+            "    double y_rest;\n    long n;\n    double u, yd;\n    int status;\n"
+            "} hystid_ff_state;\n\n"
             "void hystid_ff_init(hystid_ff_state *s);\n"
-            "/* r: the reference now; returns the command for the reference HYSTID_FF_DELAY "
-            "samples ago. */\ndouble hystid_ff_step(hystid_ff_state *s, double r);\n"
-            "/* the desired output aligned with that command's output, and the status bits (1 "
-            "step clipped\n   to the bound of condition 8, 2 no exact step, 4 saturated, 8 "
-            "turning the hysteresis round) */\ndouble hystid_ff_desired(const hystid_ff_state "
-            "*s);\nint hystid_ff_status(const hystid_ff_state *s);\n")
-    names = ("KIND", "N1A", "N1B", "Q1", "N2A", "N2B", "Q2", "NM", "L2MODE", "P", "LY", "LW",
-             "NPI", "OFF_M", "OFF_Y", "OFF_W", "OFF_U", "OFF_W1", "OFF_H", "NX", "H1", "Q")
-    src = "".join(_define(f"HX_FF_{n}", int(ispec[getattr(comp, f"_{n}")])) for n in names)
+            "/* r: the reference now (record units); returns the command for the reference "
+            "HYSTID_FF_DELAY\n   samples ago (record units). */\n"
+            "double hystid_ff_step(hystid_ff_state *s, double r);\n"
+            "/* the output asked for at that command's sample (compensate().y_des) and the "
+            "status bits (1 step\n   clipped to the bound of condition 8, 2 no exact step, 4 "
+            "saturated, 8 turning the hysteresis round) */\n"
+            "double hystid_ff_desired(const hystid_ff_state *s);\n"
+            "int hystid_ff_status(const hystid_ff_state *s);\n")
+    names_i = ("KIND", "N1A", "N1B", "Q1", "N2A", "N2B", "Q2", "NM", "L2MODE", "P", "LY", "LW",
+               "NPI", "OFF_M", "OFF_Y", "OFF_W", "OFF_U", "OFF_W1", "OFF_H", "NX", "H1", "Q")
+    src = "".join(_define(f"HX_FF_{n}", int(ispec[getattr(comp, f"_{n}")])) for n in names_i)
+    if int(ispec[comp._NM]) or int(ispec[comp._L2MODE]) or int(ispec[comp._Q2]):
+        raise ValueError("the compensator chain must have L2 left out (it is inverted ahead)")
     fnames = ("ALPHA", "F0", "F1", "G0", "BOUND", "UMIN", "UMAX", "B1LEAD", "B2LEAD", "K2", "KH")
     src += "".join(_define(f"HX_FF_{n}", float(fpar[getattr(comp, f"_{n}")])) for n in fnames)
-    src += _define("HX_FF_DM", float(chain.DM)) + _define("HX_FF_R_SHIFT", model.offset) \
-        + _define("HX_FF_U_SHIFT", model.u_rest)
-    arrays = {"a1": chain.a1, "b1t": chain.b1t}
-    if int(ispec[comp._L2MODE]) == 1:
-        arrays.update(a2=chain.a2, b2t=chain.b2t)
-    if int(ispec[comp._NM]) > 0:
-        arrays.update(am=chain.AM, bm=chain.BM, cm=chain.CM)
+    src += "".join(_define(f"HX_FF_{k}", v) for k, v in (
+        ("ADVANCE", chain.advance), ("Y_REST", plan.y_rest), ("REST", plan.rest),
+        ("U_SHIFT", plan.u_rest), ("ANCHOR_REFERENCE", int(plan.anchor == "reference")),
+        ("M", int(M)), ("M_ND", plan.m_den.size - 1), ("LEAD", plan.lead),
+        ("L2_DELAY", l2.delay), ("L2_PRE", l2.pre), ("L2_ND", l2.den.size - 1)))
+    arrays: dict[str, np.ndarray] = {"a1": chain.a1, "b1t": chain.b1t, "l2_num": l2.num,
+                                     "l2_den": l2.den, "l2_fir": l2.fir}
+    if l2.pre:
+        arrays.update(l2_a=l2.A, l2_b=l2.B, l2_gain=l2.gain)
+    if M:
+        arrays.update(m_num=plan.m_num, m_den=plan.m_den)
     if kind == comp.KIND_PI:
         arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi, r_inv=chain.r_inv,
                       mu_inv=chain.mu_inv)
@@ -316,7 +351,8 @@ def c_sources(
     source : str
         Where the model came from (a file name), for the header's comment.
     compensator : mapping, optional
-        Options of :func:`hystid.compensate.feedforward` for the exported compensator.
+        Options of :func:`hystid.compensate.compensate` for the exported compensator (see
+        :func:`ff_options`).
     rpem_sigma : float, optional
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
     rpem_record : Record, optional
@@ -333,19 +369,23 @@ def c_sources(
     Raises
     ------
     ValueError
-        When the compensator cannot be built with the ``compensator`` options given, or a
-        number is not finite.
+        For a model kind the export has no C for (it names the kind), when the compensator
+        cannot be built with the ``compensator`` options given, or a number is not finite.
     """
     if isinstance(model, DuhemSandwich):
         from ..validate import check_plain_duhem
 
         check_plain_duhem(model.structure.layout, "the C export")
     from .. import __version__
+    from ..pi import PISandwich
 
+    if not isinstance(model, DuhemSandwich | PISandwich):
+        raise ValueError(f"model: a {type(model).__name__} cannot be exported to C (the export "
+                         "has the Duhem and the Prandtl-Ishlinskii sandwiches)")
     duhem = isinstance(model, DuhemSandwich)
     mhead, msrc = _model_part(model)
     try:
-        fhead, fsrc = _ff_part(ff_chain(model, **dict(compensator or {})), model)
+        fhead, fsrc = _ff_part(ff_plan(model, **dict(compensator or {})), model)
     except ValueError as err:
         if compensator:  # options asked for explicitly: their error is the answer
             raise
@@ -369,9 +409,11 @@ def c_sources(
     header = (banner + "#ifndef HYSTID_MODEL_H\n#define HYSTID_MODEL_H\n\n" + mhead + fhead
               + (rhead if duhem else "\n#define HYSTID_NO_RPEM 1 /* Duhem models only */\n")
               + "\n#endif /* HYSTID_MODEL_H */\n")
-    helpers = MODEL_COMMON
-    if not duhem:  # sgn is used by the Duhem parts only (an unused static is an error)
-        helpers = MODEL_COMMON[MODEL_COMMON.index("static double hx_max"):]
+    # an unused static function is an error: sgn for the Duhem parts, min and max for the PI
+    # parts and the Duhem reversal planner
+    cut = MODEL_COMMON.index("static double hx_max")
+    helpers = (MODEL_COMMON[:cut] if duhem else "") \
+        + (MODEL_COMMON[cut:] if not duhem or "static double hx_plan_step" in fsrc else "")
     source_text = (banner + '#include <math.h>\n\n#include "hystid_model.h"\n' + helpers
                    + "\n/* ---- the placed model */\n" + msrc
                    + ("\n/* ---- the feed-forward compensator */\n" + fsrc if fsrc else "")
@@ -403,7 +445,7 @@ def export_c(
     source : str
         Where the model came from, for the header's comment.
     compensator : mapping, optional
-        Options of :func:`hystid.compensate.feedforward` (see :func:`c_sources`).
+        Options of :func:`hystid.compensate.compensate` (see :func:`ff_options`).
     rpem_sigma : float, optional
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
     rpem_record : Record, optional

@@ -37,6 +37,23 @@ def _samples(text: str) -> int:
     return value
 
 
+def _share(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from err
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a share >= 0, got {text!r}")
+    return value
+
+
+def _window(text: str) -> int:
+    value = _samples(text)
+    if value < 3 or value % 2 == 0:
+        raise argparse.ArgumentTypeError(f"expected an odd window length >= 3, got {text!r}")
+    return value
+
+
 def _positive(text: str) -> float:
     try:
         value = float(text)
@@ -65,10 +82,21 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="replace the two files in DIR")
     parser.add_argument("--u-limits", type=_limits, default=None, metavar="LOW,HIGH",
                         help="compensator: command limits in the record's units (default: the "
-                        "model's input envelope widened by 10%% of its span at each end)")
+                        "model's input envelope widened by --margin of its span at each end)")
+    parser.add_argument("--margin", type=_share, default=None, metavar="F",
+                        help="compensator: share of the input envelope's span added at each end "
+                        "of the default limits (default 0.1)")
     parser.add_argument("--preview", type=_samples, default=None, metavar="N",
                         help="compensator: reversal planner preview in samples (default: "
-                        "feedforward's)")
+                        "compensate's)")
+    parser.add_argument("--smooth", type=_window, default=None, metavar="L",
+                        help="compensator: ask for the reference smoothed over L samples (odd, "
+                        ">= 3) without lag, as hystid compensate --smooth (its delay adds to "
+                        "HYSTID_FF_DELAY)")
+    parser.add_argument("--anchor", choices=("model", "reference"), default=None,
+                        help="compensator: the stage rests at the model's output at rest "
+                        "(default) or at the first reference sample the step is given (a sensor "
+                        "zero that moved)")
     parser.add_argument("--rpem-sigma", type=_positive, default=None, metavar="S",
                         help="on-line identifier: initial residual scale in output units "
                         "(default: 1e-3 of the model's output span)")
@@ -95,11 +123,16 @@ def run(args: argparse.Namespace) -> int:
     from ..modelfile import ModelFileError, load_model
     from .c import export_c
 
-    options = {k: v for k, v in (("u_limits", args.u_limits), ("preview", args.preview))
+    options = {k: v for k, v in (("u_limits", args.u_limits), ("margin", args.margin),
+                                 ("preview", args.preview), ("anchor", args.anchor))
                if v is not None}
     notes: list[str] = []
     try:
         model = load_model(args.model)
+        if args.smooth is not None:
+            from ..compensate import smoothing_model
+
+            options["reference_model"] = smoothing_model(args.smooth, model.dt)
         record = None
         if args.rpem_record is not None:
             from ..records import load_record
