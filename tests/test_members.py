@@ -66,7 +66,7 @@ def test_members_and_the_identify_entry_point():
     with pytest.raises(ValueError, match="structure: applies to model='duhem' only"):
         identify(rec, model="pi", structure=MEMBERS["duhem"].structure)
     with pytest.raises(ValueError, match="model='auto' chooses on batch fits"):
-        identify(rec, model="auto", method="online")
+        identify(rec, model="auto", method="ekf")
     with pytest.raises(ValueError, match="PI sandwich is identified by 'batch' or 'online'"):
         identify(rec, model="pi-stage", method="ekf")
     with pytest.raises(ValueError, match="holdout"):

@@ -128,3 +128,24 @@ def test_branch_gradients_are_the_derivatives_of_the_prediction():
         h = 1e-6 * max(1.0, abs(phi[j]))
         fd = (run(phi + h * np.eye(25)[j])[0] - run(phi - h * np.eye(25)[j])[0]) / (2 * h)
         np.testing.assert_allclose(J[:, j], fd, rtol=1e-5, atol=1e-7 * np.max(np.abs(fd)))
+
+
+def test_auto_online_chooses_on_the_head_and_runs_the_member_on_line():
+    """``model="auto", method="online"``: the member the head's batch fits choose, identified
+    on-line over the whole record: the Duhem member on the paper's (Duhem) stage; on the
+    Bouc-Wen look-alike of stage A, within the on-line goal of the batch choice."""
+    from hystid.reference import reference_record
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        paper = identify(reference_record(0.3, seed=0), model="auto", method="online")
+        train = stage_a_like("prbn", seconds=1.0, seed=0)
+        held = [stage_a_like(kind, seconds=1.0, seed=1) for kind in ("sine50", "tri50")]
+        online = identify(train, model="auto", method="online")
+        batch = identify(train, model="auto")
+    assert (paper.info["model"], paper.method) == ("duhem", "online")
+    assert online.method != "batch" and online.info["model"] in ("duhem", "pi-stage")
+    assert online.info["member_selection"]["on_samples"] < train.n
+    rms_online = np.array([r["model"] for r in compare(online.model, train, held).rows])
+    rms_batch = np.array([r["model"] for r in compare(batch.model, train, held).rows])
+    assert np.max(rms_online / rms_batch) <= RATIO, (rms_online, rms_batch)

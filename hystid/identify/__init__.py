@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -151,9 +152,12 @@ def _identify_member(record: Record, method: str, structure: Any, model: str,
         raise ValueError(f"structure: applies to model='duhem' only (got model={model!r}); a "
                          "member fixes its own structure")
     if model == "auto":
+        if method == "online":
+            return _online_auto(record, progress, settings)
         if method != "batch":
-            raise ValueError(f"model='auto' chooses on batch fits (got method={method!r}); "
-                             "pass model='duhem' or 'pi' for an on-line method")
+            raise ValueError(f"model='auto' chooses on batch fits, for method 'batch' or "
+                             f"'online' (got method={method!r}); pass model='duhem' for "
+                             f"method={method!r}")
         return select_member(record, progress=progress, **settings)
     chosen = member(model)
     if chosen.kind == "pi" and method not in ("batch", "online"):
@@ -161,6 +165,36 @@ def _identify_member(record: Record, method: str, structure: Any, model: str,
                          f"recursive identifier), got {method!r}")
     result = chosen.fit(record, method, progress=progress, **settings)
     result.info["model"] = chosen.name
+    return result
+
+
+#: Share of a record (after its leading rest) on which ``model="auto", method="online"`` chooses
+#: the member by batch fits before the member's on-line identifier runs over the whole record.
+ONLINE_CHOICE_SHARE = 0.5
+
+
+def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
+                 settings: dict) -> IdentificationResult:
+    """``model="auto"`` on-line: the member chosen on the head of the record (batch fits, as
+    :func:`~hystid.identify.members.select_member` chooses), then identified on-line over
+    the whole record (a stage is identified on a first stretch of data before the loop runs)."""
+    from .members import member, select_member
+    from .prepare import rest_level
+
+    _, at_rest, n_lead = rest_level(record.u)
+    lead = n_lead if at_rest else 0
+    k = lead + int(round(ONLINE_CHOICE_SHARE * (record.n - lead)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the head's fits are only compared
+        choice = select_member(record[:k], progress=progress)
+    name = choice.info["model"]
+    say = getattr(progress, "say", None)
+    if say is not None:
+        say(f"model choice (on samples 0..{k - 1}): {name}; its on-line identifier runs over "
+            "the whole record")
+    result = member(name).fit(record, "online", progress=progress, **settings)
+    result.info["member_selection"] = {**choice.info["member_selection"], "on_samples": k}
+    result.info["model"] = name
     return result
 
 
