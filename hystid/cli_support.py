@@ -13,6 +13,8 @@ import sys
 import time
 from typing import NoReturn
 
+from .errors import CommandError
+
 #: Exit status of a refused input or a failed write.
 EXIT_BAD_INPUT = 2
 #: Compiled kernels every ``hystid demo`` runs, as (module, name): while one of them is not in
@@ -23,10 +25,6 @@ DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensiti
 __all__ = ["DEMO_KERNELS", "EXIT_BAD_INPUT", "RECORD_FILES", "CommandError", "OneLineParser",
            "Progress", "check_model_on", "check_seconds", "for_cli", "jsonable", "kernels_cached",
            "one_of", "remember", "run_command", "table"]
-
-
-class CommandError(Exception):
-    """A user-facing error: printed without a traceback, exit status 2."""
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .errors import ModelFileError
 from .safeio import check_output, dumps_strict, write_text
 
 __all__ = ["FORMAT", "KINDS", "VERSION", "ModelFileError", "file_sha256", "make_provenance",
@@ -27,10 +28,6 @@ FORMAT = "hystid-model"
 VERSION = 1
 #: Model kinds a file may hold.
 KINDS = ("duhem", "pi")
-
-
-class ModelFileError(ValueError):
-    """A model file cannot be read or written; the message names the file and the entry."""
 
 
 # --------------------------------------------------------------------------- provenance
