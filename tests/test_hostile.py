@@ -430,7 +430,7 @@ def test_simulate_model_refuses_bad_pairs(simulated, tmp_path, capsys):
 
 
 def test_diagnose_reads_the_saved_model(simulated, tmp_path, capsys):
-    from hystid.diagnose import command as diagnose_command
+    from hystid.cli import diagnose as diagnose_command
 
     rec_path, report = simulated
     parser = cli.build_parser()

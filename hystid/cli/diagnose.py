@@ -37,8 +37,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The sub-command's parser.
     """
-    from .diagnosis import DEFAULT_EFFECTS
-    from .effects import FAMILIES
+    from ..diagnose.diagnosis import DEFAULT_EFFECTS
+    from ..diagnose.effects import FAMILIES
 
     parser.add_argument("train", metavar="TRAIN",
                         help="record to identify on (csv, npz, mat, h5 or file.h5:group)")
@@ -232,9 +232,9 @@ def run(args: argparse.Namespace) -> int:
     int
         0 on success, 2 for bad input.
     """
+    from ..diagnose.diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
+    from ..diagnose.final_model import final_model
     from ..validate import check_fit_size, check_magnitudes
-    from .diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
-    from .final_model import final_model
 
     try:
         _check_out(args)

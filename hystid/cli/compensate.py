@@ -92,8 +92,8 @@ def scan_for(model: Any, kind: str, frequency: float, amplitude: float,
     ndarray
         The reference, starting at the model's output at rest.
     """
-    from .placed import _rest
-    from .tracking import scan_reference
+    from ..compensate.placed import _rest
+    from ..compensate.tracking import scan_reference
 
     if frequency >= model.fs / 2:
         raise ValueError(f"HZ: {frequency:g} Hz is not below half the model's rate "
@@ -240,9 +240,9 @@ def run(args: argparse.Namespace) -> int:
     int
         0 on success, 2 for bad input or a failed write.
     """
+    from ..compensate.linear_parts import smoothing_model
+    from ..compensate.placed import compensate
     from ..safeio import OutputError, check_output
-    from .linear_parts import smoothing_model
-    from .placed import compensate
 
     try:
         inputs = [args.model] + ([args.reference] if args.reference else [])

@@ -13,7 +13,7 @@ import sys
 import time
 from typing import NoReturn
 
-from .errors import CommandError
+from ..errors import CommandError
 
 #: Exit status of a refused input or a failed write.
 EXIT_BAD_INPUT = 2
@@ -124,7 +124,7 @@ def check_model_on(model, rec, option: str = "--model") -> None:
     CommandError
         When the model's delays and orders are not shorter than half the record.
     """
-    from .validate import check_delays_fit
+    from ..validate import check_delays_fit
 
     try:
         check_delays_fit(model.structure, rec.n, f"{option}: on {rec.name!r}")
@@ -156,7 +156,7 @@ def remember(rec, path: str):
     CommandError
         When its samples are beyond :data:`hystid.validate.MAX_MAGNITUDE`.
     """
-    from .validate import check_magnitudes
+    from ..validate import check_magnitudes
 
     RECORD_FILES[rec.name] = str(path)
     try:
@@ -214,7 +214,7 @@ def run_command(args: argparse.Namespace) -> int:
         :class:`~hystid.safeio.OutputError` raised while writing (an output that appeared
         meanwhile) or an :class:`OSError`; 130 when interrupted.
     """
-    from . import safeio
+    from .. import safeio
 
     safeio._CLAIMS.clear()  # the outputs of an earlier command run in this process
     try:

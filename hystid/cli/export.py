@@ -92,8 +92,8 @@ def run(args: argparse.Namespace) -> int:
     int
         0 on success, 2 on bad input.
     """
+    from ..export.c import export_c
     from ..modelfile import ModelFileError, load_model
-    from .c import export_c
 
     options = {k: v for k, v in (("u_limits", args.u_limits), ("preview", args.preview))
                if v is not None}

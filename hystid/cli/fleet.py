@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .options import integer
+from ..options import integer
 
 __all__ = ["configure_parser", "run"]
 
@@ -54,7 +54,7 @@ def _positive_float(text: str) -> float:
 
 
 def _columns(text: str) -> dict:
-    from .records import parse_columns
+    from ..records import parse_columns
 
     try:
         return parse_columns(text)
@@ -120,7 +120,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 
 def _settings(args: argparse.Namespace) -> dict:
-    from .fleet import FleetError
+    from ..fleet import FleetError
 
     settings = {"holdout": args.holdout}
     if args.fs is not None:
@@ -132,7 +132,7 @@ def _settings(args: argparse.Namespace) -> dict:
     else:
         settings["initial"] = args.initial
         if args.effects:
-            from .diagnose.screen import effect_names_check
+            from ..diagnose.screen import effect_names_check
 
             names = [e.strip() for e in args.effects.split(",") if e.strip()]
             try:
@@ -156,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     int
         0 when every record is ok, 1 when some failed, 2 on bad input.
     """
-    from .fleet import FleetError, result_paths, run_fleet
+    from ..fleet import FleetError, result_paths, run_fleet
 
     try:
         table = run_fleet(args.source, args.out, args.fleet_kind, settings=_settings(args),

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, cli_support
-from .cli_support import EXIT_BAD_INPUT, CommandError, OneLineParser, Progress  # noqa: F401
-from .options import MAX_SECONDS, integer, number
+from .. import __version__
+from ..options import MAX_SECONDS, integer, number
+from . import support as cli_support
+from .support import EXIT_BAD_INPUT, CommandError, OneLineParser, Progress  # noqa: F401
 
 #: numpy's floating-point RuntimeWarnings raised while a fit tries a diverging candidate: not
 #: shown by ``identify`` (a result the fit could not trust carries its own warnings).
@@ -27,7 +28,7 @@ _RECORD_SUFFIXES = (".csv", ".npz", ".mat", ".h5", ".hdf5")
 def _load(path: str, fs: float | None, columns: dict | None = None, option: str = "",
           units: dict | None = None):
     """Load a record; a problem with it is a :class:`CommandError` naming ``option`` and file."""
-    from .records import RecordError, load_record
+    from ..records import RecordError, load_record
 
     try:
         return cli_support.remember(load_record(path, fs=fs, columns=columns, units=units), path)
@@ -38,7 +39,7 @@ def _load(path: str, fs: float | None, columns: dict | None = None, option: str 
 def _check_file(path: str | None, option: str, args: argparse.Namespace,
                 inputs: tuple = (), create_folder: bool = False) -> Path | None:
     """Check an output file before any work (see :func:`hystid.safeio.check_output`)."""
-    from .safeio import OutputError, check_output
+    from ..safeio import OutputError, check_output
 
     if path is None:
         return None
@@ -55,7 +56,7 @@ def _check_identify_outputs(args: argparse.Namespace, inputs: tuple) -> None:
     ``--history`` may lie inside the ``--out`` folder (which is created), but never be the
     folder or one of the files written into it, not even with ``--force``.
     """
-    from .safeio import OutputError, check_apart, inside
+    from ..safeio import OutputError, check_apart, inside
 
     if args.history and args.out:
         try:
@@ -70,7 +71,7 @@ def _check_identify_outputs(args: argparse.Namespace, inputs: tuple) -> None:
 def _check_dir(path: str | None, args: argparse.Namespace, inputs: tuple = (),
                names: tuple[str, ...] = REPORT_FILES) -> Path | None:
     """Check an output folder and the files to be written into it, before any work."""
-    from .safeio import OutputError, check_output_dir
+    from ..safeio import OutputError, check_output_dir
 
     if path is None:
         return None
@@ -82,7 +83,7 @@ def _check_dir(path: str | None, args: argparse.Namespace, inputs: tuple = (),
 
 
 def _columns_arg(text: str) -> dict:
-    from .records import parse_columns
+    from ..records import parse_columns
 
     try:
         return parse_columns(text)
@@ -91,7 +92,7 @@ def _columns_arg(text: str) -> dict:
 
 
 def _units_arg(text: str) -> dict:
-    from .records import parse_units
+    from ..records import parse_units
 
     try:
         return parse_units(text)
@@ -122,7 +123,7 @@ def _crop_arg(args):
     text = getattr(args, "crop", None)
     if text is None:
         return None
-    from .options import OptionError, parse_crop
+    from ..options import OptionError, parse_crop
 
     try:
         return parse_crop(text)
@@ -133,7 +134,7 @@ def _crop_arg(args):
 def _cropped(rec, span):
     if span is None:
         return rec
-    from .options import OptionError, crop
+    from ..options import OptionError, crop
 
     try:
         return crop(rec, span)
@@ -195,7 +196,7 @@ def _method_arg(args: argparse.Namespace) -> str:
 
 def _check_skip(args: argparse.Namespace, train, structure) -> None:
     """``--skip`` must leave the batch fit enough samples of the record it fits."""
-    from .identify import min_samples
+    from ..identify import min_samples
 
     if getattr(args, "skip", None) is None:
         return
@@ -209,8 +210,8 @@ def _check_skip(args: argparse.Namespace, train, structure) -> None:
 
 def _identify_record(rec, args, progress: Progress, structure=None):
     """Run the chosen model/method on a record; returns the IdentificationResult."""
-    from .identify import identify
-    from .validate import check_fit_size
+    from ..identify import identify
+    from ..validate import check_fit_size
 
     method = _method_arg(args)
     check_fit_size(rec.n, "batch" if structure == "auto" else method, f"record {rec.name!r}")
@@ -233,7 +234,7 @@ def _structure_arg(args):
     text = getattr(args, "structure", None)
     if text is None or text == "auto":
         return text
-    from .options import OptionError, parse_structure
+    from ..options import OptionError, parse_structure
 
     try:
         return parse_structure(text)
@@ -261,8 +262,8 @@ def _split_for_validation(rec, val, args):
 
 def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dict, np.ndarray,
                                                                               object]:
-    from .baselines import compare, rest_zero, simulate_from_rest
-    from .metrics import validate
+    from ..baselines import compare, rest_zero, simulate_from_rest
+    from ..metrics import validate
 
     target = val if val is not None else rec
     k = scored_from
@@ -312,7 +313,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
 
 def _write_history(path: str, result) -> None:
     """Write the parameter history as CSV (atomically; its folder is created when missing)."""
-    from .safeio import atomic_open
+    from ..safeio import atomic_open
 
     if result.history is None:  # pragma: no cover - refused before the work by _method_arg
         raise CommandError(f"--history: method {result.method!r} keeps no parameter history")
@@ -357,7 +358,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def _reference_stage_record(args: argparse.Namespace):
     """The built-in stage excited like the paper (``--seconds``, ``--seed``, ``--noise``)."""
-    from .reference import reference_record
+    from ..reference import reference_record
 
     for option, value in (("--input", args.input), ("--columns", args.columns),
                           ("--fs", args.fs)):
@@ -376,8 +377,8 @@ def _reference_stage_record(args: argparse.Namespace):
 
 def _model_record(args: argparse.Namespace, progress: Progress):
     """A saved model (``--model``) simulated on a record's input (``--input``)."""
-    from .modelfile import ModelFileError, load_model
-    from .records import Record, RecordError
+    from ..modelfile import ModelFileError, load_model
+    from ..records import Record, RecordError
 
     if args.input is None:
         raise CommandError("--model needs --input REC: the record whose input u is simulated")
@@ -396,7 +397,7 @@ def _model_record(args: argparse.Namespace, progress: Progress):
     if not np.isclose(rec.fs, model.fs, rtol=1e-9):
         raise CommandError(f"--input {args.input}: sampled at {rec.fs:g} Hz but the model at "
                            f"{model.fs:g} Hz (expected the model's rate)")
-    from .operating import AdmissibilityWarning
+    from ..operating import AdmissibilityWarning
 
     with warnings.catch_warnings():  # the reasons are in resp.warnings, printed below
         warnings.simplefilter("ignore", AdmissibilityWarning)
@@ -429,7 +430,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     int
         The exit status (0).
     """
-    from .safeio import dumps_strict
+    from ..safeio import dumps_strict
 
     progress = Progress(args.quiet or args.json)
     inputs = (args.record, args.val, *(args.repeat or []))
@@ -463,7 +464,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         if not args.json:
             print(f"hystid identify: warning: {cli_support.for_cli(w)}", file=sys.stderr)
     if args.out:
-        from .modelfile import make_provenance
+        from ..modelfile import make_provenance
 
         provenance = make_provenance(result.method, args.record, result.settings)
         _write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance,
@@ -520,9 +521,9 @@ def _write_outputs(out: Path, report: dict, target, yhat, result, truth=None,
     validation figure shows the samples the validation figures were computed on: from
     ``scored_from`` (a held-out end of the record) less the transient.
     """
-    from .metrics import plot_convergence, plot_validation
-    from .modelfile import save_model
-    from .safeio import atomic_folder, write_json
+    from ..metrics import plot_convergence, plot_validation
+    from ..modelfile import save_model
+    from ..safeio import atomic_folder, write_json
 
     model = result.model
     units = {"u": target.units.get("u", ""), "y": target.units.get("y", "")}
@@ -560,9 +561,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     int
         The exit status (0).
     """
-    from .identify import METHODS, identify, min_samples
-    from .metrics import validate
-    from .reference import PAPER_PARAMS, reference_model, reference_record
+    from ..identify import METHODS, identify, min_samples
+    from ..metrics import validate
+    from ..reference import PAPER_PARAMS, reference_model, reference_record
 
     progress = Progress(args.quiet)
     _check_dir(args.out, args)
@@ -612,7 +613,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     report["validation_of"] = result.method
     report["truth_simulated_rms_um"] = float(np.sqrt(np.mean((truth.simulate(val.u).y
                                                                - val.y) ** 2)))
-    from .modelfile import make_provenance
+    from ..modelfile import make_provenance
 
     report["noise_um"] = args.noise
     _write_outputs(out, {"model": "duhem", "method": result.method,
@@ -738,7 +739,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                        description="Localise the model error, screen unmodelled effects and "
                        "measure how far each closes the gap on held-out data.")
     if only in (None, "diagnose"):
-        from .diagnose import command as diagnose_command
+        from . import diagnose as diagnose_command
 
         diagnose_command.configure_parser(p)
         p.set_defaults(func=diagnose_command.run)
@@ -748,7 +749,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                        "model) for a reference displacement or a scan, in the record's units, "
                        "and write t,r,u,y_pred to a CSV.")
     if only in (None, "compensate"):
-        from .compensate import command as compensate_command
+        from . import compensate as compensate_command
 
         compensate_command.configure_parser(p)
         p.set_defaults(func=compensate_command.run)
@@ -757,14 +758,14 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                        description="Identify or diagnose many records as Dask tasks; one result "
                        "row per record (CSV and Parquet), resumable.")
     if only in (None, "fleet"):
-        from . import fleet_command
+        from . import fleet as fleet_command
 
         fleet_command.configure_parser(p)
         p.set_defaults(func=fleet_command.run)
 
     p = sub.add_parser("export", help="a saved model as C99 (model, compensator, RPEM step)")
     if only in (None, "export"):
-        from .export import command as export_command
+        from . import export as export_command
 
         export_command.configure_parser(p)
         p.set_defaults(func=export_command.run)
