@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 import warnings
@@ -666,7 +667,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--noise", type=_non_negative_float, default=1e-3,
                    help="sensor noise standard deviation in um (default 0.001 = 1 nm)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.set_defaults(func=cmd_demo)
+    p.set_defaults(func=functools.partial(cli_support.run_command, steps=cmd_demo),
+                   prog=p.prog)
 
     p = sub.add_parser("simulate", help="write a record from the reference stage or a model",
                        description="Simulate the reference stage with the paper's excitation "
@@ -690,7 +692,8 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--out", type=_path, required=True, help="output file (.csv, .npz, .mat, .h5)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.set_defaults(func=cmd_simulate)
+    p.set_defaults(func=functools.partial(cli_support.run_command, steps=cmd_simulate),
+                   prog=p.prog)
 
     p = sub.add_parser("identify", help="identify a record",
                        description="Identify a sandwich model from a record (CSV with a header "
@@ -733,42 +736,33 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true",
                    help="replace --history and files already in --out")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
-    p.set_defaults(func=cmd_identify)
+    p.set_defaults(func=functools.partial(cli_support.run_command, steps=cmd_identify),
+                   prog=p.prog)
 
-    p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap",
-                       description="Localise the model error, screen unmodelled effects and "
-                       "measure how far each closes the gap on held-out data.")
+    p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap")
     if only in (None, "diagnose"):
         from . import diagnose as diagnose_command
 
         diagnose_command.configure_parser(p)
-        p.set_defaults(func=diagnose_command.run)
 
     p = sub.add_parser("compensate", help="the command that makes a saved model follow a "
-                       "reference", description="Compute the compensated command (inverse "
-                       "model) for a reference displacement or a scan, in the record's units, "
-                       "and write t,r,u,y_pred to a CSV.")
+                       "reference")
     if only in (None, "compensate"):
         from . import compensate as compensate_command
 
         compensate_command.configure_parser(p)
-        p.set_defaults(func=compensate_command.run)
 
-    p = sub.add_parser("fleet", help="identify or diagnose many records on Dask",
-                       description="Identify or diagnose many records as Dask tasks; one result "
-                       "row per record (CSV and Parquet), resumable.")
+    p = sub.add_parser("fleet", help="identify or diagnose many records on Dask")
     if only in (None, "fleet"):
         from . import fleet as fleet_command
 
         fleet_command.configure_parser(p)
-        p.set_defaults(func=fleet_command.run)
 
     p = sub.add_parser("export", help="a saved model as C99 (model, compensator, RPEM step)")
     if only in (None, "export"):
         from . import export as export_command
 
         export_command.configure_parser(p)
-        p.set_defaults(func=export_command.run)
     return parser
 
 
@@ -788,12 +782,13 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        0 on success, 2 on bad input or a failed write, 130 when interrupted.
+        0 on success, 2 on bad input or a failed write, 130 when interrupted (``fleet``: 1
+        when some record failed).
     """
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     parser = build_parser(only=_command_word(argv))
     args = parser.parse_args(argv)
-    return cli_support.run_command(args)
+    return args.func(args)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
