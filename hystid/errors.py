@@ -5,21 +5,20 @@ Each is a subclass of the built-in type a caller would catch anyway (most are
 message names what is wrong and what was expected. The modules that raise them also hand them
 on under their old names (``from hystid.records import RecordError`` still works).
 
-===========================  =================  ================================================
-class                        base               raised or warned by
-===========================  =================  ================================================
-:class:`RecordError`         ValueError         :mod:`hystid.records` (a record, a record file)
-:class:`ModelFileError`      ValueError         :mod:`hystid.modelfile` (a model file)
-:class:`OutputError`         ValueError         :mod:`hystid.safeio` (an output path)
-:class:`OptionError`         ValueError         :mod:`hystid.options` (a command-line value)
-:class:`IdentificationDataError`  ValueError    :mod:`hystid.identify` (a record that cannot
-                                                identify a stage)
-:class:`DiagnosisError`      ValueError         :mod:`hystid.diagnose` (a diagnosis' input)
-:class:`FleetError`          ValueError         :mod:`hystid.fleet` (a fleet's input)
-:class:`CommandError`        Exception          :mod:`hystid.cli` (the ``hystid`` command)
-:class:`AdmissibilityWarning`  RuntimeWarning   a model used outside what it was identified for
-:class:`CompensationWarning`   UserWarning      :func:`hystid.compensate.compensate`
-===========================  =================  ================================================
+* :class:`RecordError` (ValueError) -- a record or a record file, :mod:`hystid.records`;
+* :class:`ModelFileError` (ValueError) -- a model file, :mod:`hystid.modelfile`;
+* :class:`OutputError` (ValueError) -- an output path, :mod:`hystid.safeio`;
+* :class:`IdentificationDataError` (ValueError) -- a record that cannot identify a stage,
+  :mod:`hystid.identify`;
+* :class:`DiagnosisError` (ValueError) -- a diagnosis' input, :mod:`hystid.diagnose`;
+* :class:`FleetError` (ValueError) -- a fleet's input, :mod:`hystid.fleet`;
+* :class:`OptionError` (ValueError) -- a command-line value, :mod:`hystid.options`;
+* :class:`CommandError` (Exception) -- an input the ``hystid`` command refuses,
+  :mod:`hystid.cli`;
+* :class:`AdmissibilityWarning` (RuntimeWarning) -- a model used outside what it was
+  identified for;
+* :class:`CompensationWarning` (UserWarning) -- a compensator that had to approximate,
+  :func:`hystid.compensate.compensate`.
 """
 
 from __future__ import annotations
