@@ -14,10 +14,17 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import DiagnosisError, OptionError, RecordError
 from ..options import crop, fraction, integer, number, parse_crop, parse_structure
 from .support import CommandError, bind, check_out, positive_arg, refused, run_command, tell
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..diagnose.final_model import FinalModel
+    from ..diagnose.result import DiagnosisResult
+    from ..model import DuhemSandwich, Structure
+    from ..records import Record
 
 __all__ = ["OUTPUT_FILES", "configure_parser", "run"]
 
@@ -134,7 +141,7 @@ def _units(text: str | None) -> dict | None:
         return parse_units(text)
 
 
-def _load(path: str, args, label: str):
+def _load(path: str, args: argparse.Namespace, label: str) -> Record:
     from ..records import Record, load_record
 
     with refused(errors=RecordError):
@@ -149,7 +156,7 @@ def _load(path: str, args, label: str):
     return rec
 
 
-def _model(path: str | None, fs: float):
+def _model(path: str | None, fs: float) -> DuhemSandwich | None:
     """The model saved in ``path`` (a model file, or an older report.json with a structure)."""
     if path is None:
         return None
@@ -183,14 +190,15 @@ def _model(path: str | None, fs: float):
                              name=f"model from {Path(path).name}")
 
 
-def _structure(text: str | None):
+def _structure(text: str | None) -> Structure | None:
     if text is None:
         return None
     with refused(errors=OptionError):
         return parse_structure(text)
 
 
-def _write(out: Path, report: dict, result, final, summary: str, provenance: dict) -> None:
+def _write(out: Path, report: dict, result: DiagnosisResult, final: FinalModel, summary: str,
+           provenance: dict) -> None:
     """Write the report, the summary, the model and the figures: all of them, or none on a
     failure."""
     from ..modelfile import save_model

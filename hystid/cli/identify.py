@@ -40,6 +40,8 @@ from .support import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
+    from ..identify.result import IdentificationResult
+    from ..model import Structure
     from ..records import Record
 
 __all__ = ["MODEL_NAMES", "NUMERIC_NOISE", "REPORT_FILES", "configure_parser", "run",
@@ -158,13 +160,13 @@ def _crop_arg(args: argparse.Namespace) -> tuple[float | None, float | None] | N
         return parse_crop(args.crop)
 
 
-def _cropped(rec, span):
+def _cropped(rec: Record, span: tuple[float | None, float | None] | None) -> Record:
     """The part of ``rec`` in ``span`` (all of it for ``None``)."""
     with refused(errors=OptionError):
         return crop(rec, span)
 
 
-def _structure_arg(args: argparse.Namespace):
+def _structure_arg(args: argparse.Namespace) -> Structure | str | None:
     """The structure of ``--structure``: ``None``, ``"auto"`` or a Duhem structure."""
     if args.structure is None or args.structure == "auto":
         return args.structure
@@ -210,7 +212,8 @@ def _method_arg(args: argparse.Namespace) -> str:
     return method
 
 
-def _check_skip(args: argparse.Namespace, train, structure) -> None:
+def _check_skip(args: argparse.Namespace, train: Record,
+                structure: Structure | str | None) -> None:
     """``--skip`` must leave the batch fit enough samples of the record it fits."""
     from ..identify import min_samples
 
@@ -224,7 +227,8 @@ def _check_skip(args: argparse.Namespace, train, structure) -> None:
                            f"without its held-out end; expected at least {need} samples left)")
 
 
-def _identify_record(rec, args, progress: Progress, structure=None):
+def _identify_record(rec: Record, args: argparse.Namespace, progress: Progress,
+                     structure: Structure | str | None = None) -> IdentificationResult:
     """Run the chosen model/method on a record; returns the IdentificationResult."""
     from ..identify import identify
     from ..validate import check_fit_size
@@ -246,7 +250,8 @@ def _identify_record(rec, args, progress: Progress, structure=None):
                     **settings)
 
 
-def _split_for_validation(rec, val, args):
+def _split_for_validation(rec: Record, val: Record | None,
+                          args: argparse.Namespace) -> tuple[Record, Record, int | None]:
     """The identification record, the validation target and the first sample to score.
 
     Without ``--val`` the end of the record is held out (``--holdout``) and the whole record is

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import warnings
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,6 +34,9 @@ from .support import (
     seed_arg,
     units_arg,
 )
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..records import Record
 
 __all__ = ["RECORD_SUFFIXES", "configure_parser", "run"]
 
@@ -105,7 +109,7 @@ def _simulate(args: argparse.Namespace) -> None:
                  f"[{rec.y.min():.4g}, {rec.y.max():.4g}] {rec.units.get('y', '')}")
 
 
-def _reference_stage_record(args: argparse.Namespace):
+def _reference_stage_record(args: argparse.Namespace) -> Record:
     """The built-in stage excited like the paper (``--seconds``, ``--seed``, ``--noise``)."""
     from ..reference import reference_record
 
@@ -124,7 +128,7 @@ def _reference_stage_record(args: argparse.Namespace):
                             name=f"reference stage seed {args.seed}")
 
 
-def _model_record(args: argparse.Namespace, progress: Progress):
+def _model_record(args: argparse.Namespace, progress: Progress) -> Record:
     """A saved model (``--model``) simulated on a record's input (``--input``)."""
     from ..errors import AdmissibilityWarning, ModelFileError, RecordError
     from ..modelfile import load_model

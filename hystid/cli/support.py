@@ -39,8 +39,8 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["DEMO_KERNELS", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "RECORD_FILES", "UNITS_HELP",
            "CommandError", "OneLineParser", "Progress", "bind", "check_model_on", "check_out",
            "check_seconds", "columns_arg", "file_arg", "for_cli", "jsonable", "kernels_cached",
-           "load", "one_of", "positive_arg", "refused", "remember", "run_command", "table",
-           "tell", "units_arg"]
+           "load", "non_negative_arg", "one_of", "positive_arg", "refused", "remember",
+           "run_command", "seconds_arg", "seed_arg", "table", "tell", "units_arg"]
 
 #: Exit status of a refused input or a failed write.
 EXIT_BAD_INPUT = 2
@@ -278,7 +278,7 @@ def check_seconds(seconds: float, need: int, fs: float, option: str = "--seconds
                            f"{need} samples: {option} {need / fs:.3g} or more)")
 
 
-def check_model_on(model, rec, option: str = "--model") -> None:
+def check_model_on(model: Any, rec: Record, option: str = "--model") -> None:
     """Refuse a model whose delays reach past most of the record it is simulated on.
 
     Parameters
@@ -297,10 +297,8 @@ def check_model_on(model, rec, option: str = "--model") -> None:
     """
     from ..validate import check_delays_fit
 
-    try:
+    with refused():
         check_delays_fit(model.structure, rec.n, f"{option}: on {rec.name!r}")
-    except ValueError as err:
-        raise CommandError(str(err)) from err
 
 
 def load(path: str, fs: float | None = None, columns: dict | None = None, option: str = "",
@@ -334,7 +332,7 @@ def load(path: str, fs: float | None = None, columns: dict | None = None, option
     return remember(rec, path)
 
 
-def remember(rec, path: str):
+def remember(rec: Record, path: str) -> Record:
     """Note the file a record came from (see :func:`for_cli`), check its sizes, return it.
 
     Parameters
@@ -357,10 +355,8 @@ def remember(rec, path: str):
     from ..validate import check_magnitudes
 
     RECORD_FILES[rec.name] = str(path)
-    try:
+    with refused():
         check_magnitudes(rec, str(path))
-    except ValueError as err:
-        raise CommandError(str(err)) from err
     return rec
 
 
