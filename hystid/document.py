@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .errors import ModelFileError
 from .safeio import check_output, dumps_strict, write_text
 
 __all__ = ["FORMAT", "KINDS", "VERSION", "ModelFileError", "file_sha256", "make_provenance",
@@ -31,10 +32,6 @@ KINDS = ("duhem", "pi")
 
 #: Structure keys of the generalised Duhem block, written only when the block uses them.
 _SHAPE_KEYS = ("f_order", "g_order", "directional")
-
-
-class ModelFileError(ValueError):
-    """A model file cannot be read or written; the message names the file and the entry."""
 
 
 # --------------------------------------------------------------------------- provenance

@@ -36,7 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from .safeio import OutputError, folder_lock
+from .errors import FleetError, OutputError
+from .safeio import folder_lock
 
 __all__ = ["KINDS", "RECORD_SUFFIXES", "FailedSeed", "FleetError", "Job", "find_jobs",
            "fleet_client", "map_seeds", "read_results", "result_paths", "run_fleet", "run_job",
@@ -57,10 +58,6 @@ BASE_COLUMNS = ("name", "status", "error", "train", "val", "held_out", "method",
 #: identification runs 1.6x slower (the allocator hands memory back to the system at every
 #: step). The local cluster unsets it; see the README for workers started by ``dask worker``.
 LOCAL_WORKER_ENV = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
-
-
-class FleetError(ValueError):
-    """Bad fleet input (no records, a malformed table, a results file that is not ours)."""
 
 
 # --------------------------------------------------------------------------- the records

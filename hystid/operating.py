@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from .errors import AdmissibilityWarning
 from .signals import finite_number
 
 __all__ = ["AdmissibilityWarning", "Envelope", "Placed", "SLEW_QUANTILE", "warn_admissibility"]
@@ -36,10 +37,6 @@ __all__ = ["AdmissibilityWarning", "Envelope", "Placed", "SLEW_QUANTILE", "warn_
 #: its samples. Isolated jumps (a step out of rest, a generator wrapping its last sample round)
 #: are not part of what the input does.
 SLEW_QUANTILE = 0.999
-
-
-class AdmissibilityWarning(RuntimeWarning):
-    """A model is used outside what it was identified for (input envelope or condition 8)."""
 
 
 @dataclass(frozen=True)

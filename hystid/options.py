@@ -14,6 +14,7 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from .errors import OptionError
 from .validate import MAX_DELAY, MAX_ORDER
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -38,10 +39,6 @@ MAX_SECONDS = 600.0
 
 _TRUE = ("1", "true", "yes", "on")
 _FALSE = ("0", "false", "no", "off")
-
-
-class OptionError(ValueError):
-    """A command-line option has a value hystid cannot use; the message names the option."""
 
 
 # --------------------------------------------------------------------------- numbers

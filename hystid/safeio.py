@@ -34,6 +34,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from .errors import OutputError
+
 __all__ = [
     "OutputError",
     "atomic_folder",
@@ -52,10 +54,6 @@ __all__ = [
 ]
 
 PathLike = str | os.PathLike[str]
-
-
-class OutputError(ValueError):
-    """An output path that must not be written (the message names the option and the path)."""
 
 
 # --------------------------------------------------------------------------- checks

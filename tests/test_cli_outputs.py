@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from hystid import cli
+from hystid.cli import identify as identify_command
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MEASURED = DATA / "real" / "piezo_sine_150V_1Hz" / "hysteresis_v_150_1hz.csv"
@@ -53,7 +54,7 @@ def never_fit(monkeypatch):
     def boom(*args, **kwargs):
         raise AssertionError("work started before the options were checked")
 
-    monkeypatch.setattr(cli, "_identify_record", boom)
+    monkeypatch.setattr(identify_command, "_identify_record", boom)
     monkeypatch.setattr("hystid.identify.identify", boom)
     monkeypatch.setattr("hystid.identify.pi_recursive.identify_pi", boom)
 
@@ -253,7 +254,7 @@ def test_structure_and_method_are_checked_before_loading(tmp_path, capsys, never
     def no_load(*args, **kwargs):
         raise AssertionError("a record was loaded before the options were checked")
 
-    monkeypatch.setattr(cli, "_load", no_load)
+    monkeypatch.setattr(identify_command, "load", no_load)
     for extra, option in ((["--structure", "order=2"], "--structure"),
                           (["--model", "pi", "--method", "ekf"], "--method ekf"),
                           (["--model", "pi", "--structure", "n2a=1"], "--structure"),
@@ -274,13 +275,13 @@ def test_skip_beyond_the_fitted_part_is_refused_naming_it(stage, capsys, never_f
 
 
 def test_numpy_noise_of_a_diverging_candidate_is_not_shown(stage, capsys, monkeypatch):
-    real = cli._identify_record
+    real = identify_command._identify_record
 
     def overflowing_first(*args, **kwargs):  # a candidate overflowing, as a start-up try may
         np.exp(np.float64(1e3))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(cli, "_identify_record", overflowing_first)
+    monkeypatch.setattr(identify_command, "_identify_record", overflowing_first)
     code, out, err = run(["identify", stage[0], "--method", "online", "--quiet"], capsys)
     assert code == 0 and "alpha" in out
     assert "overflow" not in err and "RuntimeWarning" not in err, err

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hystid.cli import diagnose as diagnose_command
 from hystid.diagnose import (
     EFFECT_NAMES,
     EFFECTS,
@@ -20,7 +21,6 @@ from hystid.diagnose import (
     noise_floor,
     simulate_with_effect,
 )
-from hystid.diagnose import command as diagnose_command
 from hystid.diagnose.diagnosis import DEFAULT_EFFECTS
 from hystid.diagnose.screen import compare_losses
 from hystid.diagnose.where import Segment, cross_correlation_test

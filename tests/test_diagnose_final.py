@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from hystid import testing
-from hystid.diagnose import command as diagnose_command
+from hystid.cli import diagnose as diagnose_command
 from hystid.diagnose.effects import AugmentedSandwich
 from hystid.diagnose.final_model import _scores
 from hystid.modelfile import ModelFileError, load_model, save_model

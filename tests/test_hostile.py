@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from hystid import cli
+from hystid.cli import identify as identify_command
 from hystid.records import Record, RecordError, load_record
 from hystid.safeio import OutputError, check_output, dumps_strict, write_json
 
@@ -65,7 +66,7 @@ def never_fit(monkeypatch):
     def boom(*args, **kwargs):
         raise AssertionError("work started before the outputs were checked")
 
-    monkeypatch.setattr(cli, "_identify_record", boom)
+    monkeypatch.setattr(identify_command, "_identify_record", boom)
     monkeypatch.setattr("hystid.reference.reference_record", boom)
     monkeypatch.setattr("hystid.identify.identify", boom)
 
@@ -430,7 +431,7 @@ def test_simulate_model_refuses_bad_pairs(simulated, tmp_path, capsys):
 
 
 def test_diagnose_reads_the_saved_model(simulated, tmp_path, capsys):
-    from hystid.diagnose import command as diagnose_command
+    from hystid.cli import diagnose as diagnose_command
 
     rec_path, report = simulated
     parser = cli.build_parser()

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from hystid import cli
+from hystid.cli import identify as identify_command
 from hystid.identify import identify
 from hystid.model import DuhemSandwich, Structure
 from hystid.modelfile import ModelFileError, load_model
@@ -286,14 +287,14 @@ def test_a_file_appearing_at_a_new_output_is_kept(tmp_path, capsys, monkeypatch)
 def test_a_report_appearing_in_out_during_a_fit_is_kept(folder, tmp_path, capsys,
                                                         monkeypatch):
     out = tmp_path / "rep"
-    real = cli._identify_record
+    real = identify_command._identify_record
 
     def meanwhile(*args, **kwargs):
         out.mkdir()
         (out / "report.json").write_text("mine\n")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(cli, "_identify_record", meanwhile)
+    monkeypatch.setattr(identify_command, "_identify_record", meanwhile)
     code, _, err = run(["identify", folder / "rec.csv", "--quiet", "--out", out], capsys)
     assert code == 2 and "report.json: appeared" in error_line(err)
     assert (out / "report.json").read_text() == "mine\n"
@@ -347,6 +348,32 @@ def test_missing_column_hint_in_cli_syntax(tmp_path, capsys):
     assert code == 2 and "--columns u=1,y=2" in line and "columns={" not in line
     with pytest.raises(RecordError, match=r"columns=\{'u': 1, 'y': 2\}"):  # Python's own
         load_record(path)
+
+
+@pytest.mark.parametrize("args", [
+    ["diagnose", "{csv}"],
+    ["compensate", "{model}", "--reference", "{csv}", "--out", "{tmp}/u.csv"],
+])
+def test_missing_column_hint_in_cli_syntax_where_the_command_has_columns(folder, tmp_path,
+                                                                         capsys, args):
+    path = tmp_path / "noheader.csv"
+    path.write_text("".join(f"{k},{np.sin(k / 5):.4f},{np.cos(k / 5):.4f}\n"
+                            for k in range(200)))
+    argv = [a.format(csv=path, model=folder / "model.json", tmp=tmp_path) for a in args]
+    code, _, err = run(argv, capsys)
+    line = error_line(err)
+    assert code == 2 and "--columns u=1,y=2" in line and "columns={" not in line, line
+
+
+def test_missing_column_hint_stays_python_where_the_command_has_no_columns(folder, tmp_path,
+                                                                           capsys):
+    path = tmp_path / "noheader.csv"
+    path.write_text("".join(f"{k},{np.sin(k / 5):.4f},{np.cos(k / 5):.4f}\n"
+                            for k in range(200)))
+    code, _, err = run(["export", folder / "model.json", "--c", tmp_path / "c", "--rpem-record",
+                        path], capsys)
+    line = error_line(err)
+    assert code == 2 and "--columns" not in line and "columns={'u': 1, 'y': 2}" in line, line
 
 
 def test_printed_figures_carry_units(folder, capsys):

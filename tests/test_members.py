@@ -57,7 +57,7 @@ def test_every_swing_threshold_is_reversed_by_the_input_it_was_placed_on():
 def test_members_and_the_identify_entry_point():
     assert tuple(MEMBERS) == ("duhem", "gduhem", "pi", "pi-stage")
     assert set(AUTO_CANDIDATES) <= set(MEMBERS)
-    from hystid.cli import MODEL_NAMES
+    from hystid.cli.identify import MODEL_NAMES
 
     assert MODEL_NAMES == tuple(MEMBERS)  # the parser's list, kept without importing models
     with pytest.raises(ValueError, match="model: expected 'auto' or one of duhem, gduhem, pi"):

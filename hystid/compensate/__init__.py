@@ -27,9 +27,9 @@ Modules: :mod:`~hystid.compensate.duhem_inverse` (the maths of the per-sample in
 planner), :mod:`~hystid.compensate.compensator` (the inverse chain),
 :mod:`~hystid.compensate.linear_parts` (the linear blocks' inversion, reference models),
 :mod:`~hystid.compensate.placed` (compensation in the record's units),
-:mod:`~hystid.compensate.command` (``hystid compensate``), :mod:`~hystid.compensate.
-feedback`, :mod:`~hystid.compensate.closedloop`, :mod:`~hystid.compensate.tracking`,
-:mod:`~hystid.compensate.robustness`.
+:mod:`~hystid.compensate.feedback`, :mod:`~hystid.compensate.closedloop`,
+:mod:`~hystid.compensate.tracking`, :mod:`~hystid.compensate.robustness`; ``hystid compensate``
+is :mod:`hystid.cli.compensate`.
 """
 
 from .closedloop import (

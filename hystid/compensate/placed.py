@@ -41,6 +41,7 @@ from typing import Any
 import control as ct
 import numpy as np
 
+from ..errors import CompensationWarning
 from ..operating import warn_admissibility
 from ..signals import finite_signal
 from .compensator import (
@@ -64,10 +65,6 @@ __all__ = ["DEFAULT_MARGIN", "Compensation", "CompensationWarning", "compensate"
 DEFAULT_MARGIN = 0.1
 #: A reference starting further than this share of its span from the rest output is warned of.
 START_TOLERANCE = 0.01
-
-
-class CompensationWarning(UserWarning):
-    """The compensator had to approximate (non-minimum-phase L2, pre-actuation cut short)."""
 
 
 @dataclass

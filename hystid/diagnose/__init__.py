@@ -11,12 +11,13 @@ it shrinks once that effect is in the model.
   ``saturation``) as augmentations of the sandwich; :func:`simulate_with_effect`.
 * :mod:`.structure` -- a dead time of several samples as the structure change ``q1 + d``.
 * :mod:`.screen` -- screening and the held-out significance test; :mod:`.refit` -- the refits.
-* :mod:`.report` -- summary and figures; :mod:`.command` -- ``hystid diagnose``.
+* :mod:`.report` -- summary and figures; ``hystid diagnose`` is :mod:`hystid.cli.diagnose`.
 """
 
 import importlib
 
-# the submodules load on first use, so that ``hystid --help`` (which reads .command) stays light
+# the submodules load on first use: importing one of them (the command line reads .screen, say)
+# loads none of the others
 _HOME = {
     "DiagnosisError": "diagnosis", "DiagnosisResult": "diagnosis", "EffectOutcome": "diagnosis",
     "diagnose": "diagnosis", "EFFECT_NAMES": "effects", "EFFECTS": "effects",

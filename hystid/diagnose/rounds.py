@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..baselines import repeat_floor
+from ..errors import DiagnosisError
 from ..identify.prepare import prepare
 from ..model import DuhemSandwich
 from ..records import Record
@@ -44,10 +45,6 @@ WIDEN = 4.0
 #: Fewest samples in the train part and in the held-out part.
 MIN_TRAIN_SAMPLES = 2000
 MIN_VAL_SAMPLES = 1000
-
-
-class DiagnosisError(ValueError):
-    """Bad input for a diagnosis (too short, not excited, mismatched sampling rates...)."""
 
 
 # --------------------------------------------------------------------------- progress

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import IdentificationDataError
 from ..operating import Envelope
 from ..records import Record
 from ..records_checks import burst_spans, record_warnings
@@ -50,10 +51,6 @@ FAR_SPREADS = 3.0
 JUMP_SLEWS = 10.0
 #: Share of samples pinned at an extreme for the sensor to count as saturated.
 SATURATION_SHARE = 0.005
-
-
-class IdentificationDataError(ValueError):
-    """The record cannot identify a stage; the message names the record and the reason."""
 
 
 @dataclass

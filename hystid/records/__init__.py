@@ -37,22 +37,17 @@ A record file is read from its own bytes only, and never decodes to much more th
 Two roles may not read the same column (``columns={"u": "y"}`` would identify ``y`` from
 itself). :meth:`Record.save` writes atomically (see :mod:`hystid.safeio`).
 
-The package: :mod:`~hystid.records.record` (the record, its errors and constants),
+The package: :mod:`~hystid.records.record` (the record and its constants),
 :mod:`~hystid.records.loading` (:func:`load_record` and friends),
 :mod:`~hystid.records.csvfile` and :mod:`~hystid.records.arrays` (the formats, with the
 hostile-file checks) and :mod:`~hystid.records.checks` (the sampling rate);
-:meth:`Record.save` writes from :mod:`~hystid.records.record` itself.
+:meth:`Record.save` writes from :mod:`~hystid.records.record` itself. :class:`RecordError` is
+defined with hystid's other errors in :mod:`hystid.errors`.
 """
 
+from ..errors import RecordError
 from .loading import load_piezo_sine_150v, load_record, parse_columns, parse_units, read_records
-from .record import (
-    EXPANSION_FLOOR,
-    FS_RTOL,
-    MAX_EXPANSION,
-    T_UNIFORM_RTOL,
-    Record,
-    RecordError,
-)
+from .record import EXPANSION_FLOOR, FS_RTOL, MAX_EXPANSION, T_UNIFORM_RTOL, Record
 
 __all__ = [
     "EXPANSION_FLOOR",

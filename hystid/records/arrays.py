@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import RecordError
 from ..signals import finite_signal
 from .checks import _fs_from_time, _stated_fs
 from .record import (
@@ -21,7 +22,6 @@ from .record import (
     MAX_EXPANSION,
     Locator,
     Record,
-    RecordError,
     _as_fs,
 )
 

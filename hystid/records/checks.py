@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .record import FS_RTOL, T_UNIFORM_RTOL, Locator, RecordError, _as_fs
+from ..errors import RecordError
+from .record import FS_RTOL, T_UNIFORM_RTOL, Locator, _as_fs
 
 
 # --------------------------------------------------------------------------- shared checks

@@ -11,9 +11,10 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import RecordError
 from ..signals import finite_signal
 from .checks import _fs_from_time, _stated_fs
-from .record import _DEFAULT_UNITS, _META_PREFIX, _META_RE, _ROLES, Locator, Record, RecordError
+from .record import _DEFAULT_UNITS, _META_PREFIX, _META_RE, _ROLES, Locator, Record
 
 
 # --------------------------------------------------------------------------- CSV

@@ -7,6 +7,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from ..errors import RecordError
 from .arrays import _read_h5, _read_mat, _read_npz, _record_from_arrays
 from .csvfile import _load_csv
 from .record import (
@@ -15,7 +16,6 @@ from .record import (
     _ROLES,
     _SUFFIXES,
     Record,
-    RecordError,
     _unknown_extension,
 )
 

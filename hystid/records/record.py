@@ -1,4 +1,7 @@
-"""The record: one experiment's input and output, uniformly sampled, its errors and its writers."""
+"""The record: one experiment's input and output, uniformly sampled, and its writers.
+
+Its errors are :class:`~hystid.errors.RecordError`.
+"""
 
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import RecordError
 from ..safeio import atomic_open, atomic_path
 from ..signals import finite_signal
 
@@ -36,66 +40,6 @@ _META_RE = re.compile(r"name=(?P<name>.*), fs=(?P<fs>[^,]*), units(?P<units>.*)$
 
 #: Where a value sits in a file: keyword arguments for :class:`RecordError`.
 Locator = Callable[[int], dict[str, Any]]
-
-
-class RecordError(ValueError):
-    """A record or a record file is invalid.
-
-    The message starts with the location of the problem (file, line, column, or array and index,
-    whichever are known) followed by what is wrong and what was expected, for example
-    ``rec.csv, line 17, column 'y': value 'nan' is not finite (expected a finite number)``.
-
-    Parameters
-    ----------
-    message : str
-        What is wrong and what was expected.
-    file : str or os.PathLike, optional
-        The file, as the user named it.
-    line : int, optional
-        1-based line number, counting comment and header lines.
-    column : str, optional
-        Column name (CSV files).
-    array : str, optional
-        Array, variable or dataset name (NumPy, MATLAB and HDF5 files).
-    kind : str, optional
-        What ``array`` is called in the message: ``"array"`` (default), ``"variable"``, ...
-    index : int, optional
-        0-based sample index in ``array``.
-
-    Attributes
-    ----------
-    file, line, column, array, index
-        The location given at construction (``None`` when unknown).
-    """
-
-    def __init__(
-        self,
-        message: str,
-        *,
-        file: str | os.PathLike[str] | None = None,
-        line: int | None = None,
-        column: str | None = None,
-        array: str | None = None,
-        kind: str = "array",
-        index: int | None = None,
-    ) -> None:
-        self.file = None if file is None else os.fspath(file)
-        self.line = line
-        self.column = column
-        self.array = array
-        self.index = index
-        parts = []
-        if self.file is not None:
-            parts.append(self.file)
-        if line is not None:
-            parts.append(f"line {line}")
-        if column is not None:
-            parts.append(f"column {column!r}")
-        if array is not None:
-            parts.append(f"{kind} {array!r}")
-        if index is not None:
-            parts.append(f"index {index}")
-        super().__init__(f"{', '.join(parts)}: {message}" if parts else message)
 
 
 # --------------------------------------------------------------------------- the record

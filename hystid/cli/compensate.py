@@ -13,24 +13,20 @@ an existing ``--out`` is replaced only with ``--force``, and atomically.
 from __future__ import annotations
 
 import argparse
-import sys
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["EXIT_BAD_INPUT", "HEADER", "configure_parser", "parse_scan", "run", "scan_for"]
+from .support import CommandError, bind, check_out, refused, run_command, tell
 
-EXIT_BAD_INPUT = 2
+__all__ = ["HEADER", "configure_parser", "parse_scan", "run", "scan_for"]
+
 #: Columns of the written CSV.
 HEADER = ("t", "r", "u", "y_pred")
 #: Seconds at rest before a scan's approach, and of the approach itself.
 SCAN_REST, SCAN_LEAD_IN = 0.01, 0.01
-
-
-class _BadInput(ValueError):
-    """Bad input, reported as one line and exit status 2."""
 
 
 def parse_scan(text: str) -> tuple[str, float, float]:
@@ -92,8 +88,8 @@ def scan_for(model: Any, kind: str, frequency: float, amplitude: float,
     ndarray
         The reference, starting at the model's output at rest.
     """
-    from .placed import _rest
-    from .tracking import scan_reference
+    from ..compensate.placed import _rest
+    from ..compensate.tracking import scan_reference
 
     if frequency >= model.fs / 2:
         raise ValueError(f"HZ: {frequency:g} Hz is not below half the model's rate "
@@ -112,6 +108,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The sub-command's parser.
     """
+    parser.description = ("Compute the compensated command (inverse model) for a reference "
+                          "displacement or a scan, in the record's units, and write t,r,u,y_pred "
+                          "to a CSV.")
     parser.add_argument("model", metavar="MODEL",
                         help="a saved model (hystid identify --out writes DIR/model.json)")
     source = parser.add_mutually_exclusive_group(required=True)
@@ -146,15 +145,32 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="CSV to write: t,r,u,y_pred")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument("--quiet", action="store_true", help="no summary line")
+    bind(parser, run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``hystid compensate``; returns the exit status (2 for bad input).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments (see :func:`configure_parser`).
+
+    Returns
+    -------
+    int
+        0 on success, 2 for bad input or a failed write.
+    """
+    return run_command(args, _compensate)
 
 
 def _number(text: str, option: str, *, minimum: float, strict: bool) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise _BadInput(f"{option}: expected a number, got {text!r}") from None
+        raise CommandError(f"{option}: expected a number, got {text!r}") from None
     if not np.isfinite(value) or value < minimum or (strict and value == minimum):
-        raise _BadInput(f"{option}: expected a number {'>' if strict else '>='} {minimum:g}, "
+        raise CommandError(f"{option}: expected a number {'>' if strict else '>='} {minimum:g}, "
                         f"got {text!r}")
     return value
 
@@ -166,50 +182,45 @@ def _limits(text: str | None) -> tuple[float, float] | None:
     try:
         low, high = (float(p) for p in parts)
     except ValueError:
-        raise _BadInput(f"--limits: expected LOW:HIGH such as -100:80, got {text!r}") from None
+        raise CommandError(f"--limits: expected LOW:HIGH such as -100:80, got {text!r}") \
+            from None
     if not (np.isfinite(low) and np.isfinite(high) and low < high):
-        raise _BadInput(f"--limits: expected finite LOW < HIGH, got {text!r}")
+        raise CommandError(f"--limits: expected finite LOW < HIGH, got {text!r}")
     return low, high
 
 
 def _load_model(path: str) -> Any:
-    from ..modelfile import ModelFileError, load_model
+    from ..modelfile import load_model
 
-    try:
+    with refused(f"MODEL {path}: ", errors=(OSError, ValueError)):  # a ModelFileError too
         return load_model(path)
-    except (ModelFileError, OSError, ValueError) as err:
-        raise _BadInput(f"MODEL {path}: {err}") from err
 
 
 def _reference(args: argparse.Namespace, model: Any) -> tuple[np.ndarray, str]:
     """The reference and a label for it."""
     if args.scan is not None:
-        try:
+        with refused("--scan: "):
             kind, hz, amp = parse_scan(args.scan)
-            seconds = _number(args.seconds, "--seconds", minimum=0.0, strict=True)
+        seconds = _number(args.seconds, "--scan: --seconds", minimum=0.0, strict=True)
+        with refused("--scan: "):
             return scan_for(model, kind, hz, amp, seconds), f"scan {args.scan}"
-        except ValueError as err:
-            raise _BadInput(f"--scan: {err}") from err
-    from ..records import RecordError, load_record, parse_columns, parse_units
+    from ..errors import RecordError
+    from ..records import load_record, parse_columns, parse_units
 
-    try:
+    with refused("--columns/--units: "):
         columns = parse_columns(args.columns) if args.columns is not None else None
         units = parse_units(args.units) if args.units is not None else None
-    except ValueError as err:
-        raise _BadInput(f"--columns/--units: {err}") from err
     fs = None if args.fs is None else _number(args.fs, "--fs", minimum=0.0, strict=True)
-    try:
+    with refused("--reference ", errors=RecordError):
         rec = load_record(args.reference, fs=fs, columns=columns, units=units)
-    except RecordError as err:
-        raise _BadInput(f"--reference {err}") from err
     if not np.isclose(rec.fs, model.fs, rtol=1e-6):
-        raise _BadInput(f"--reference {args.reference}: sampled at {rec.fs:g} Hz, the model at "
-                        f"{model.fs:g} Hz (expected the model's rate)")
+        raise CommandError(f"--reference {args.reference}: sampled at {rec.fs:g} Hz, the model "
+                           f"at {model.fs:g} Hz (expected the model's rate)")
     unit = model.units.get("y")
     if rec.units.get("y") != unit:
-        raise _BadInput(f"--reference {args.reference}: y is in {rec.units.get('y')!r}, the "
-                        f"model's output in {unit!r} (give --units, or a record in the model's "
-                        "units)")
+        raise CommandError(f"--reference {args.reference}: y is in {rec.units.get('y')!r}, the "
+                           f"model's output in {unit!r} (give --units, or a record in the "
+                           "model's units)")
     return rec.y, f"y of {args.reference}"
 
 
@@ -227,61 +238,35 @@ def _write(path: Path, result: Any, model_path: str, label: str) -> None:
         np.savetxt(handle, data, delimiter=",", fmt="%.17g")
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run ``hystid compensate``; returns the exit status (2 for bad input).
+def _compensate(args: argparse.Namespace) -> None:
+    """``hystid compensate``'s steps (see :func:`run`)."""
+    from ..compensate.linear_parts import smoothing_model
+    from ..compensate.placed import compensate
 
-    Parameters
-    ----------
-    args : argparse.Namespace
-        Parsed arguments (see :func:`configure_parser`).
-
-    Returns
-    -------
-    int
-        0 on success, 2 for bad input or a failed write.
-    """
-    from ..safeio import OutputError, check_output
-    from .linear_parts import smoothing_model
-    from .placed import compensate
-
-    try:
-        inputs = [args.model] + ([args.reference] if args.reference else [])
-        out = check_output(args.out, option="--out", inputs=inputs, force=args.force)
+    with refused():  # a model that cannot be inverted, a reference it cannot follow
+        out = check_out(args, args.out, inputs=(args.model, args.reference))
         if out.suffix.lower() != ".csv":
-            raise _BadInput(f"--out {out}: expected a .csv file")
+            raise CommandError(f"--out {out}: expected a .csv file")
         margin = _number(args.margin, "--margin", minimum=0.0, strict=False)
         limits = _limits(args.limits)
         model = _load_model(args.model)
         y_ref, label = _reference(args, model)
         smoother = None
         if args.smooth is not None:
-            try:
+            with refused("--smooth: "):
                 smoother = smoothing_model(int(args.smooth), model.dt)
-            except ValueError as err:
-                raise _BadInput(f"--smooth: {err}") from err
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             result = compensate(model, y_ref, u_limits=limits, margin=margin,
                                 reference_model=smoother, anchor=args.anchor)
-    except (_BadInput, OutputError) as err:
-        print(f"hystid compensate: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except ValueError as err:  # the model cannot be inverted, or the reference is unusable
-        print(f"hystid compensate: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    try:
+    with refused(f"--out {out}: ", "; a file already there is left as it was", errors=OSError):
         _write(out, result, args.model, label)
-    except OSError as err:
-        print(f"hystid compensate: error: --out {out}: {err}; a file already there is left as "
-              "it was", file=sys.stderr)
-        return EXIT_BAD_INPUT
     if not args.quiet:
         for note in result.warnings:
-            print(f"hystid compensate: warning: {note}", file=sys.stderr)
+            tell(args, note, "warning")
         u_unit, y_unit = result.units.get("u", ""), result.units.get("y", "")
         print(f"{out}: {result.u.size} samples, command {result.u.min():.4g} .. "
               f"{result.u.max():.4g} {u_unit} (limits {result.u_limits[0]:.4g} .. "
               f"{result.u_limits[1]:.4g}), predicted output within "
               f"{np.max(np.abs(result.y_pred - result.y_des)):.3g} {y_unit} of the asked one, "
               f"{100 * np.mean(result.exact):.1f} % exact samples")
-    return 0

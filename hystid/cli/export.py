@@ -8,11 +8,10 @@ status 2; nothing is written then.
 from __future__ import annotations
 
 import argparse
-import sys
+
+from .support import CommandError, bind, run_command, tell
 
 __all__ = ["configure_parser", "run"]
-
-EXIT_BAD_INPUT = 2
 
 
 def _limits(text: str) -> tuple[float, float]:
@@ -105,6 +104,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         "covariance and residual scale (default: the model on the paper's "
                         "excitation within its envelope)")
     parser.add_argument("--quiet", action="store_true", help="print nothing on success")
+    bind(parser, run)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -120,8 +120,13 @@ def run(args: argparse.Namespace) -> int:
     int
         0 on success, 2 on bad input.
     """
-    from ..modelfile import ModelFileError, load_model
-    from .c import export_c
+    return run_command(args, _export)
+
+
+def _export(args: argparse.Namespace) -> None:
+    """``hystid export``'s steps (see :func:`run`): every refusal said on one line."""
+    from ..export.c import export_c
+    from ..modelfile import load_model
 
     options = {k: v for k, v in (("u_limits", args.u_limits), ("margin", args.margin),
                                  ("preview", args.preview), ("anchor", args.anchor))
@@ -141,20 +146,18 @@ def run(args: argparse.Namespace) -> int:
         paths = export_c(model, args.c_dir, force=args.force, source=str(args.model),
                          compensator=options or None, rpem_sigma=args.rpem_sigma,
                          rpem_record=record, notes=notes)
-    except ModelFileError as err:
-        return _fail(str(err))
-    except ValueError as err:  # OutputError (a ValueError) and the generator's refusals
-        return _fail(str(err))
+    except ValueError as err:  # a ModelFileError, an OutputError, the generator's refusals
+        raise CommandError(_one_line(str(err))) from err
     except OSError as err:
-        return _fail(f"--c {args.c_dir}: cannot write there ({err.strerror or err}"
-                     f"{f': {err.filename}' if err.filename else ''}); no file was half-written")
+        raise CommandError(_one_line(
+            f"--c {args.c_dir}: cannot write there ({err.strerror or err}"
+            f"{f': {err.filename}' if err.filename else ''}); no file was half-written")) from err
     for note in notes:
-        print(f"hystid export: note: {note}", file=sys.stderr)
+        tell(args, note, "note")
     if not args.quiet:
         print("wrote " + ", ".join(str(p) for p in paths))
-    return 0
 
 
-def _fail(message: str) -> int:
-    print(f"hystid export: error: {' '.join(message.split())}", file=sys.stderr)
-    return EXIT_BAD_INPUT
+def _one_line(message: str) -> str:
+    """``message`` with its line breaks and runs of spaces as single spaces."""
+    return " ".join(message.split())

@@ -13,21 +13,24 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..options import OptionError, crop, fraction, integer, number, parse_crop, parse_structure
+from ..errors import DiagnosisError, OptionError, RecordError
+from ..options import crop, fraction, integer, number, parse_crop, parse_structure
+from .support import CommandError, bind, check_out, positive_arg, refused, run_command, tell
 
-__all__ = ["EXIT_BAD_INPUT", "OUTPUT_FILES", "configure_parser", "run"]
+if TYPE_CHECKING:  # pragma: no cover
+    from ..diagnose.final_model import FinalModel
+    from ..diagnose.result import DiagnosisResult
+    from ..model import DuhemSandwich, Structure
+    from ..records import Record
 
-EXIT_BAD_INPUT = 2
+__all__ = ["OUTPUT_FILES", "configure_parser", "run"]
+
 #: Files ``--out`` receives.
 OUTPUT_FILES = ("report.json", "summary.txt", "model.json", "error_time.png", "spectrum.png",
                 "branch.png", "gap.png", "correlation.png")
-
-_fraction = fraction
-_positive = number(0.0, strict_minimum=True)
-
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     """Add the ``diagnose`` arguments to ``parser``.
@@ -37,14 +40,16 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The sub-command's parser.
     """
-    from .diagnosis import DEFAULT_EFFECTS
-    from .effects import FAMILIES
+    from ..diagnose.diagnosis import DEFAULT_EFFECTS
+    from ..diagnose.effects import FAMILIES
 
+    parser.description = ("Localise the model error, screen unmodelled effects and measure how "
+                          "far each closes the gap on held-out data.")
     parser.add_argument("train", metavar="TRAIN",
                         help="record to identify on (csv, npz, mat, h5 or file.h5:group)")
     parser.add_argument("--val", nargs="+", metavar="VAL", default=[],
                         help="held-out record(s); without them the end of TRAIN is held out")
-    parser.add_argument("--fs", type=_positive, default=None,
+    parser.add_argument("--fs", type=positive_arg(float), default=None,
                         help="sampling rate in Hz (for files without a time vector or fs)")
     parser.add_argument("--columns", default=None, metavar="t=1,u=3,y=2",
                         help="where t, u and y are in the files (names or 0-based positions)")
@@ -67,11 +72,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help=f"comma-separated families or forms (default all forms of "
                         f"{','.join(FAMILIES)}: {','.join(DEFAULT_EFFECTS)});"
                         " a named candidate that the records cannot show is an error")
-    parser.add_argument("--holdout", type=_fraction, default=0.4,
+    parser.add_argument("--holdout", type=fraction, default=0.4,
                         help="share of TRAIN held out when no --val is given (default 0.4)")
     parser.add_argument("--crop", default=None, metavar="START:STOP",
                         help="keep only this time span of every record, in seconds")
-    parser.add_argument("--u-scale", type=_positive, default=1.0, metavar="K",
+    parser.add_argument("--u-scale", type=positive_arg(float), default=1.0, metavar="K",
                         help="multiply the input by K (keeps alpha |dw1| of condition (8) "
                         "in a range the fit starts well from, e.g. 1/150 for +-150 V)")
     parser.add_argument("--train-skip", type=number(0.0), default=0.0, metavar="S",
@@ -81,9 +86,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="records start at rest at zero output (rest) or at the output "
                         "level measured before the input first moves (level); auto (default): "
                         "level for a record that starts with 10 samples at rest")
-    parser.add_argument("--alpha", type=_fraction, default=0.01,
+    parser.add_argument("--alpha", type=fraction, default=0.01,
                         help="family-wise level of the held-out test per round (default 0.01)")
-    parser.add_argument("--min-reduction", type=_fraction, default=0.02,
+    parser.add_argument("--min-reduction", type=fraction, default=0.02,
                         help="smallest relative held-out RMS reduction worth having "
                         "(default 0.02)")
     parser.add_argument("--max-rounds", type=integer(1, 20), default=3,
@@ -99,124 +104,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         "of every family the screen cannot rule out always is; default: as "
                         "long as the nominal identification took; 0: only those, the same "
                         "diagnosis on every machine)")
-
-
-class _BadInput(Exception):
-    pass
-
-
-def _columns(text: str | None) -> dict | None:
-    from ..records import parse_columns
-
-    if text is None:
-        return None
-    try:
-        return parse_columns(text)
-    except ValueError as err:
-        raise _BadInput(f"--columns: {err}") from err
-
-
-def _units(text: str | None) -> dict | None:
-    from ..records import parse_units
-
-    if text is None:
-        return None
-    try:
-        return parse_units(text)
-    except ValueError as err:
-        raise _BadInput(f"--units: {err}") from err
-
-
-def _load(path: str, args, label: str):
-    from ..records import Record, RecordError, load_record
-
-    try:
-        rec = load_record(path, fs=args.fs, columns=_columns(args.columns),
-                          units=_units(args.units))
-    except RecordError as err:
-        raise _BadInput(str(err)) from err
-    try:
-        rec = crop(rec, parse_crop(args.crop) if args.crop is not None else None)
-    except OptionError as err:
-        raise _BadInput(f"{err} ({label})") from err
-    if args.u_scale != 1.0:
-        units = dict(rec.units)
-        units["u"] = f"{args.u_scale:g} {units.get('u', '')}".strip()
-        rec = Record(rec.u * args.u_scale, rec.y, rec.fs, units, rec.name)
-    return rec
-
-
-def _model(path: str | None, fs: float):
-    """The model saved in ``path`` (a model file, or an older report.json with a structure)."""
-    if path is None:
-        return None
-    from ..model import DuhemSandwich, Structure
-    from ..modelfile import FORMAT, ModelFileError, load_model
-
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError) as err:
-        raise _BadInput(f"--model {path}: cannot read a JSON object ({err})") from err
-    if isinstance(data, dict) and "format" in data:
-        if data.get("format") != FORMAT:
-            raise _BadInput(f"--model {path}: 'format' is {data.get('format')!r} (expected "
-                            f"{FORMAT!r})")
-        try:
-            model = load_model(path)
-        except ModelFileError as err:
-            raise _BadInput(f"--model {err}") from err
-        if not isinstance(model, DuhemSandwich):
-            raise _BadInput(f"--model {path}: holds a {type(model).__name__} (diagnose needs a "
-                            "Duhem sandwich)")
-        return model
-    if not isinstance(data, dict) or not isinstance(data.get("params"), dict):
-        raise _BadInput(f"--model {path}: expected a model file (model.json) or a JSON object "
-                        "with 'params' and 'structure'")
-    if not isinstance(data.get("structure"), dict):
-        raise _BadInput(f"--model {path}: has parameters but no 'structure' (orders and delays "
-                        "cannot be guessed from names; use the model.json written by "
-                        "hystid identify --out)")
-    try:
-        structure = Structure(**data["structure"])
-        return DuhemSandwich(data["params"], structure, fs=fs,
-                             name=f"model from {Path(path).name}")
-    except (TypeError, ValueError) as err:
-        raise _BadInput(f"--model {path}: {err}") from err
-
-
-def _structure(text: str | None):
-    if text is None:
-        return None
-    try:
-        return parse_structure(text)
-    except OptionError as err:
-        raise _BadInput(str(err)) from err
-
-
-def _check_out(args: argparse.Namespace) -> None:
-    """Refuse an output folder that would overwrite files, before any work."""
-    from ..safeio import OutputError, check_output_dir
-
-    if args.out is None:
-        return
-    inputs = [p for p in (args.train, *args.val, *args.repeat, args.model) if p]
-    try:
-        check_output_dir(args.out, OUTPUT_FILES, inputs=inputs, force=args.force)
-    except OutputError as err:
-        raise _BadInput(str(err)) from err
-
-
-def _write(out: Path, report: dict, result, final, summary: str, provenance: dict) -> None:
-    """Write the report, the summary, the model and the figures: all of them, or none on a
-    failure."""
-    from ..modelfile import save_model
-    from ..safeio import atomic_folder, write_json, write_text
-
-    with atomic_folder(out) as stage:
-        write_json(stage / "report.json", report)
-        write_text(stage / "summary.txt", summary + "\n")
-        save_model(final.model, stage / "model.json", provenance=provenance)
-        result.plot(stage)
+    bind(parser, run)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -230,14 +118,108 @@ def run(args: argparse.Namespace) -> int:
     Returns
     -------
     int
-        0 on success, 2 for bad input.
+        0 on success, 2 for bad input or a failed write.
     """
-    from ..validate import check_fit_size, check_magnitudes
-    from .diagnosis import DEFAULT_EFFECTS, DiagnosisError, diagnose
-    from .final_model import final_model
+    return run_command(args, _diagnose)
 
-    try:
-        _check_out(args)
+
+def _columns(text: str | None) -> dict | None:
+    from ..records import parse_columns
+
+    if text is None:
+        return None
+    with refused("--columns: "):
+        return parse_columns(text)
+
+
+def _units(text: str | None) -> dict | None:
+    from ..records import parse_units
+
+    if text is None:
+        return None
+    with refused("--units: "):
+        return parse_units(text)
+
+
+def _load(path: str, args: argparse.Namespace, label: str) -> Record:
+    from ..records import Record, load_record
+
+    with refused(errors=RecordError):
+        rec = load_record(path, fs=args.fs, columns=_columns(args.columns),
+                          units=_units(args.units))
+    with refused(suffix=f" ({label})", errors=OptionError):
+        rec = crop(rec, parse_crop(args.crop) if args.crop is not None else None)
+    if args.u_scale != 1.0:
+        units = dict(rec.units)
+        units["u"] = f"{args.u_scale:g} {units.get('u', '')}".strip()
+        rec = Record(rec.u * args.u_scale, rec.y, rec.fs, units, rec.name)
+    return rec
+
+
+def _model(path: str | None, fs: float) -> DuhemSandwich | None:
+    """The model saved in ``path`` (a model file, or an older report.json with a structure)."""
+    if path is None:
+        return None
+    from ..errors import ModelFileError
+    from ..model import DuhemSandwich, Structure
+    from ..modelfile import FORMAT, load_model
+
+    with refused(f"--model {path}: cannot read a JSON object (", ")",
+                 errors=(OSError, ValueError)):
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    if isinstance(data, dict) and "format" in data:
+        if data.get("format") != FORMAT:
+            raise CommandError(f"--model {path}: 'format' is {data.get('format')!r} (expected "
+                               f"{FORMAT!r})")
+        with refused("--model ", errors=ModelFileError):
+            model = load_model(path)
+        if not isinstance(model, DuhemSandwich):
+            raise CommandError(f"--model {path}: holds a {type(model).__name__} (diagnose needs "
+                               "a Duhem sandwich)")
+        return model
+    if not isinstance(data, dict) or not isinstance(data.get("params"), dict):
+        raise CommandError(f"--model {path}: expected a model file (model.json) or a JSON "
+                           "object with 'params' and 'structure'")
+    if not isinstance(data.get("structure"), dict):
+        raise CommandError(f"--model {path}: has parameters but no 'structure' (orders and "
+                           "delays cannot be guessed from names; use the model.json written by "
+                           "hystid identify --out)")
+    with refused(f"--model {path}: ", errors=(TypeError, ValueError)):
+        structure = Structure(**data["structure"])
+        return DuhemSandwich(data["params"], structure, fs=fs,
+                             name=f"model from {Path(path).name}")
+
+
+def _structure(text: str | None) -> Structure | None:
+    if text is None:
+        return None
+    with refused(errors=OptionError):
+        return parse_structure(text)
+
+
+def _write(out: Path, report: dict, result: DiagnosisResult, final: FinalModel, summary: str,
+           provenance: dict) -> None:
+    """Write the report, the summary, the model and the figures: all of them, or none on a
+    failure."""
+    from ..modelfile import save_model
+    from ..safeio import atomic_folder, write_json, write_text
+
+    with atomic_folder(out) as stage:
+        write_json(stage / "report.json", report)
+        write_text(stage / "summary.txt", summary + "\n")
+        save_model(final.model, stage / "model.json", provenance=provenance)
+        result.plot(stage)
+
+
+def _diagnose(args: argparse.Namespace) -> None:
+    """``hystid diagnose``'s steps (see :func:`run`)."""
+    from ..diagnose.diagnosis import DEFAULT_EFFECTS, diagnose
+    from ..diagnose.final_model import final_model
+    from ..validate import check_fit_size, check_magnitudes
+
+    with refused(errors=DiagnosisError):
+        check_out(args, args.out, OUTPUT_FILES,
+                  inputs=(args.train, *args.val, *args.repeat, args.model))
         train = _load(args.train, args, "TRAIN")
         vals = [_load(p, args, f"--val {p}") for p in args.val]
         repeats = [_load(p, args, f"--repeat {p}") for p in args.repeat]
@@ -246,8 +228,8 @@ def run(args: argparse.Namespace) -> int:
                 check_magnitudes(rec, path)
             check_fit_size(train.n, "batch", f"TRAIN {args.train}")
         except ValueError as err:
-            raise _BadInput(str(err).replace(", or use --method online (one pass, linear in "
-                                             "the length, with progress)", "")) from err
+            raise CommandError(str(err).replace(", or use --method online (one pass, linear "
+                                                "in the length, with progress)", "")) from err
         if args.effects is None:
             names, strict = DEFAULT_EFFECTS, False
         else:
@@ -262,12 +244,8 @@ def run(args: argparse.Namespace) -> int:
             repeats=repeats, time_budget=args.time_budget,
             require_excitation=strict, progress=not args.quiet,
         )
-        say = None if args.quiet else (lambda m: print(f"hystid diagnose: {m}",
-                                                       file=sys.stderr, flush=True))
-        final = final_model(result, train, vals, progress=say)
-    except (_BadInput, DiagnosisError) as err:
-        print(f"hystid diagnose: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        final = final_model(result, train, vals,
+                            progress=None if args.quiet else (lambda m: tell(args, m)))
     report = result.to_dict()
     report["records"] = {"train": train.name, "val": [v.name for v in vals],
                          "repeat": [r.name for r in repeats],
@@ -279,11 +257,8 @@ def run(args: argparse.Namespace) -> int:
 
         out = Path(args.out)
         provenance = make_provenance("diagnose", args.train, {"model": final.chosen})
-        try:
+        with refused(f"--out {out}: ", errors=OSError):
             _write(out, report, result, final, summary, provenance)
-        except OSError as err:
-            print(f"hystid diagnose: error: --out {out}: {err}", file=sys.stderr)
-            return EXIT_BAD_INPUT
     if args.json:
         from ..safeio import dumps_strict
 
@@ -292,4 +267,3 @@ def run(args: argparse.Namespace) -> int:
         print(summary)
         if args.out:
             print(f"\nfigures, report and model.json ({final.chosen}) written to {args.out}")
-    return 0

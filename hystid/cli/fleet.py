@@ -13,13 +13,13 @@ when any record failed.
 from __future__ import annotations
 
 import argparse
-import sys
 
-from .options import integer
+from ..errors import FleetError
+from .support import bind, columns_arg, refused, run_command, seed_arg
 
-__all__ = ["configure_parser", "run"]
+__all__ = ["EXIT_SOME_FAILED", "configure_parser", "run"]
 
-EXIT_BAD_INPUT = 2
+#: Exit status when some record failed (its row says why).
 EXIT_SOME_FAILED = 1
 
 
@@ -53,15 +53,6 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _columns(text: str) -> dict:
-    from .records import parse_columns
-
-    try:
-        return parse_columns(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(str(err)) from err
-
-
 def _scheduler(text: str) -> str:
     if "://" not in text:
         raise argparse.ArgumentTypeError(f"expected an address like tcp://HOST:PORT, got {text!r}")
@@ -88,9 +79,9 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="share of a record held out when it has no val record (default 0.4)")
     p.add_argument("--fs", type=_positive_float, default=None,
                    help="sampling rate in Hz (for files without a time vector or fs)")
-    p.add_argument("--columns", type=_columns, default=None, metavar="t=1,u=3,y=2",
+    p.add_argument("--columns", type=columns_arg, default=None, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
-    p.add_argument("--seed", type=integer(0, 2**63 - 1), default=0,
+    p.add_argument("--seed", type=seed_arg, default=0,
                    help="root seed; each record's seed is drawn from it and its name (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
@@ -103,6 +94,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser : argparse.ArgumentParser
         The ``fleet`` sub-command's parser.
     """
+    parser.description = ("Identify or diagnose many records as Dask tasks; one result row per "
+                          "record (CSV and Parquet), resumable.")
     sub = parser.add_subparsers(dest="fleet_kind", required=True, metavar="KIND")
     p = sub.add_parser("identify", help="identify and validate every record",
                        description="Identify the Duhem sandwich on every record, validate it on "
@@ -110,6 +103,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     _common(p)
     p.add_argument("--method", choices=("batch", "online", "eria", "ekf"), default="batch",
                    help="estimator (default batch)")
+    bind(p, run)
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of every record",
                        description="Run the sim-to-real gap diagnosis on every record.")
     _common(p)
@@ -117,11 +111,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                    help="comma-separated candidate effects (default all)")
     p.add_argument("--initial", choices=("rest", "level"), default="rest",
                    help="records start at rest at zero output or at the measured level")
+    bind(p, run)
 
 
 def _settings(args: argparse.Namespace) -> dict:
-    from .fleet import FleetError
-
     settings = {"holdout": args.holdout}
     if args.fs is not None:
         settings["fs"] = args.fs
@@ -132,13 +125,11 @@ def _settings(args: argparse.Namespace) -> dict:
     else:
         settings["initial"] = args.initial
         if args.effects:
-            from .diagnose.screen import effect_names_check
+            from ..diagnose.screen import effect_names_check
 
             names = [e.strip() for e in args.effects.split(",") if e.strip()]
-            try:
+            with refused("--effects: "):
                 effect_names_check(names)
-            except ValueError as err:
-                raise FleetError(f"--effects: {err}") from err
             settings["effects"] = names
     return settings
 
@@ -156,16 +147,18 @@ def run(args: argparse.Namespace) -> int:
     int
         0 when every record is ok, 1 when some failed, 2 on bad input.
     """
-    from .fleet import FleetError, result_paths, run_fleet
+    return run_command(args, _fleet)
 
-    try:
+
+def _fleet(args: argparse.Namespace) -> int:
+    """``hystid fleet``'s steps (see :func:`run`)."""
+    from ..fleet import result_paths, run_fleet
+
+    with refused(errors=FleetError):
         table = run_fleet(args.source, args.out, args.fleet_kind, settings=_settings(args),
                           workers=args.workers, scheduler=args.scheduler, force=args.force,
                           retry_failed=args.retry_failed, seed=args.seed,
                           progress=not args.quiet)
-    except FleetError as err:
-        print(f"hystid fleet {args.fleet_kind}: error: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     ok = table[table["status"] == "ok"]
     failed = table[table["status"] != "ok"]
     print(f"{len(table)} records: {len(ok)} ok, {len(failed)} failed")
