@@ -215,7 +215,8 @@ def parse_structure(text: str, option: str = "--structure") -> Structure:
     """Parse ``key=value,...`` into a Duhem sandwich :class:`~hystid.model.Structure`.
 
     Keys ``n1a, n1b, n2a, n2b`` (orders, 0..:data:`MAX_ORDER`), ``q1, q2`` (delays in samples,
-    0..:data:`MAX_DELAY`) and ``f0`` (``0/1``, ``true/false``, ``yes/no``); keys left out keep
+    0..:data:`MAX_DELAY`), ``f0`` and ``directional`` (``0/1``, ``true/false``, ``yes/no``),
+    ``f_order`` (1..3) and ``g_order`` (0..2) of the generalised Duhem block; keys left out keep
     the paper's experimental structure.
 
     Parameters
@@ -237,7 +238,7 @@ def parse_structure(text: str, option: str = "--structure") -> Structure:
     """
     from .model import Structure
 
-    keys = ("n1a", "n1b", "n2a", "n2b", "q1", "q2", "f0")
+    keys = ("n1a", "n1b", "n2a", "n2b", "q1", "q2", "f0", "f_order", "g_order", "directional")
     values: dict[str, int | bool] = {}
     for part in text.split(","):
         key, sep, raw = (s.strip() for s in part.partition("="))
@@ -254,16 +255,22 @@ def parse_structure(text: str, option: str = "--structure") -> Structure:
 
 
 def _structure_value(key: str, raw: str, option: str) -> int | bool:
-    if key == "f0":
+    if key in ("f0", "directional"):
         if raw.lower() in _TRUE:
             return True
         if raw.lower() in _FALSE:
             return False
-        raise OptionError(f"{option}: f0={raw} (expected 0 or 1, true or false)")
+        raise OptionError(f"{option}: {key}={raw} (expected 0 or 1, true or false)")
     try:
         value = int(raw)
     except ValueError as err:
         raise OptionError(f"{option}: {key}={raw} is not an integer") from err
+    shape = {"f_order": (1, 3), "g_order": (0, 2)}
+    if key in shape:
+        low, high = shape[key]
+        if not low <= value <= high:
+            raise OptionError(f"{option}: {key}={raw} (expected {low}..{high})")
+        return value
     top = MAX_DELAY if key.startswith("q") else MAX_ORDER
     if not 0 <= value <= top:
         what = "delay in samples" if key.startswith("q") else "order"

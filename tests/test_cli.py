@@ -284,3 +284,21 @@ def test_pi_batch_fit_takes_offset_option(records, tmp_path, capsys):
         reports[offset] = json.loads((out / "report.json").read_text())
     assert reports["none"]["offset"] == 0.0
     assert reports["estimate"]["offset"] == pytest.approx(2.0, abs=0.2)
+
+
+def test_identify_online_chooses_the_member_then_runs_it_on_line(tmp_path, capsys):
+    """``hystid identify REC --method online``: the model choice on the record's first half,
+    then the chosen member on-line; ``--structure`` takes the generalised block's keys."""
+    from hystid.reference import reference_record
+
+    path = tmp_path / "rec.csv"
+    reference_record(0.3, seed=0).save(path)
+    assert main(["identify", str(path), "--method", "online", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "chosen" in out and "alpha" in out  # the Duhem member chosen on the paper's stage
+    assert main(["identify", str(path), "--structure", "directional=1,f_order=2",
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "ad " in out and "f2 " in out
+    assert main(["identify", str(path), "--structure", "g_order=3", "--quiet"]) == 2
+    assert "g_order=3 (expected 0..2)" in capsys.readouterr().err

@@ -81,13 +81,15 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--units", type=units_arg, metavar="u=V,y=um", help=UNITS_HELP)
     p.add_argument("--model", choices=("auto", *MODEL_NAMES), default=None,
                    help="member of the model family (default: auto, the simplest member that "
-                   "no richer one beats on the record's held-out end; duhem when --structure "
-                   "or an on-line --method is given)")
+                   "no richer one beats on the record's held-out end; with --method online "
+                   "chosen on the record's first half, then identified on-line; duhem when "
+                   "--structure, --history or --method eria/ekf is given)")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch; online for --model pi)")
     p.add_argument("--structure", default=None, metavar="auto|n1a=1,n2a=2,...",
-                   help="model structure: keys n1a, n1b, n2a, n2b, q1, q2, f0 (the paper's "
-                   "experimental one by default), or 'auto' to choose on held-out error")
+                   help="model structure: keys n1a, n1b, n2a, n2b, q1, q2, f0, f_order, "
+                   "g_order, directional (the paper's experimental one by default), or 'auto' "
+                   "to choose on held-out error")
     p.add_argument("--crop", default=None, metavar="START:STOP",
                    help="keep only this time span of every record, in seconds")
     p.add_argument("--offset", choices=("estimate", "none"), default=None,
@@ -175,12 +177,13 @@ def _structure_arg(args: argparse.Namespace) -> Structure | str | None:
 
 
 def _model_arg(args: argparse.Namespace) -> str:
-    """The ``--model`` of ``identify``: as given, else ``auto`` for a batch fit that no other
-    option ties to the Duhem sandwich (``--structure``, an on-line ``--method``)."""
+    """The ``--model`` of ``identify``: as given, else ``auto`` for a batch or on-line fit that
+    no other option ties to the Duhem sandwich (``--structure``, ``--history``, ``--method eria``
+    or ``ekf``)."""
     model = getattr(args, "model", None)
     if model is None:
         tied = (getattr(args, "structure", None) is not None
-                or args.method not in (None, "batch") or getattr(args, "history", None))
+                or args.method in ("eria", "ekf") or getattr(args, "history", None))
         model = "duhem" if tied else "auto"
         args.model = model
     return model
@@ -194,9 +197,9 @@ def _method_arg(args: argparse.Namespace) -> str:
     if family == "pi" and method in ("ekf", "eria"):
         raise CommandError(f"--method {method}: the PI sandwich is identified by 'online' (its "
                            "recursive identifier) or 'batch' (expected one of these)")
-    if model_kind == "auto" and method != "batch":
-        raise CommandError(f"--model auto chooses on batch fits (got --method {method}; "
-                           "expected --model duhem or pi for an on-line method)")
+    if model_kind == "auto" and method not in ("batch", "online"):
+        raise CommandError(f"--model auto chooses on batch fits, for --method batch or online "
+                           f"(got --method {method}; expected --model duhem for it)")
     if getattr(args, "history", None) and method not in _HISTORY_METHODS[family]:
         raise CommandError(f"--history: method {method!r} keeps no parameter history "
                            f"(expected --method {one_of(_HISTORY_METHODS[family])})")
