@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import FleetError
+from .identify import MODEL_NAMES
 from .support import bind, columns_arg, refused, run_command, seed_arg
 
 __all__ = ["EXIT_SOME_FAILED", "configure_parser", "run"]
@@ -98,11 +99,15 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                           "record (CSV and Parquet), resumable.")
     sub = parser.add_subparsers(dest="fleet_kind", required=True, metavar="KIND")
     p = sub.add_parser("identify", help="identify and validate every record",
-                       description="Identify the Duhem sandwich on every record, validate it on "
+                       description="Identify a member of the model family on every record "
+                       "(hystid.identify.identify with --model and --method), validate it on "
                        "the held-out data against a static line and a linear model.")
     _common(p)
     p.add_argument("--method", choices=("batch", "online", "eria", "ekf"), default="batch",
                    help="estimator (default batch)")
+    p.add_argument("--model", choices=("auto", *MODEL_NAMES), default="duhem",
+                   help="member of the model family (default duhem, the quickest; auto chooses "
+                   "per record as hystid identify does)")
     bind(p, run)
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of every record",
                        description="Run the sim-to-real gap diagnosis on every record.")
@@ -122,6 +127,7 @@ def _settings(args: argparse.Namespace) -> dict:
         settings["columns"] = args.columns
     if args.fleet_kind == "identify":
         settings["method"] = args.method
+        settings["model"] = args.model
     else:
         settings["initial"] = args.initial
         if args.effects:
