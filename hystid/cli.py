@@ -151,7 +151,7 @@ def _holdout_fraction(text: str) -> float:
 #: Methods of each hysteresis block (``--model``) that keep a parameter history.
 #: The members of the model family (``hystid.identify.members.MEMBERS``; a test keeps the two
 #: equal, so that the parser does not import the models).
-MODEL_NAMES = ("duhem", "gduhem", "pi", "pi-stage")
+MODEL_NAMES = ("duhem", "gduhem", "pi", "pi-stage", "mduhem")
 _HISTORY_METHODS = {"duhem": ("online", "eria", "ekf"), "pi": ("online", "eria")}
 
 
@@ -175,6 +175,9 @@ def _method_arg(args: argparse.Namespace) -> str:
     if family == "pi" and method in ("ekf", "eria"):
         raise CommandError(f"--method {method}: the PI sandwich is identified by 'online' (its "
                            "recursive identifier) or 'batch' (expected one of these)")
+    if model_kind == "mduhem" and method != "batch":
+        raise CommandError(f"--method {method}: the mduhem member is identified by 'batch' only "
+                           "(expected --method batch, or another --model)")
     if model_kind == "auto" and method != "batch":
         raise CommandError(f"--model auto chooses on batch fits (got --method {method}; "
                            "expected --model duhem or pi for an on-line method)")
@@ -217,7 +220,7 @@ def _identify_record(rec, args, progress: Progress, structure=None):
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", None) != "none"
-        if _model_arg(args) == "duhem":  # the PI batch fit keeps its own settings
+        if _model_arg(args) in ("duhem", "mduhem"):  # the PI batch fit keeps its own settings
             settings["say"] = progress.say
         elif _model_arg(args) == "auto":  # a line per candidate fitted and scored
             settings["progress"] = progress
