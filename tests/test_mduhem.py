@@ -270,3 +270,28 @@ def test_member_does_not_depend_on_the_units(maxwell_stage):
     y_mv = mv.model.simulate(held[0].u, check=False).y
     y_v = v.model.simulate((held[0].u + 300.0) / 1000.0, check=False).y
     assert np.max(np.abs(y_mv - y_v)) < 1e-6 * np.ptp(y_v)
+
+
+def test_fit_recovers_a_multi_duhem_stage_to_its_noise():
+    """Data from a known model with its rates given: the default starts reach the noise, and a
+    start at the answer stays there."""
+    model = rich_model(u_rest=0.3, offset=-0.2)
+    noise = 1e-4
+
+    def rec(seed: int, n: int) -> Record:
+        u = 0.3 + _input(n, seed)
+        y = model.simulate(u, check=False).y
+        return Record(u, y + np.random.default_rng(seed).normal(scale=noise, size=n), FS)
+
+    train, held = rec(20, 6000), rec(21, 3000)
+    fit = fit_mduhem_output_error(train, RICH, rates=RATES)
+    assert fit.info["rms_residual"] < 1.1 * noise
+    e = fit.model.simulate(held.u, check=False).y - model.simulate(held.u, check=False).y
+    # within the noise; not much less: the slowest operator (0.4 of its state forgotten per
+    # sweep of this input, below the grid's rule) keeps a near-constant the offset trades with
+    assert np.sqrt(np.mean(e ** 2)) < noise
+    assert np.sqrt(np.mean(e[len(e) // 2:] ** 2)) < 0.3 * noise
+    warm = fit_mduhem_output_error(train, RICH, rates=RATES, theta0=model.theta)
+    assert warm.info["start"] == "theta0" and warm.info["rms_residual"] < 1.1 * noise
+    with pytest.raises(ValueError, match="theta0: expected 13 values"):
+        fit_mduhem_output_error(train, RICH, rates=RATES, theta0=model.theta[:3])

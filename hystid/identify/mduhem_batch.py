@@ -310,8 +310,10 @@ def _starts(problem: _Problem, yn: np.ndarray,
         if not problem.model(theta0, problem.rates).is_stable():
             raise ValueError("theta0: the start must have stable L1 and L2")
         theta, y0 = np.asarray(theta0, dtype=float), 0.0
-        if problem.fit_offset:
-            _, y0 = _weights_given_blocks(theta, problem)
+        if problem.fit_offset:  # the offset that fits best for the start as it is
+            yhat = mduhem_output_sensitivities(problem.model(theta, problem.rates),
+                                               problem.un)[0]
+            y0 = float(np.mean(problem.target - yhat[problem.rows]))
         return {"theta0": (theta, y0)}
     blocks = {"unit blocks": np.zeros(problem.n)}
     arx = _arx_blocks(problem, yn)
