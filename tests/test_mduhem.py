@@ -204,6 +204,14 @@ def test_options_are_checked():
         identify(rec, model="mduhem", rates=[1.0])
 
 
+def test_compensation_is_refused_with_a_reason():
+    from hystid.compensate import compensate
+
+    model = rich_model()
+    with pytest.raises(ValueError, match="multi-Duhem sandwich .* no inverse"):
+        compensate(model, model.simulate(_input(300), check=False).y, u_limits=(-1.0, 3.0))
+
+
 def test_rate_grid_and_condition_8():
     u = _input(3000, seed=7)
     r = rate_grid(u, 5)
