@@ -204,12 +204,15 @@ def test_options_are_checked():
         identify(rec, model="mduhem", rates=[1.0])
 
 
-def test_compensation_is_refused_with_a_reason():
+def test_compensation_and_c_export_are_refused_with_a_reason():
     from hystid.compensate import compensate
+    from hystid.export.c import c_sources
 
     model = rich_model()
     with pytest.raises(ValueError, match="multi-Duhem sandwich .* no inverse"):
         compensate(model, model.simulate(_input(300), check=False).y, u_limits=(-1.0, 3.0))
+    with pytest.raises(ValueError, match="multi-Duhem sandwich .* not exported"):
+        c_sources(model)
 
 
 def test_rate_grid_and_condition_8():
