@@ -202,6 +202,8 @@ def test_options_are_checked():
         identify(rec, model="mduhem", method="online")
     with pytest.raises(ValueError, match="rates: expected 6 positive rates"):
         identify(rec, model="mduhem", rates=[1.0])
+    with pytest.raises(ValueError, match=r"100 samples are too few .*\(expected at least 180"):
+        identify(rec[:100], model="mduhem")
 
 
 def test_compensation_and_c_export_are_refused_with_a_reason():

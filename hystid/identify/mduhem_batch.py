@@ -412,11 +412,19 @@ def fit_mduhem_output_error(
     Raises
     ------
     ValueError
-        For rates that do not match the structure or a ``theta0`` of another length.
+        For a record shorter than ten samples per parameter, rates that do not match the
+        structure or a ``theta0`` of another length.
     """
     s = structure or MultiDuhemStructure()
     if not isinstance(s, MultiDuhemStructure):
         raise TypeError(f"structure: expected a MultiDuhemStructure, got {type(s).__name__}")
+    from . import SAMPLES_PER_PARAMETER
+
+    need = SAMPLES_PER_PARAMETER * len(s.names)
+    if record.n < need:
+        raise ValueError(f"record {record.name!r}: {record.n} samples are too few for the "
+                         f"multi-Duhem fit (expected at least {need}: {SAMPLES_PER_PARAMETER} "
+                         f"per parameter)")
     say = say or (lambda line: None)
     prep = prepare(record, skip=skip)
     if not offset:
