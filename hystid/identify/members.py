@@ -149,8 +149,9 @@ class Member:
 PI_NFEV = 40
 
 #: Duhem operators of the ``mduhem`` member. Six against the structure's default four: on
-#: measured stage A 28-39 nm held out against 35-47 nm, on simulated Maxwell-slip, Preisach and
-#: Bouc-Wen stages 1-40 % less, for a fit of a few seconds either way.
+#: measured stage A 28-39 nm held out against 34-45 nm; on simulated Preisach and Maxwell-slip
+#: stages 1-2 % less; on two Bouc-Wen stages 19-46 % less on five of six records, 16 % more on
+#: one; a fit of 1-2 s either way on stage A.
 MDUHEM_OPERATORS = 6
 
 #: The members, simplest first.
@@ -175,8 +176,8 @@ MEMBERS: dict[str, Member] = {m.name: m for m in (
 
 #: The members ``model="auto"`` chooses between (the paper's PI sandwich is left out: on the
 #: records measured so far it never beat both of these, and it is the slowest to fit; the
-#: ``mduhem`` member is fast, 3-5 s on stage A's 20 001 samples, but loses to ``pi-stage``
-#: there while counting fewer parameters, so the choice would take it within its margin).
+#: ``mduhem`` member is fast, 1-2 s on stage A's 20 001 samples, but loses to ``pi-stage``
+#: there while counting fewer parameters, so the choice could take it within its margin).
 AUTO_CANDIDATES = ("duhem", "pi-stage")
 
 #: Share of the excitation (after the leading rest) held out for the choice.
