@@ -27,7 +27,7 @@ FORMAT = "hystid-model"
 #: Version written by this hystid; the only one it reads.
 VERSION = 1
 #: Model kinds a file may hold.
-KINDS = ("duhem", "pi")
+KINDS = ("duhem", "pi", "mduhem")
 
 
 #: Structure keys of the generalised Duhem block, written only when the block uses them.
@@ -106,7 +106,7 @@ def model_document(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, PISandwich or MultiDuhemSandwich
         The model (or a diagnosed ``AugmentedSandwich``: the nominal model's document with
         its ``effects``).
     provenance : mapping, optional
@@ -138,6 +138,8 @@ def model_document(
     }
     if kind == "pi":
         doc["thresholds"] = [float(r) for r in model.thresholds]
+    elif kind == "mduhem":
+        doc["rates"] = [float(r) for r in model.rates]
     else:
         doc["rest_memory"] = float(model.rest_memory)
     doc.update({
@@ -162,7 +164,7 @@ def save_model(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, PISandwich or MultiDuhemSandwich
         The model to keep.
     path : str or os.PathLike
         The file (``.json`` by convention). Written atomically: a failure leaves any previous
@@ -203,6 +205,6 @@ def _effects_of(model: Any) -> dict[str, dict[str, float]] | None:
 def _kind_of(model: Any) -> str:
     kind = getattr(type(model), "kind", None)
     if kind not in KINDS:
-        raise ModelFileError(f"model: expected a DuhemSandwich or a PISandwich, got "
-                             f"{type(model).__name__}")
+        raise ModelFileError(f"model: expected a DuhemSandwich, a PISandwich or a "
+                             f"MultiDuhemSandwich, got {type(model).__name__}")
     return kind

@@ -6,11 +6,12 @@ from::
     {
       "format": "hystid-model",
       "version": 1,
-      "kind": "duhem",                        # or "pi"
+      "kind": "duhem",                        # or "pi", "mduhem"
       "name": "...",
       "structure": {"n1a": 1, "n1b": 0, "n2a": 2, "n2b": 0, "q1": 1, "q2": 0, "f0": false},
       "params": {"alpha": 0.8365, ...},       # floats written with 17 significant digits
       "thresholds": [...],                    # PI sandwich only
+      "rates": [...],                         # multi-Duhem sandwich only (alpha_j)
       "fs": 30000.0,
       "u_rest": 0.0, "offset": 0.0,
       "envelope": {"u_min": ..., "u_max": ..., "slew": ...} or null,
@@ -49,6 +50,7 @@ from .operating import Envelope
 from .validate import check_model, check_structure_size
 
 if TYPE_CHECKING:  # pragma: no cover
+    from .mduhem import MultiDuhemSandwich
     from .pi import PISandwich
 
 __all__ = ["FORMAT", "KINDS", "VERSION", "ModelFileError", "file_sha256", "load_model",
@@ -57,6 +59,7 @@ __all__ = ["FORMAT", "KINDS", "VERSION", "ModelFileError", "file_sha256", "load_
 _DUHEM_KEYS = ("n1a", "n1b", "n2a", "n2b", "q1", "q2", "f0")
 _SHAPE_KEYS = ("f_order", "g_order", "directional")
 _PI_KEYS = ("n_operators", "n1a", "n1b", "n2a", "n2b", "q1", "q2")
+_MDUHEM_KEYS = _PI_KEYS
 
 
 def _with_effects(model: DuhemSandwich, effects: Any, where: str) -> Any:
@@ -83,7 +86,7 @@ def _with_effects(model: DuhemSandwich, effects: Any, where: str) -> Any:
 
 
 # --------------------------------------------------------------------------- loading
-def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
+def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich | MultiDuhemSandwich:
     """Read a model file written by :func:`save_model`.
 
     Parameters
@@ -93,7 +96,7 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
 
     Returns
     -------
-    DuhemSandwich or PISandwich
+    DuhemSandwich, PISandwich or MultiDuhemSandwich
         The model, with its structure, parameters, sampling rate, rest level, offset, envelope
         and units. The file's provenance is in the model's ``provenance`` attribute. A Duhem
         model file with ``effects`` (written by ``hystid diagnose --out``) gives the
@@ -126,6 +129,16 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich:
             check_structure_size(structure)
             model = DuhemSandwich(params, structure, **common,
                                   rest_memory=_number(doc, "rest_memory", where, default=0.0))
+        elif kind == "mduhem":
+            from .mduhem import MultiDuhemSandwich, MultiDuhemStructure
+
+            structure = MultiDuhemStructure(**_structure(doc, _MDUHEM_KEYS, where))
+            rates = doc.get("rates")
+            if not isinstance(rates, list) or not all(
+                    isinstance(r, int | float) and not isinstance(r, bool) for r in rates):
+                raise ModelFileError(f"{where}: 'rates' must be a list of numbers (a multi-Duhem "
+                                     "model's operator rates alpha_j)")
+            model = MultiDuhemSandwich(params, rates, structure, **common)
         else:
             from .pi import PISandwich, PIStructure
 

@@ -171,7 +171,7 @@ def test_save_never_replaces_a_file_unless_forced(tmp_path):
     assert path.read_text() == "mine"
     model.save(path, force=True)
     assert load_model(path).params == model.params
-    with pytest.raises(ModelFileError, match="expected a DuhemSandwich or a PISandwich"):
+    with pytest.raises(ModelFileError, match="expected a DuhemSandwich, a PISandwich or a Multi"):
         save_model(object(), tmp_path / "x.json")
 
 

@@ -10,6 +10,7 @@ import control as ct
 import numpy as np
 import pytest
 
+from hystid.mduhem import MultiDuhemSandwich, MultiDuhemStructure
 from hystid.model import DuhemSandwich, InitialCondition, Structure
 from hystid.operating import AdmissibilityWarning, Envelope
 from hystid.pi import PISandwich, PIStructure
@@ -43,7 +44,17 @@ def pi_member() -> PISandwich:
     return PISandwich(values, r, s, fs=FS, name="p", u_rest=12.5, offset=-0.8)
 
 
-MEMBERS = {"duhem": duhem_member, "pi": pi_member}
+def mduhem_member() -> MultiDuhemSandwich:
+    s = MultiDuhemStructure(n_operators=3)
+    values = {"a11": -0.3, "f1_0": 0.2, "f1_1": 0.3, "f1_2": 0.1, "g0_0": 0.1, "g0_1": 0.05,
+              "g0_2": 0.02, "a21": -1.2, "a22": 0.5, "a23": -0.1, "b22": 0.1, "b23": -0.05}
+    return MultiDuhemSandwich(values, [0.1, 0.5, 2.0], s, fs=FS, name="m", u_rest=12.5,
+                              offset=-0.8)
+
+
+MEMBERS = {"duhem": duhem_member, "pi": pi_member, "mduhem": mduhem_member}
+#: What each member's constructor takes after the parameters (its fixed block constants).
+FIXED = {"pi": lambda m: (m.thresholds,), "mduhem": lambda m: (m.rates,)}
 
 
 @pytest.mark.parametrize("kind", MEMBERS)
@@ -94,8 +105,7 @@ def test_admissibility_is_one_test_for_every_member(kind):
     theta = model.theta.copy()
     names = list(model.structure.names)
     theta[names.index("a21")] = -2.5
-    bad = type(model)(theta, *((model.thresholds,) if kind == "pi" else ()),
-                      model.structure, fs=FS)
+    bad = type(model)(theta, *FIXED.get(kind, lambda m: ())(model), model.structure, fs=FS)
     assert any("not sound" in m for m in bad.admissibility(u[:200]))
 
 

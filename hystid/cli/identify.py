@@ -56,7 +56,7 @@ REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png"
 
 #: The members of the model family (``hystid.identify.members.MEMBERS``; a test keeps the two
 #: equal, so that the parser does not import the models).
-MODEL_NAMES = ("duhem", "gduhem", "pi", "pi-stage")
+MODEL_NAMES = ("duhem", "gduhem", "pi", "pi-stage", "mduhem")
 #: Methods of each hysteresis block (``--model``) that keep a parameter history.
 _HISTORY_METHODS = {"duhem": ("online", "eria", "ekf"), "pi": ("online", "eria")}
 
@@ -197,6 +197,9 @@ def _method_arg(args: argparse.Namespace) -> str:
     if family == "pi" and method in ("ekf", "eria"):
         raise CommandError(f"--method {method}: the PI sandwich is identified by 'online' (its "
                            "recursive identifier) or 'batch' (expected one of these)")
+    if model_kind == "mduhem" and method != "batch":
+        raise CommandError(f"--method {method}: the mduhem member is identified by 'batch' only "
+                           "(expected --method batch, or another --model)")
     if model_kind == "auto" and method not in ("batch", "online"):
         raise CommandError(f"--model auto chooses on batch fits, for --method batch or online "
                            f"(got --method {method}; expected --model duhem for it)")
@@ -241,7 +244,7 @@ def _identify_record(rec: Record, args: argparse.Namespace, progress: Progress,
     settings: dict = {"progress": progress} if method != "batch" else {}
     if method == "batch":
         settings["offset"] = getattr(args, "offset", None) != "none"
-        if _model_arg(args) == "duhem":  # the PI batch fit keeps its own settings
+        if _model_arg(args) in ("duhem", "mduhem"):  # the PI batch fit keeps its own settings
             settings["say"] = progress.say
         elif _model_arg(args) == "auto":  # a line per candidate fitted and scored
             settings["progress"] = progress

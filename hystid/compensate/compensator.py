@@ -362,6 +362,9 @@ def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
            reference_lead: int | None = None, l2_identity: bool = False) -> _Chain:
     if not hasattr(model, "structure") or not hasattr(model, "L1"):
         raise ValueError(f"model: expected a DuhemSandwich or PISandwich, got {model!r}")
+    if getattr(type(model), "kind", None) == "mduhem":
+        raise ValueError("model: the multi-Duhem sandwich (mduhem) has no inverse for "
+                         "compensation yet (expected a DuhemSandwich or PISandwich)")
     umin, umax = (float(v) for v in u_limits)
     if not (np.isfinite(umin) and np.isfinite(umax) and umin < umax):
         raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")

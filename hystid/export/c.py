@@ -372,6 +372,9 @@ def c_sources(
         For a model kind the export has no C for (it names the kind), when the compensator
         cannot be built with the ``compensator`` options given, or a number is not finite.
     """
+    if getattr(type(model), "kind", None) == "mduhem":
+        raise ValueError("model: the C export writes the Duhem and PI sandwiches; the "
+                         "multi-Duhem sandwich (mduhem) is not exported yet")
     if isinstance(model, DuhemSandwich):
         from ..validate import check_plain_duhem
 

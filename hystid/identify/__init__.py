@@ -74,7 +74,8 @@ def identify(
         its table in ``result.info["structure_selection"]``).
     model : str
         The member of the model family (:data:`hystid.identify.members.MEMBERS`): ``"duhem"``
-        (default), ``"gduhem"``, ``"pi"``, ``"pi-stage"``, or ``"auto"`` to choose between
+        (default), ``"gduhem"``, ``"pi"``, ``"pi-stage"``, ``"mduhem"`` (batch only), or
+        ``"auto"`` to choose between
         :data:`~hystid.identify.members.AUTO_CANDIDATES` on data held out inside the record
         (:func:`~hystid.identify.members.select_member`; batch only, its table in
         ``result.info["member_selection"]``). ``structure`` applies to the Duhem sandwich.
