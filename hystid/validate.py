@@ -216,6 +216,10 @@ def check_model(model: Any) -> None:
     if "alpha" in model.params and not model.params["alpha"] > 0:
         raise ValueError(f"'alpha' is {model.params['alpha']!r} (expected alpha > 0: with "
                          "alpha <= 0 the Duhem loop grows instead of settling)")
+    if "ad" in model.params and not abs(model.params["ad"]) < 1.0:
+        raise ValueError(f"'ad' is {model.params['ad']!r} (expected |ad| < 1: otherwise one "
+                         "branch's rate alpha (1 +- ad) is not positive and the loop grows "
+                         "instead of settling)")
     for block in ("L1", "L2"):
         radius = _poles_radius(getattr(model, f"a{block[1]}"))
         if not radius <= MAX_POLE_RADIUS:

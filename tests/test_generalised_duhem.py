@@ -163,3 +163,23 @@ def test_gduhem_member_and_what_it_is_refused_by():
     with pytest.raises(ValueError, match="eria.*plain Duhem"):
         identify(Record(u, model.simulate(u, check=False).y, 30_000.0), method="eria",
                  structure=FULL)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["structure"].__setitem__("f_order", 7), "f_order must be an integer from 1 to 3"),
+    (lambda d: d["structure"].__setitem__("directional", "yes"),
+     "'directional' must be true or false"),
+    (lambda d: d["params"].pop("gd"), r"missing \['gd'\]"),
+    (lambda d: d["params"].__setitem__("ad", 5.0), r"expected \|ad\| < 1"),
+])
+def test_a_bad_generalised_model_file_is_refused_by_name(tmp_path, change, message):
+    import json
+
+    from hystid.errors import ModelFileError
+
+    doc = json.loads(full_model().save(tmp_path / "g.json").read_text())
+    change(doc)
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ModelFileError, match=message):
+        load_model(bad)
