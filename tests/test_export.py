@@ -285,6 +285,18 @@ def test_ff_step_matches_compensate_with_reversal_planning(tmp_path):
 
 
 @needs_cc
+def test_ff_step_matches_compensate_while_saturating(tmp_path):
+    """The reference stage between 0 and 10 V on a 50 Hz triangle (bench_export's case): the
+    command saturates for a third of each period, the state leaves the planner's path."""
+    model = reference_model()
+    ramp = model.simulate(np.linspace(model.u_rest, 10.0, 5_000), check=False).y
+    res = _ff_case(model, triangle(model, 0.6 * abs(ramp[-1] - ramp[0]), 0.1, 50.0), tmp_path,
+                   u_limits=(0.0, 10.0))
+    assert np.mean((res.status & 4) != 0) > 0.2
+    assert np.any(res.status & 8) and np.any(res.status & 1) and np.any(res.status == 0)
+
+
+@needs_cc
 def test_ff_step_matches_with_a_reference_model_and_the_reference_anchor(tmp_path):
     model = placed_duhem()
     r = triangle(model, 3.0) + 0.05  # the sensor zero moved by 50 nm
