@@ -71,7 +71,7 @@ from ..kernels import duhem_w2, sgn
 __all__ = [
     "BOUND",
     "EXACT",
-    "MEMO_SETS",
+    "MEMO_INTERVALS",
     "UNREACHABLE",
     "check_bound",
     "duhem_forward",
@@ -331,14 +331,17 @@ def _target(delta, alpha, g0, bound, lo, hi):
     return 1 if hi[0] >= lo[0] else 0
 
 
-#: Sets of the backward pass a :func:`planner_memo` keeps from one sample to the next (more are
-#: recomputed each sample: the size changes the speed only, never a result).
-MEMO_SETS = 32
+#: Intervals per window sample the memo of :func:`planner_memo` has room for, for the sets of the
+#: backward pass (a set has a few; once the room is used up, further sets are computed afresh at
+#: every sample: the room changes the speed only, never a result).
+MEMO_INTERVALS = 8
 # planner_memo's integers (sample indices relative to the window of the last call): the ring
 # slot of the next call's W[0], whether the key state holds, the last sample the kept
 # near-branch path reaches, its first unreachable sample (-1 if none), the target the kept
-# sets lead to (-1 if none), how many sets are kept, then each kept set's count of intervals
-_M_BASE, _M_KEY, _M_END, _M_J, _M_TARGET, _M_SETS, _M_COUNTS = range(7)
+# sets lead to (-1 if none), how many sets are kept, where the last backward pass stopped early
+# (-1 if it did not), how much of the room the kept sets use; then, for each kept set, its
+# count of intervals and its place in the room
+_M_BASE, _M_KEY, _M_END, _M_J, _M_TARGET, _M_SETS, _M_EXIT, _M_FILL, _M_HEAD = range(9)
 
 
 @njit(cache=True)
@@ -353,18 +356,21 @@ def planner_memo(n):
     Returns
     -------
     mi : ndarray of int64
-        Indices, flags and the counts of intervals of the kept sets.
+        Indices and flags, then the counts of intervals and places of the kept sets.
     mf : ndarray of float64
         The key state, the state at the end of the kept path, then the path's gaps (a ring of
         ``n`` samples).
-    ms : ndarray of float64, shape (MEMO_SETS + 2, 2, 32)
-        The kept sets (lower and upper ends of their intervals), then two scratch sets.
+    ms : ndarray of float64
+        Two scratch sets (lower then upper ends, 32 intervals each), then the room for the kept
+        sets (:data:`MEMO_INTERVALS` intervals per window sample).
     """
-    mi = np.zeros(_M_COUNTS + MEMO_SETS, np.int64)
+    n = max(n, 1)
+    mi = np.zeros(_M_HEAD + 2 * n, np.int64)
     mi[_M_J] = -1
     mi[_M_TARGET] = -1
-    mf = np.zeros(4 + max(n, 1))
-    ms = np.zeros((MEMO_SETS + 2, 2, _K))
+    mi[_M_EXIT] = -1
+    mf = np.zeros(4 + n)
+    ms = np.zeros(4 * _K + 2 * MEMO_INTERVALS * n)
     return mi, mf, ms
 
 
@@ -374,16 +380,17 @@ def plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms):
 
     ``mi, mf, ms`` come from :func:`planner_memo` and are updated in place; each call must see
     the window of the previous call moved on by one sample (``W[0]`` now was ``W[1]`` then, the
-    same values, the same length). Two things are kept, both exact:
+    same values, the same length). What is kept, all of it exact:
 
     * the near-branch path of the look-ahead scan. When the state ``w1p, w2p`` is the one that
       path reached after its first step (the near step was taken and the internal model landed
       on it to the last bit), the new scan is the old one less its first sample: only the new
       last sample of the window is simulated (none when the old scan had stopped at an
-      unreachable sample);
+      unreachable sample). The backward pass then stops where it stopped before, if that is
+      still ahead: its answer is the same (near step) without running it again;
     * the sets of the backward pass. They depend on the window's values and on the target
       sample (the first unreachable one) only, not on the state: while the target stays, each
-      set is computed once (the :data:`MEMO_SETS` nearest the target; further ones every time).
+      set is computed once (as many as the room holds, :data:`MEMO_INTERVALS`).
 
     Parameters
     ----------
@@ -406,6 +413,8 @@ def plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms):
     mi[_M_BASE] = base + 1 if base + 1 < n else 0
     if mi[_M_TARGET] >= 0:
         mi[_M_TARGET] -= 1
+    stop = mi[_M_EXIT]
+    mi[_M_EXIT] = -1
     d0, st0 = duhem_inverse_step(W[0], w1p, w2p, alpha, f0, f1, g0, bound)
     if st0 == UNREACHABLE or n < 3:
         mi[_M_KEY] = 0
@@ -413,7 +422,8 @@ def plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms):
     w1a = w1p + d0
     w2a = duhem_forward(w1a, w1p, w2p, alpha, f0, f1, g0)
     gaps = mf[4:4 + n]  # gaps[(base + i) % n]: the near-branch path's gap before W[i]
-    if mi[_M_KEY] == 1 and w1p == mf[0] and w2p == mf[1]:
+    same = mi[_M_KEY] == 1 and w1p == mf[0] and w2p == mf[1]
+    if same:
         # the state is where the kept path went after its first step: it goes on alike
         j = mi[_M_J]
         if j >= 0:
@@ -449,20 +459,43 @@ def plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms):
     mf[3] = a2
     if j < 0:
         return d0, st0, False
+    if same and stop >= 2:
+        # the same path, target and sets: the pass below would stop at W[stop - 1] again (at
+        # W[1], the gap there is the near step's, the final test passes alike)
+        if stop > 2:
+            mi[_M_EXIT] = stop - 1
+        return d0, st0, False
     # backward from the target j: the gaps before W[i] from which W[j] is reachable exactly
     if mi[_M_TARGET] != j:
         mi[_M_TARGET] = j
         mi[_M_SETS] = 0
+        mi[_M_FILL] = 0
     kept = mi[_M_SETS]
+    fill = mi[_M_FILL]
+    count = mi[_M_HEAD:_M_HEAD + n]
+    place = mi[_M_HEAD + n:_M_HEAD + 2 * n]
+    room = ms[4 * _K:]
+    scratch = 0
     if kept == 0:
-        mi[_M_COUNTS] = _target(W[j] - W[j - 1], alpha, g0, bound, ms[0, 0], ms[0, 1])
-        kept = 1
-    lo = ms[0, 0]
-    hi = ms[0, 1]
-    m = mi[_M_COUNTS]
+        m = _target(W[j] - W[j - 1], alpha, g0, bound, ms[0:_K], ms[_K:2 * _K])
+        lo = ms[0:_K]
+        hi = ms[_K:2 * _K]
+        scratch = 1
+        if 2 * m <= room.shape[0]:
+            room[0:m] = lo[:m]
+            room[m:2 * m] = hi[:m]
+            count[0] = m
+            place[0] = 0
+            lo = room[0:m]
+            hi = room[m:2 * m]
+            fill = 2 * m
+            kept = 1
+    else:
+        m = count[0]
+        lo = room[place[0]:place[0] + m]
+        hi = room[place[0] + m:place[0] + 2 * m]
     i = j
     r = 0  # sets kept: r = j - i
-    scratch = 0
     while True:
         if m == 0:  # no exact plan: keep going, the reversal will be approximate
             break
@@ -474,6 +507,7 @@ def plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms):
                 break  # the near-branch path reaches the set by itself: waiting is safe
         else:
             mi[_M_SETS] = kept
+            mi[_M_FILL] = fill
             # gap after the near step, relative to W[0]
             if _inside(duhem_gap(w1a, w2a, f0, f1), lo, hi, m):
                 return d0, st0, False
@@ -487,21 +521,30 @@ def plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms):
         i -= 1
         r += 1
         if r < kept:
-            lo = ms[r, 0]
-            hi = ms[r, 1]
-            m = mi[_M_COUNTS + r]
+            m = count[r]
+            lo = room[place[r]:place[r] + m]
+            hi = room[place[r] + m:place[r] + 2 * m]
             continue
-        out = r
-        if r >= MEMO_SETS:
-            out = MEMO_SETS + scratch
-            scratch = 1 - scratch
-        m = _preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, ms[out, 0], ms[out, 1])
-        lo = ms[out, 0]
-        hi = ms[out, 1]
-        if r < MEMO_SETS:
-            mi[_M_COUNTS + r] = m
+        out_lo = ms[2 * scratch * _K:(2 * scratch + 1) * _K]
+        out_hi = ms[(2 * scratch + 1) * _K:(2 * scratch + 2) * _K]
+        scratch = 1 - scratch
+        m = _preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, out_lo, out_hi)
+        if r == kept and fill + 2 * m <= room.shape[0]:
+            room[fill:fill + m] = out_lo[:m]
+            room[fill + m:fill + 2 * m] = out_hi[:m]
+            count[r] = m
+            place[r] = fill
+            lo = room[fill:fill + m]
+            hi = room[fill + m:fill + 2 * m]
+            fill += 2 * m
             kept = r + 1
+        else:
+            lo = out_lo
+            hi = out_hi
+    if i >= 2:
+        mi[_M_EXIT] = i
     mi[_M_SETS] = kept
+    mi[_M_FILL] = fill
     return d0, st0, False
 
 

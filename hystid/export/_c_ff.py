@@ -20,7 +20,6 @@ FF_PLANNER = r"""
 #define HX_ROUND_OFF 1e-13
 #define HX_BIG 1e30
 #define HX_K HYSTID_FF_PLAN_K
-#define HX_MEMO_SETS HYSTID_FF_MEMO_SETS
 #define HX_MARGIN 1e-11
 #define HX_EXACT 0
 #define HX_BOUND 1
@@ -279,16 +278,19 @@ static double hx_plan_memo(const double *W, int n, double w1p, double w2p, doubl
                            double f0, double f1, double g0, double bound, hystid_ff_planner *p,
                            int *status, int *far)
 {
-    double *gaps = p->gaps;
-    double *lo, *hi;
+    double *gaps = p->gaps, *room = p->room;
+    const double *lo, *hi;
+    double *out_lo, *out_hi;
     double d0, w1a, w2a, a1, a2, d, w1, near, farv, w1f, w2f;
-    int base, st0, st, j, i, slot, kept, m, r, out, scratch, n_sol;
+    int base, stop, same, st0, st, j, i, k, slot, kept, fill, m, r, scratch, n_sol;
     *far = 0;
     base = p->base;
     p->base = base + 1 < n ? base + 1 : 0;
     if (p->target >= 0) {
         p->target -= 1;
     }
+    stop = p->exit;
+    p->exit = -1;
     d0 = hx_inverse_step(W[0], w1p, w2p, alpha, f0, f1, g0, bound, &st0);
     *status = st0;
     if (st0 == HX_UNREACHABLE || n < 3) {
@@ -297,7 +299,8 @@ static double hx_plan_memo(const double *W, int n, double w1p, double w2p, doubl
     }
     w1a = w1p + d0;
     w2a = hx_forward(w1a, w1p, w2p, alpha, f0, f1, g0);
-    if (p->key == 1 && w1p == p->key_w1 && w2p == p->key_w2) {
+    same = p->key == 1 && w1p == p->key_w1 && w2p == p->key_w2;
+    if (same) {
         /* the state is where the kept path went after its first step: it goes on alike */
         j = p->j;
         if (j >= 0) {
@@ -340,21 +343,45 @@ static double hx_plan_memo(const double *W, int n, double w1p, double w2p, doubl
     if (j < 0) {
         return d0;
     }
+    if (same && stop >= 2) {
+        /* the same path, target and sets: the backward pass would stop there again */
+        if (stop > 2) {
+            p->exit = stop - 1;
+        }
+        return d0;
+    }
     if (p->target != j) {
         p->target = j;
         p->kept = 0;
+        p->fill = 0;
     }
     kept = p->kept;
+    fill = p->fill;
+    scratch = 0;
     if (kept == 0) {
-        p->count[0] = hx_target(W[j] - W[j - 1], alpha, g0, bound, p->lo[0], p->hi[0]);
-        kept = 1;
+        m = hx_target(W[j] - W[j - 1], alpha, g0, bound, p->scratch[0], p->scratch[1]);
+        lo = p->scratch[0];
+        hi = p->scratch[1];
+        scratch = 1;
+        if (2 * m <= HYSTID_FF_PLAN_ROOM) {
+            for (k = 0; k < m; k++) {
+                room[k] = lo[k];
+                room[m + k] = hi[k];
+            }
+            p->count[0] = m;
+            p->place[0] = 0;
+            lo = room;
+            hi = room + m;
+            fill = 2 * m;
+            kept = 1;
+        }
+    } else {
+        m = p->count[0];
+        lo = room + p->place[0];
+        hi = room + p->place[0] + m;
     }
-    lo = p->lo[0];
-    hi = p->hi[0];
-    m = p->count[0];
     i = j;
     r = 0;
-    scratch = 0;
     for (;;) {
         if (m == 0) {
             break;
@@ -369,6 +396,7 @@ static double hx_plan_memo(const double *W, int n, double w1p, double w2p, doubl
             }
         } else {
             p->kept = kept;
+            p->fill = fill;
             if (hx_inside(hx_gap(w1a, w2a, f0, f1), lo, hi, m)) {
                 return d0;
             }
@@ -387,26 +415,36 @@ static double hx_plan_memo(const double *W, int n, double w1p, double w2p, doubl
         i -= 1;
         r += 1;
         if (r < kept) {
-            lo = p->lo[r];
-            hi = p->hi[r];
             m = p->count[r];
+            lo = room + p->place[r];
+            hi = room + p->place[r] + m;
             continue;
         }
-        out = r;
-        if (r >= HX_MEMO_SETS) {
-            out = HX_MEMO_SETS + scratch;
-            scratch = 1 - scratch;
-        }
-        m = hx_preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, p->lo[out],
-                        p->hi[out]);
-        lo = p->lo[out];
-        hi = p->hi[out];
-        if (r < HX_MEMO_SETS) {
+        out_lo = p->scratch[2 * scratch];
+        out_hi = p->scratch[2 * scratch + 1];
+        scratch = 1 - scratch;
+        m = hx_preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, out_lo, out_hi);
+        if (r == kept && fill + 2 * m <= HYSTID_FF_PLAN_ROOM) {
+            for (k = 0; k < m; k++) {
+                room[fill + k] = out_lo[k];
+                room[fill + m + k] = out_hi[k];
+            }
             p->count[r] = m;
+            p->place[r] = fill;
+            lo = room + fill;
+            hi = room + fill + m;
+            fill += 2 * m;
             kept = r + 1;
+        } else {
+            lo = out_lo;
+            hi = out_hi;
         }
     }
+    if (i >= 2) {
+        p->exit = i;
+    }
     p->kept = kept;
+    p->fill = fill;
     return d0;
 }
 
@@ -419,18 +457,21 @@ static void hx_planner_init(hystid_ff_planner *p)
     p->j = -1;
     p->target = -1;
     p->kept = 0;
+    p->exit = -1;
+    p->fill = 0;
     p->key_w1 = p->key_w2 = p->end_w1 = p->end_w2 = 0.0;
     for (i = 0; i < HYSTID_FF_PREVIEW + 1; i++) {
+        p->count[i] = 0;
+        p->place[i] = 0;
         p->gaps[i] = 0.0;
     }
-    for (i = 0; i < HX_MEMO_SETS + 2; i++) {
-        if (i < HX_MEMO_SETS) {
-            p->count[i] = 0;
-        }
+    for (i = 0; i < 4; i++) {
         for (k = 0; k < HX_K; k++) {
-            p->lo[i][k] = 0.0;
-            p->hi[i][k] = 0.0;
+            p->scratch[i][k] = 0.0;
         }
+    }
+    for (i = 0; i < HYSTID_FF_PLAN_ROOM; i++) {
+        p->room[i] = 0.0;
     }
 }
 """

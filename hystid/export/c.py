@@ -210,15 +210,17 @@ def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
         "the model's output at rest"
     planner = (
         "/* the reversal planner's memo (hystid.compensate.duhem_inverse.planner_memo): the "
-        "previous\n   sample's near-branch path and backward sets, a ring of gaps */\n"
-        + _define("HYSTID_FF_PLAN_K", di._K) + _define("HYSTID_FF_MEMO_SETS", di.MEMO_SETS)
+        "previous\n   sample's near-branch path (a ring of gaps) and the backward sets it "
+        "keeps */\n"
+        + _define("HYSTID_FF_PLAN_K", di._K)
+        + _define("HYSTID_FF_PLAN_ROOM", 2 * di.MEMO_INTERVALS * (P + 1))
         + "typedef struct hystid_ff_planner {\n"
-        "    int base, key, end, j, target, kept;\n"
-        "    int count[HYSTID_FF_MEMO_SETS];\n"
+        "    int base, key, end, j, target, kept, exit, fill;\n"
+        "    int count[HYSTID_FF_PREVIEW + 1], place[HYSTID_FF_PREVIEW + 1];\n"
         "    double key_w1, key_w2, end_w1, end_w2;\n"
         "    double gaps[HYSTID_FF_PREVIEW + 1];\n"
-        "    double lo[HYSTID_FF_MEMO_SETS + 2][HYSTID_FF_PLAN_K];\n"
-        "    double hi[HYSTID_FF_MEMO_SETS + 2][HYSTID_FF_PLAN_K];\n"
+        "    double scratch[4][HYSTID_FF_PLAN_K];\n"
+        "    double room[HYSTID_FF_PLAN_ROOM];\n"
         "} hystid_ff_planner;\n")
     head = (f"\n/* Feed-forward compensator: hystid.compensate.compensate(model, r) one sample "
             f"at a time ({names[kind]}\n   inverse), in the record's units: the reference as the "
