@@ -7,10 +7,14 @@ of ``hystid_model_step`` (goal: at least one million), of ``model.simulate``, th
 largest relative difference of the outputs, and the C rates of the on-line identifier's step
 and of the compensator ``hystid_ff_step`` (``hystid.compensate.compensate`` one sample at a
 time, set beside ``compensate`` over the whole reference) for two models: the reference stage
-(a Duhem sandwich: its reversal planner looks 300 samples ahead every sample; limits 0-10 V) and
+(a Duhem sandwich: its reversal planner looks 300 samples ahead, reusing the previous sample's
+look-ahead while the command follows the plan; limits 0-10 V, where the 50 Hz triangle
+saturates for a third of each period and the look-ahead is simulated again) and
 the ``pi-stage`` member identified on a simulated stage A (``hystid.testing``; L2 with a zero
 outside the unit circle: its anti-causal inverse runs as a FIR every sample). Goal: one million
-samples per second for every step.
+samples per second for every step. Beside the goal, the Duhem compensator on the same scan with
+limits wide enough never to saturate (every sample follows the plan), and with a preview of
+3 000 samples (where shifting the step's reference lines costs more than the planner).
 
 Usage: OPENBLAS_NUM_THREADS=1 python benchmarks/bench_export.py [--quick] [--samples N]
            [--out FILE.json]
@@ -146,12 +150,14 @@ def pi_stage_model():
                         model="pi-stage").model
 
 
-def ff_rates(model, folder: Path, n: int, options: dict) -> dict:
+def ff_rates(model, folder: Path, n: int, options: dict, scan_limits: tuple | None = None) -> dict:
     """C ``hystid_ff_step`` and Python ``compensate`` over a triangle scan of ``n`` samples,
-    with the C output checked against Python sample by sample."""
+    with the C output checked against Python sample by sample. The scan's amplitude is set by
+    the upper limit of ``scan_limits`` (default: the compensator's limits)."""
     exe = compile_export(model, folder, options)
     kw = ff_options(model, **options)
-    ramp = model.simulate(np.linspace(model.u_rest, kw["u_limits"][1], 5_000), check=False).y
+    top = (scan_limits or kw["u_limits"])[1]
+    ramp = model.simulate(np.linspace(model.u_rest, top, 5_000), check=False).y
     amp = 0.6 * abs(ramp[-1] - ramp[0])  # a scan well inside what the limits allow
     r = scan_for(model, "triangle", 50.0, amp, n / model.fs)[:n]
     with warnings.catch_warnings():
@@ -219,6 +225,14 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
         t_rpem_py = best_time(python_rpem, repeat=3, min_time=0)
         ff = {"duhem": ff_rates(model, folder / "duhem", nf, REFERENCE_LIMITS),
               "pi_stage": ff_rates(pi_stage_model(), folder / "pi", nf, {})}
+        # the planner's cost beside the goal: the same scan without saturation (every sample
+        # follows the plan), and a preview ten times as long
+        context = {
+            "duhem_unsaturated": ff_rates(model, folder / "wide", nf, {"u_limits": (-100, 100)},
+                                          scan_limits=REFERENCE_LIMITS["u_limits"]),
+            "duhem_preview_3000": ff_rates(model, folder / "p3000", nf,
+                                           {**REFERENCE_LIMITS, "preview": 3000}),
+        }
     c_rate_model = n / t_c
     py_rate = n / t_py
     rates = [c_rate_model, nf / t_rpem] + [v["c_samples_per_s"] for v in ff.values()]
@@ -226,7 +240,7 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
             "c_model_samples_per_s": c_rate_model, "python_simulate_samples_per_s": py_rate,
             "ratio_c_vs_python": c_rate_model / py_rate,
             "c_rpem_samples_per_s": nf / t_rpem, "python_rpem_samples_per_s": nf / t_rpem_py,
-            "ff": ff, "checksum_relative_difference": agree,
+            "ff": ff, "ff_context": context, "checksum_relative_difference": agree,
             "meets_goal": bool(c_rate_model >= GOAL),
             "every_step_meets_goal": bool(min(rates) >= GOAL)}
 
@@ -253,14 +267,17 @@ def render(payload: dict) -> str:
          f"{payload['c_rpem_samples_per_s'] / payload['python_rpem_samples_per_s']:.2g}x "
          "rpem_run"],
     ]
-    labels = {"duhem": "reference stage (Duhem", "pi_stage": "pi-stage (PI"}
-    for key, ff in payload["ff"].items():
+    labels = {"duhem": "reference stage (Duhem", "pi_stage": "pi-stage (PI",
+              "duhem_unsaturated": "reference stage, limits +-100 V: no saturation (Duhem",
+              "duhem_preview_3000": "reference stage (Duhem"}
+    every = {**payload["ff"], **payload.get("ff_context", {})}
+    for key, ff in every.items():
         rows.append([f"C hystid_ff_step, {labels[key]}, planner {ff['planner_preview']}, "
                      f"L2 FIR {ff['l2_fir_taps']} taps, delay {ff['delay']})",
                      f"{ff['c_samples_per_s']:.3g}",
                      f"{ff['c_samples_per_s'] / ff['python_samples_per_s']:.2g}x compensate"])
     goal = "met" if payload["every_step_meets_goal"] else "NOT met"
-    worst = max(ff["checksum_relative_difference"] for ff in payload["ff"].values())
+    worst = max(ff["checksum_relative_difference"] for ff in every.values())
     return (table(rows, ["step", "samples/s", "ratio"])
             + f"\n\n{payload['samples']} samples of the reference stage (the identifier and the "
               f"compensators {payload['ff']['duhem']['samples']}); goal "

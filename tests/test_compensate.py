@@ -72,6 +72,40 @@ def test_causal_inverse_cannot_prepare_reversals_on_the_paper_stage(stage):
     assert np.all(planned.exact)
 
 
+@pytest.mark.parametrize("f0", [0.0, 0.02])
+def test_planner_memo_gives_plan_steps_results_bit_for_bit(f0):
+    """plan_memo over a moving window (the state mostly where the last near step put it, at
+    times pushed off as a saturated command does, or held) against plan_step from scratch."""
+    p = PAPER_PARAMS
+    alpha, f1, g0, bound = p["alpha"], p["f1"], p["g0"], hc.DUHEM_BOUND
+    rng = np.random.default_rng(1)
+    n, steps = 301, 5_000
+    t = np.arange(steps + n) / 30_000.0
+    w = 1.5 * np.sin(2 * np.pi * 50 * t) + 0.4 * np.sin(2 * np.pi * 170 * t)
+    w[2_500:] += np.cumsum(rng.normal(0.0, 0.004, w.size - 2_500))  # fragmented sets
+    mi, mf, ms = di.planner_memo(n)
+    w1p = w2p = 0.0
+    seen = {"far": 0, "unreachable": 0, "bound": 0, "off": 0}
+    hold = 0
+    for k in range(steps):
+        W = w[k:k + n]
+        fresh = di.plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound)
+        kept = di.plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms)
+        assert kept == fresh, k
+        d, status, far = fresh
+        seen["far"] += far
+        seen["unreachable"] += status == di.UNREACHABLE
+        seen["bound"] += status == di.BOUND
+        w1 = w1p + d
+        if hold or rng.random() < 0.02:  # off the planned path, for a while
+            hold = hold - 1 if hold else int(rng.integers(0, 30))
+            w1 = w1p + rng.normal(0.0, 0.02) if rng.random() < 0.5 else w1p
+            seen["off"] += 1
+        w2p = di.duhem_forward(w1, w1p, w2p, alpha, f0, f1, g0)
+        w1p = w1
+    assert min(seen.values()) > 5, seen
+
+
 # --------------------------------------------------------------------------- composition
 @pytest.mark.parametrize("kind", ["triangle", "sine"])
 @pytest.mark.parametrize("frequency", [10, 50, 200])

@@ -231,7 +231,7 @@ def _ff_case(model, r: np.ndarray, tmp_path: Path, **options) -> hc.Compensation
 
 def triangle(model, amplitude: float, seconds: float = 0.2, hz: float = 20.0) -> np.ndarray:
     """A triangle scan about the model's output at rest, reached from rest (record units)."""
-    from hystid.compensate.command import scan_for
+    from hystid.cli.compensate import scan_for
 
     return scan_for(model, "triangle", hz, amplitude, seconds)
 
@@ -282,6 +282,18 @@ def test_ff_step_matches_compensate_with_reversal_planning(tmp_path):
     assert res.preview == 300 + model.structure.q1 + model.structure.q2
     assert np.any(res.status & 8) and np.any(res.status == 0)  # far branches taken
     assert res.u_limits == hc.envelope_limits(model)
+
+
+@needs_cc
+def test_ff_step_matches_compensate_while_saturating(tmp_path):
+    """The reference stage between 0 and 10 V on a 50 Hz triangle (bench_export's case): the
+    command saturates for a third of each period, the state leaves the planner's path."""
+    model = reference_model()
+    ramp = model.simulate(np.linspace(model.u_rest, 10.0, 5_000), check=False).y
+    res = _ff_case(model, triangle(model, 0.6 * abs(ramp[-1] - ramp[0]), 0.1, 50.0), tmp_path,
+                   u_limits=(0.0, 10.0))
+    assert np.mean((res.status & 4) != 0) > 0.2
+    assert np.any(res.status & 8) and np.any(res.status & 1) and np.any(res.status == 0)
 
 
 @needs_cc

@@ -43,6 +43,7 @@ from ..model import DuhemSandwich
 from ..response import LabelledResponse
 from ..signals import finite_signal
 from .compensator import (
+    _P,
     COMPENSATIONS,
     DUHEM_BOUND,
     TURNING,
@@ -53,6 +54,7 @@ from .compensator import (
     chain_step,
     source_stamp,
 )
+from .duhem_inverse import planner_memo
 from .feedback import FeedbackDesign
 from .tracking import TrackingMetrics, tracking_metrics
 
@@ -361,11 +363,12 @@ def _stamped_run_loop(stamp: int) -> Dispatcher:
         xc = np.zeros(nc)
         xc_new = np.zeros(nc)
         (ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv) = chain_args
+        mi, mf, ms = planner_memo(ispec[_P] + 1)
         for k in range(rs.shape[0]):
             stage_step(theta, layout, U, W1, W2, Y, P0 + k)  # y(k) from u(k-1) and before
             y[k] = Y[P0 + k]
             x_ff, uf, ydk, st = chain_step(x_ff, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM,
-                                           DM, r_pi, mu_pi, r_inv, mu_inv)
+                                           DM, r_pi, mu_pi, r_inv, mu_inv, mi, mf, ms)
             ek = ydk - (y[k] + noise[k])
             if hold and (st & 8):
                 ek = 0.0
@@ -393,7 +396,7 @@ def _stamped_run_loop(stamp: int) -> Dispatcher:
     return _run_loop
 
 
-_run_loop = _stamped_run_loop(source_stamp(stage_step, chain_step))
+_run_loop = _stamped_run_loop(source_stamp(stage_step, chain_step, planner_memo))
 
 
 def simulate_closed_loop(

@@ -33,8 +33,10 @@ State layout (flat vector, the python-control system's states)::
 
     [x_M | y_M line | w2d line | past u | past w1 | hysteresis state]
 
-with the hysteresis state ``w2(k+q1-1)`` for the Duhem block (the planner itself keeps no state)
-or the play-operator states ``p_i`` for the PI block.
+with the hysteresis state ``w2(k+q1-1)`` for the Duhem block or the play-operator states ``p_i``
+for the PI block. The Duhem planner's memo (:func:`~hystid.compensate.duhem_inverse.plan_memo`:
+the previous sample's look-ahead, reused while the state follows it) is not part of the state:
+it saves work and changes no result, and a run starts it fresh.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from numba.core.dispatcher import Dispatcher
 from ..model import DuhemSandwich
 from ..pi_operator import play
 from ..signals import finite_signal
-from .duhem_inverse import check_bound, duhem_forward, plan_step
+from .duhem_inverse import check_bound, duhem_forward, plan_memo, planner_memo
 from .linear_parts import (
     _linear_parts,
     _min_phase,
@@ -189,8 +191,13 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
 
     @njit(cache=True)
     def chain_step(x, r, ispec, fpar, a1, b1t, a2, b2t, AM, BM, CM, DM, r_pi, mu_pi, r_inv,
-                   mu_inv):
-        """One sample of the compensator: returns ``(x_next, u, yd, status)`` (``x`` untouched)."""
+                   mu_inv, mi, mf, ms):
+        """One sample of the compensator: returns ``(x_next, u, yd, status)`` (``x`` untouched).
+
+        ``mi, mf, ms``: the reversal planner's memo (:func:`~hystid.compensate.duhem_inverse.
+        planner_memo`), updated in place; fresh, or the one of the call for the previous sample
+        (``x`` then the state that call returned). It changes the work done, not the result.
+        """
         _ = stamp  # in numba's cache key: see source_stamp
         xn = x.copy()
         _push_reference(xn, r, ispec, fpar, a2, b2t, AM, BM, CM, DM)
@@ -208,7 +215,8 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
         alpha, f0, f1, g0 = fpar[_ALPHA], fpar[_F0], fpar[_F1], fpar[_G0]
         # hysteresis inverse -> w1c = w1(k+q1)
         if kind == KIND_DUHEM:
-            d, status, far = plan_step(window, w1p, xn[oH], alpha, f0, f1, g0, fpar[_BOUND])
+            d, status, far = plan_memo(window, w1p, xn[oH], alpha, f0, f1, g0, fpar[_BOUND],
+                                       mi, mf, ms)
             if far:
                 status |= 8
             w1c = w1p + d
@@ -265,7 +273,7 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
     return chain_step
 
 
-chain_step = _stamped_chain_step(source_stamp(plan_step, duhem_forward, play))
+chain_step = _stamped_chain_step(source_stamp(plan_memo, duhem_forward, play))
 
 
 @njit(cache=True)
@@ -283,15 +291,17 @@ def _stamped_chain_run(stamp: int) -> Dispatcher:
                   mu_inv, u, yd, status):
         """Run :func:`chain_step` over the advanced reference ``rs``; returns the final state."""
         _ = stamp  # in numba's cache key: see source_stamp
+        mi, mf, ms = planner_memo(ispec[_P] + 1)
         for k in range(rs.shape[0]):
             x, u[k], yd[k], status[k] = chain_step(x, rs[k], ispec, fpar, a1, b1t, a2, b2t, AM,
-                                                   BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv)
+                                                   BM, CM, DM, r_pi, mu_pi, r_inv, mu_inv, mi,
+                                                   mf, ms)
         return x
 
     return chain_run
 
 
-chain_run = _stamped_chain_run(source_stamp(chain_step))
+chain_run = _stamped_chain_run(source_stamp(chain_step, planner_memo))
 
 
 # =========================================================================== configuration
@@ -458,12 +468,16 @@ def _as_reference(y_ref, name: str = "y_ref") -> np.ndarray:
 def _functions(chain: _Chain):
     args = chain.args()
 
+    n = int(chain.ispec[_P]) + 1
+
+    # python-control may call these with any state: a fresh planner memo every time
     def update(t, x, u, params):
-        xn, _, _, _ = chain_step(np.asarray(x, float), float(u[0]), *args)
+        xn, _, _, _ = chain_step(np.asarray(x, float), float(u[0]), *args, *planner_memo(n))
         return xn
 
     def output(t, x, u, params):
-        _, uc, yd, status = chain_step(np.asarray(x, float), float(u[0]), *args)
+        _, uc, yd, status = chain_step(np.asarray(x, float), float(u[0]), *args,
+                                       *planner_memo(n))
         return np.array([uc, yd, float(status)])
 
     return update, output
@@ -596,8 +610,11 @@ def inverse(
         that cannot prepare reversals (they are then approximate for a stage like the paper's).
         The stretch a reversal needs grows as the scan slows: on the reference stage, for a
         7 um sine, 300 samples suffice down to 5 Hz, 1 000 at 2 Hz, 3 000 at 1 Hz; a preview too
-        short leaves the reversal approximate (status 2 for a few samples). The cost per
-        sample grows linearly with the preview (``benchmarks/bench_compensate.py``).
+        short leaves the reversal approximate (status 2 for a few samples). While the stage
+        follows the plan the planner reuses the previous sample's look-ahead (a few steps a
+        sample, whatever the preview); a sample off the plan (a saturated command, a clipped
+        or far-branch step) simulates the preview again up to its next reversal
+        (``benchmarks/bench_compensate.py``).
     duhem_bound : float
         Largest ``alpha |dw1|`` per sample, below the stability bound 2 of condition (8).
     compensation : {"inverse", "linear", "none"}

@@ -50,6 +50,13 @@ The rules used here
   zero, the middle of the band where the inverse is unique (status ``UNREACHABLE``), clipped to
   the bound.
 
+Run once a sample over a moving window (the compensator), :func:`plan_memo` keeps what the
+previous sample's call found: the near-branch path of the look-ahead (reused whole when the
+state is where its first step led, to the last bit) and the backward sets (which depend on the
+window and the target sample only). Its results are :func:`plan_step`'s, bit for bit; only the
+work changes: from the whole preview every sample to about one step a sample while the stage
+follows the plan.
+
 Numba caches compiled functions per file; the callers of these kernels in other modules are
 compiled without cache so that they never run a stale copy.
 """
@@ -64,13 +71,16 @@ from ..kernels import duhem_w2, sgn
 __all__ = [
     "BOUND",
     "EXACT",
+    "MEMO_INTERVALS",
     "UNREACHABLE",
     "check_bound",
     "duhem_forward",
     "duhem_gap",
     "duhem_inverse_step",
     "duhem_solutions",
+    "plan_memo",
     "plan_step",
+    "planner_memo",
 ]
 
 #: Step statuses (bit flags, combined with ``SATURATED`` by the compensator).
@@ -321,21 +331,221 @@ def _target(delta, alpha, g0, bound, lo, hi):
     return 1 if hi[0] >= lo[0] else 0
 
 
-@njit(cache=True)
-def _first_unreachable(W, i0, w1p, w2p, alpha, f0, f1, g0, bound, gaps):
-    """Index of the first sample of ``W[i0:]`` the near branch cannot reach (-1 if none).
+#: Intervals per window sample the memo of :func:`planner_memo` has room for, for the sets of the
+#: backward pass (a set has a few; once the room is used up, further sets are computed afresh at
+#: every sample: the room changes the speed only, never a result).
+MEMO_INTERVALS = 8
+# planner_memo's integers (sample indices relative to the window of the last call): the ring
+# slot of the next call's W[0], whether the key state holds, the last sample the kept
+# near-branch path reaches, its first unreachable sample (-1 if none), the target the kept
+# sets lead to (-1 if none), how many sets are kept, where the last backward pass stopped early
+# (-1 if it did not), how much of the room the kept sets use; then, for each kept set, its
+# count of intervals and its place in the room
+_M_BASE, _M_KEY, _M_END, _M_J, _M_TARGET, _M_SETS, _M_EXIT, _M_FILL, _M_HEAD = range(9)
 
-    ``gaps[i]`` receives the gap of the near-branch path before sample ``i``.
+
+@njit(cache=True)
+def planner_memo(n):
+    """A fresh memo for :func:`plan_memo` over windows of ``n`` samples.
+
+    Parameters
+    ----------
+    n : int
+        Window length (preview + 1).
+
+    Returns
+    -------
+    mi : ndarray of int64
+        Indices and flags, then the counts of intervals and places of the kept sets.
+    mf : ndarray of float64
+        The key state, the state at the end of the kept path, then the path's gaps (a ring of
+        ``n`` samples).
+    ms : ndarray of float64
+        Two scratch sets (lower then upper ends, 32 intervals each), then the room for the kept
+        sets (:data:`MEMO_INTERVALS` intervals per window sample).
     """
-    for i in range(i0, W.shape[0]):
-        gaps[i] = duhem_gap(w1p, w2p, f0, f1)
-        d, st = duhem_inverse_step(W[i], w1p, w2p, alpha, f0, f1, g0, bound)
-        if st == UNREACHABLE:
-            return i
-        w1 = w1p + d
-        w2p = duhem_forward(w1, w1p, w2p, alpha, f0, f1, g0)
-        w1p = w1
-    return -1
+    n = max(n, 1)
+    mi = np.zeros(_M_HEAD + 2 * n, np.int64)
+    mi[_M_J] = -1
+    mi[_M_TARGET] = -1
+    mi[_M_EXIT] = -1
+    mf = np.zeros(4 + n)
+    ms = np.zeros(4 * _K + 2 * MEMO_INTERVALS * n)
+    return mi, mf, ms
+
+
+@njit(cache=True)
+def plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms):
+    """:func:`plan_step`, reusing what the previous sample's call found (same results, bit for bit).
+
+    ``mi, mf, ms`` come from :func:`planner_memo` and are updated in place; each call must see
+    the window of the previous call moved on by one sample (``W[0]`` now was ``W[1]`` then, the
+    same values, the same length). What is kept, all of it exact:
+
+    * the near-branch path of the look-ahead scan. When the state ``w1p, w2p`` is the one that
+      path reached after its first step (the near step was taken and the internal model landed
+      on it to the last bit), the new scan is the old one less its first sample: only the new
+      last sample of the window is simulated (none when the old scan had stopped at an
+      unreachable sample). The backward pass then stops where it stopped before, if that is
+      still ahead: its answer is the same (near step) without running it again;
+    * the sets of the backward pass. They depend on the window's values and on the target
+      sample (the first unreachable one) only, not on the state: while the target stays, each
+      set is computed once (as many as the room holds, :data:`MEMO_INTERVALS`).
+
+    Parameters
+    ----------
+    W, w1p, w2p, alpha, f0, f1, g0, bound
+        As for :func:`plan_step`.
+    mi, mf, ms : ndarray
+        The memo (:func:`planner_memo`).
+
+    Returns
+    -------
+    d : float
+        Increment of ``w1``.
+    status : int
+        ``EXACT``, ``BOUND`` or ``UNREACHABLE``.
+    far : bool
+        Whether the far branch was taken.
+    """
+    n = W.shape[0]
+    base = mi[_M_BASE]  # ring slot of W[0]
+    mi[_M_BASE] = base + 1 if base + 1 < n else 0
+    if mi[_M_TARGET] >= 0:
+        mi[_M_TARGET] -= 1
+    stop = mi[_M_EXIT]
+    mi[_M_EXIT] = -1
+    d0, st0 = duhem_inverse_step(W[0], w1p, w2p, alpha, f0, f1, g0, bound)
+    if st0 == UNREACHABLE or n < 3:
+        mi[_M_KEY] = 0
+        return d0, st0, False
+    w1a = w1p + d0
+    w2a = duhem_forward(w1a, w1p, w2p, alpha, f0, f1, g0)
+    gaps = mf[4:4 + n]  # gaps[(base + i) % n]: the near-branch path's gap before W[i]
+    same = mi[_M_KEY] == 1 and w1p == mf[0] and w2p == mf[1]
+    if same:
+        # the state is where the kept path went after its first step: it goes on alike
+        j = mi[_M_J]
+        if j >= 0:
+            j -= 1
+        i = mi[_M_END] - 1
+        a1 = mf[2]
+        a2 = mf[3]
+    else:
+        j = -1
+        i = 0
+        a1 = w1a
+        a2 = w2a
+    if j < 0:  # the near-branch path from a1, a2 on, up to the end of the window
+        while i < n - 1:
+            i += 1
+            slot = base + i
+            if slot >= n:
+                slot -= n
+            gaps[slot] = duhem_gap(a1, a2, f0, f1)
+            d, st = duhem_inverse_step(W[i], a1, a2, alpha, f0, f1, g0, bound)
+            if st == UNREACHABLE:
+                j = i
+                break
+            w1 = a1 + d
+            a2 = duhem_forward(w1, a1, a2, alpha, f0, f1, g0)
+            a1 = w1
+    mi[_M_KEY] = 1
+    mf[0] = w1a
+    mf[1] = w2a
+    mi[_M_END] = i
+    mi[_M_J] = j
+    mf[2] = a1
+    mf[3] = a2
+    if j < 0:
+        return d0, st0, False
+    if same and stop >= 2:
+        # the same path, target and sets: the pass below would stop at W[stop - 1] again (at
+        # W[1], the gap there is the near step's, the final test passes alike)
+        if stop > 2:
+            mi[_M_EXIT] = stop - 1
+        return d0, st0, False
+    # backward from the target j: the gaps before W[i] from which W[j] is reachable exactly
+    if mi[_M_TARGET] != j:
+        mi[_M_TARGET] = j
+        mi[_M_SETS] = 0
+        mi[_M_FILL] = 0
+    kept = mi[_M_SETS]
+    fill = mi[_M_FILL]
+    count = mi[_M_HEAD:_M_HEAD + n]
+    place = mi[_M_HEAD + n:_M_HEAD + 2 * n]
+    room = ms[4 * _K:]
+    scratch = 0
+    if kept == 0:
+        m = _target(W[j] - W[j - 1], alpha, g0, bound, ms[0:_K], ms[_K:2 * _K])
+        lo = ms[0:_K]
+        hi = ms[_K:2 * _K]
+        scratch = 1
+        if 2 * m <= room.shape[0]:
+            room[0:m] = lo[:m]
+            room[m:2 * m] = hi[:m]
+            count[0] = m
+            place[0] = 0
+            lo = room[0:m]
+            hi = room[m:2 * m]
+            fill = 2 * m
+            kept = 1
+    else:
+        m = count[0]
+        lo = room[place[0]:place[0] + m]
+        hi = room[place[0] + m:place[0] + 2 * m]
+    i = j
+    r = 0  # sets kept: r = j - i
+    while True:
+        if m == 0:  # no exact plan: keep going, the reversal will be approximate
+            break
+        if i > 1:
+            slot = base + i
+            if slot >= n:
+                slot -= n
+            if _inside(gaps[slot], lo, hi, m):
+                break  # the near-branch path reaches the set by itself: waiting is safe
+        else:
+            mi[_M_SETS] = kept
+            mi[_M_FILL] = fill
+            # gap after the near step, relative to W[0]
+            if _inside(duhem_gap(w1a, w2a, f0, f1), lo, hi, m):
+                return d0, st0, False
+            n_sol, near, far = duhem_solutions(W[0], w1p, w2p, alpha, f0, f1, g0)
+            if n_sol == 2 and alpha * abs(far) <= bound:
+                w1f = w1p + far
+                w2f = duhem_forward(w1f, w1p, w2p, alpha, f0, f1, g0)
+                if _inside(duhem_gap(w1f, w2f, f0, f1), lo, hi, m):
+                    return far, EXACT, True
+            return d0, st0, False
+        i -= 1
+        r += 1
+        if r < kept:
+            m = count[r]
+            lo = room[place[r]:place[r] + m]
+            hi = room[place[r] + m:place[r] + 2 * m]
+            continue
+        out_lo = ms[2 * scratch * _K:(2 * scratch + 1) * _K]
+        out_hi = ms[(2 * scratch + 1) * _K:(2 * scratch + 2) * _K]
+        scratch = 1 - scratch
+        m = _preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, out_lo, out_hi)
+        if r == kept and fill + 2 * m <= room.shape[0]:
+            room[fill:fill + m] = out_lo[:m]
+            room[fill + m:fill + 2 * m] = out_hi[:m]
+            count[r] = m
+            place[r] = fill
+            lo = room[fill:fill + m]
+            hi = room[fill + m:fill + 2 * m]
+            fill += 2 * m
+            kept = r + 1
+        else:
+            lo = out_lo
+            hi = out_hi
+    if i >= 2:
+        mi[_M_EXIT] = i
+    mi[_M_SETS] = kept
+    mi[_M_FILL] = fill
+    return d0, st0, False
 
 
 @njit(cache=True)
@@ -346,7 +556,8 @@ def plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound):
     sample it cannot reach (a reversal of ``w2`` while the gap is on the wrong side). Then the
     set of gaps from which that sample is reachable exactly is propagated backwards to the next
     sample, and the near step is kept if it lands in the set (so the far branch is entered as
-    late as possible); otherwise the far step is taken if it lands in the set.
+    late as possible); otherwise the far step is taken if it lands in the set. Run once per
+    sample over a moving window, :func:`plan_memo` gives the same results for less work.
 
     Parameters
     ----------
@@ -369,42 +580,8 @@ def plan_step(W, w1p, w2p, alpha, f0, f1, g0, bound):
     far : bool
         Whether the far branch was taken.
     """
-    d0, st0 = duhem_inverse_step(W[0], w1p, w2p, alpha, f0, f1, g0, bound)
-    n = W.shape[0]
-    if st0 == UNREACHABLE or n < 3:
-        return d0, st0, False
-    w1a = w1p + d0
-    w2a = duhem_forward(w1a, w1p, w2p, alpha, f0, f1, g0)
-    gaps = np.empty(n)
-    j = _first_unreachable(W, 1, w1a, w2a, alpha, f0, f1, g0, bound, gaps)
-    if j < 1:
-        return d0, st0, False
-    lo = np.empty(_K)
-    hi = np.empty(_K)
-    lo2 = np.empty(_K)
-    hi2 = np.empty(_K)
-    m = _target(W[j] - W[j - 1], alpha, g0, bound, lo, hi)
-    for i in range(j - 1, 0, -1):
-        if m == 0:
-            break
-        if _inside(gaps[i + 1], lo, hi, m):
-            # the near-branch path reaches the set by itself: waiting (near now) is safe
-            return d0, st0, False
-        m = _preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, lo2, hi2)
-        lo, lo2 = lo2, lo
-        hi, hi2 = hi2, hi
-    if m == 0:
-        return d0, st0, False  # no exact plan: keep going, the reversal will be approximate
-    # gap after the near step, relative to W[0]
-    if _inside(duhem_gap(w1a, w2a, f0, f1), lo, hi, m):
-        return d0, st0, False
-    n_sol, near, far = duhem_solutions(W[0], w1p, w2p, alpha, f0, f1, g0)
-    if n_sol == 2 and alpha * abs(far) <= bound:
-        w1f = w1p + far
-        w2f = duhem_forward(w1f, w1p, w2p, alpha, f0, f1, g0)
-        if _inside(duhem_gap(w1f, w2f, f0, f1), lo, hi, m):
-            return far, EXACT, True
-    return d0, st0, False
+    mi, mf, ms = planner_memo(W.shape[0])
+    return plan_memo(W, w1p, w2p, alpha, f0, f1, g0, bound, mi, mf, ms)
 
 
 def check_bound(bound: float) -> float:

@@ -3,7 +3,7 @@ sample at a time: the placement, the reference model and L2's stable inverse
 (:func:`hystid.compensate.linear_parts.lti_push` and :func:`~hystid.compensate.linear_parts.
 inverse_run`), the chain of :mod:`hystid.compensate.compensator` (``_push_reference``,
 ``chain_step``) and the Duhem reversal planner of :mod:`hystid.compensate.duhem_inverse`
-(``plan_step`` and its helpers), written to do the same arithmetic in the same order.
+(``plan_memo`` and its helpers), written to do the same arithmetic in the same order.
 
 The chain state is the flat vector of the Python compensator (``[x_M | y_M line | w2d line |
 past u | past w1 | hysteresis state]``) at the offsets the generator defines (``HX_FF_*``
@@ -19,7 +19,7 @@ __all__ = ["FF_CHAIN", "FF_PLANNER"]
 FF_PLANNER = r"""
 #define HX_ROUND_OFF 1e-13
 #define HX_BIG 1e30
-#define HX_K 32
+#define HX_K HYSTID_FF_PLAN_K
 #define HX_MARGIN 1e-11
 #define HX_EXACT 0
 #define HX_BOUND 1
@@ -270,80 +270,209 @@ static int hx_target(double delta, double alpha, double g0, double bound, double
     return hi[0] >= lo[0] ? 1 : 0;
 }
 
-static int hx_first_unreachable(const double *W, int n, int i0, double w1p, double w2p,
-                                double alpha, double f0, double f1, double g0, double bound,
-                                double *gaps)
-{
-    int i, st;
-    double d, w1;
-    for (i = i0; i < n; i++) {
-        gaps[i] = hx_gap(w1p, w2p, f0, f1);
-        d = hx_inverse_step(W[i], w1p, w2p, alpha, f0, f1, g0, bound, &st);
-        if (st == HX_UNREACHABLE) {
-            return i;
-        }
-        w1 = w1p + d;
-        w2p = hx_forward(w1, w1p, w2p, alpha, f0, f1, g0);
-        w1p = w1;
-    }
-    return -1;
-}
-
-/* plan_step of hystid.compensate.duhem_inverse: the increment of w1 for W[0], with W[1..n-1]
-   as preview; *status as there, *far set when the far branch is taken. */
-static double hx_plan_step(const double *W, int n, double w1p, double w2p, double alpha,
-                           double f0, double f1, double g0, double bound, double *gaps,
+/* plan_memo of hystid.compensate.duhem_inverse: the increment of w1 for W[0], with W[1..n-1]
+   as preview; *status as there, *far set when the far branch is taken. The memo p keeps the
+   previous sample's near-branch path and backward sets (the window moves on by one sample a
+   call); it changes the work done, not the result (plan_step's). */
+static double hx_plan_memo(const double *W, int n, double w1p, double w2p, double alpha,
+                           double f0, double f1, double g0, double bound, hystid_ff_planner *p,
                            int *status, int *far)
 {
-    double la[HX_K], ha[HX_K], lb[HX_K], hb[HX_K];
-    double *lo = la, *hi = ha, *lo2 = lb, *hi2 = hb, *tmp;
-    double d0, w1a, w2a, near, farv, w1f, w2f;
-    int st0, j, m, i, n_sol;
+    double *gaps = p->gaps, *room = p->room;
+    const double *lo, *hi;
+    double *out_lo, *out_hi;
+    double d0, w1a, w2a, a1, a2, d, w1, near, farv, w1f, w2f;
+    int base, stop, same, st0, st, j, i, k, slot, kept, fill, m, r, scratch, n_sol;
     *far = 0;
+    base = p->base;
+    p->base = base + 1 < n ? base + 1 : 0;
+    if (p->target >= 0) {
+        p->target -= 1;
+    }
+    stop = p->exit;
+    p->exit = -1;
     d0 = hx_inverse_step(W[0], w1p, w2p, alpha, f0, f1, g0, bound, &st0);
     *status = st0;
     if (st0 == HX_UNREACHABLE || n < 3) {
+        p->key = 0;
         return d0;
     }
     w1a = w1p + d0;
     w2a = hx_forward(w1a, w1p, w2p, alpha, f0, f1, g0);
-    j = hx_first_unreachable(W, n, 1, w1a, w2a, alpha, f0, f1, g0, bound, gaps);
-    if (j < 1) {
+    same = p->key == 1 && w1p == p->key_w1 && w2p == p->key_w2;
+    if (same) {
+        /* the state is where the kept path went after its first step: it goes on alike */
+        j = p->j;
+        if (j >= 0) {
+            j -= 1;
+        }
+        i = p->end - 1;
+        a1 = p->end_w1;
+        a2 = p->end_w2;
+    } else {
+        j = -1;
+        i = 0;
+        a1 = w1a;
+        a2 = w2a;
+    }
+    if (j < 0) {
+        while (i < n - 1) {
+            i += 1;
+            slot = base + i;
+            if (slot >= n) {
+                slot -= n;
+            }
+            gaps[slot] = hx_gap(a1, a2, f0, f1);
+            d = hx_inverse_step(W[i], a1, a2, alpha, f0, f1, g0, bound, &st);
+            if (st == HX_UNREACHABLE) {
+                j = i;
+                break;
+            }
+            w1 = a1 + d;
+            a2 = hx_forward(w1, a1, a2, alpha, f0, f1, g0);
+            a1 = w1;
+        }
+    }
+    p->key = 1;
+    p->key_w1 = w1a;
+    p->key_w2 = w2a;
+    p->end = i;
+    p->j = j;
+    p->end_w1 = a1;
+    p->end_w2 = a2;
+    if (j < 0) {
         return d0;
     }
-    m = hx_target(W[j] - W[j - 1], alpha, g0, bound, lo, hi);
-    for (i = j - 1; i > 0; i--) {
+    if (same && stop >= 2) {
+        /* the same path, target and sets: the backward pass would stop there again */
+        if (stop > 2) {
+            p->exit = stop - 1;
+        }
+        return d0;
+    }
+    if (p->target != j) {
+        p->target = j;
+        p->kept = 0;
+        p->fill = 0;
+    }
+    kept = p->kept;
+    fill = p->fill;
+    scratch = 0;
+    if (kept == 0) {
+        m = hx_target(W[j] - W[j - 1], alpha, g0, bound, p->scratch[0], p->scratch[1]);
+        lo = p->scratch[0];
+        hi = p->scratch[1];
+        scratch = 1;
+        if (2 * m <= HYSTID_FF_PLAN_ROOM) {
+            for (k = 0; k < m; k++) {
+                room[k] = lo[k];
+                room[m + k] = hi[k];
+            }
+            p->count[0] = m;
+            p->place[0] = 0;
+            lo = room;
+            hi = room + m;
+            fill = 2 * m;
+            kept = 1;
+        }
+    } else {
+        m = p->count[0];
+        lo = room + p->place[0];
+        hi = room + p->place[0] + m;
+    }
+    i = j;
+    r = 0;
+    for (;;) {
         if (m == 0) {
             break;
         }
-        if (hx_inside(gaps[i + 1], lo, hi, m)) {
+        if (i > 1) {
+            slot = base + i;
+            if (slot >= n) {
+                slot -= n;
+            }
+            if (hx_inside(gaps[slot], lo, hi, m)) {
+                break;
+            }
+        } else {
+            p->kept = kept;
+            p->fill = fill;
+            if (hx_inside(hx_gap(w1a, w2a, f0, f1), lo, hi, m)) {
+                return d0;
+            }
+            n_sol = hx_solutions(W[0], w1p, w2p, alpha, f0, f1, g0, &near, &farv);
+            if (n_sol == 2 && alpha * fabs(farv) <= bound) {
+                w1f = w1p + farv;
+                w2f = hx_forward(w1f, w1p, w2p, alpha, f0, f1, g0);
+                if (hx_inside(hx_gap(w1f, w2f, f0, f1), lo, hi, m)) {
+                    *status = HX_EXACT;
+                    *far = 1;
+                    return farv;
+                }
+            }
             return d0;
         }
-        m = hx_preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, lo2, hi2);
-        tmp = lo;
-        lo = lo2;
-        lo2 = tmp;
-        tmp = hi;
-        hi = hi2;
-        hi2 = tmp;
-    }
-    if (m == 0) {
-        return d0;
-    }
-    if (hx_inside(hx_gap(w1a, w2a, f0, f1), lo, hi, m)) {
-        return d0;
-    }
-    n_sol = hx_solutions(W[0], w1p, w2p, alpha, f0, f1, g0, &near, &farv);
-    if (n_sol == 2 && alpha * fabs(farv) <= bound) {
-        w1f = w1p + farv;
-        w2f = hx_forward(w1f, w1p, w2p, alpha, f0, f1, g0);
-        if (hx_inside(hx_gap(w1f, w2f, f0, f1), lo, hi, m)) {
-            *status = HX_EXACT;
-            *far = 1;
-            return farv;
+        i -= 1;
+        r += 1;
+        if (r < kept) {
+            m = p->count[r];
+            lo = room + p->place[r];
+            hi = room + p->place[r] + m;
+            continue;
+        }
+        out_lo = p->scratch[2 * scratch];
+        out_hi = p->scratch[2 * scratch + 1];
+        scratch = 1 - scratch;
+        m = hx_preimage(lo, hi, m, W[i] - W[i - 1], alpha, f1, g0, bound, out_lo, out_hi);
+        if (r == kept && fill + 2 * m <= HYSTID_FF_PLAN_ROOM) {
+            for (k = 0; k < m; k++) {
+                room[fill + k] = out_lo[k];
+                room[fill + m + k] = out_hi[k];
+            }
+            p->count[r] = m;
+            p->place[r] = fill;
+            lo = room + fill;
+            hi = room + fill + m;
+            fill += 2 * m;
+            kept = r + 1;
+        } else {
+            lo = out_lo;
+            hi = out_hi;
         }
     }
+    if (i >= 2) {
+        p->exit = i;
+    }
+    p->kept = kept;
+    p->fill = fill;
     return d0;
+}
+
+static void hx_planner_init(hystid_ff_planner *p)
+{
+    int i, k;
+    p->base = 0;
+    p->key = 0;
+    p->end = 0;
+    p->j = -1;
+    p->target = -1;
+    p->kept = 0;
+    p->exit = -1;
+    p->fill = 0;
+    p->key_w1 = p->key_w2 = p->end_w1 = p->end_w2 = 0.0;
+    for (i = 0; i < HYSTID_FF_PREVIEW + 1; i++) {
+        p->count[i] = 0;
+        p->place[i] = 0;
+        p->gaps[i] = 0.0;
+    }
+    for (i = 0; i < 4; i++) {
+        for (k = 0; k < HX_K; k++) {
+            p->scratch[i][k] = 0.0;
+        }
+    }
+    for (i = 0; i < HYSTID_FF_PLAN_ROOM; i++) {
+        p->room[i] = 0.0;
+    }
 }
 """
 
@@ -400,6 +529,7 @@ void hystid_ff_init(hystid_ff_state *s)
     }
 #if HX_FF_KIND == 0
     s->x[HX_FF_OFF_H] = HX_FF_REST; /* the Duhem state remembered at rest */
+    hx_planner_init(&s->plan);
 #endif
     for (i = 0; i < HYSTID_FF_M_NX; i++) {
         s->mx[i] = 0.0;
@@ -521,9 +651,9 @@ double hystid_ff_step(hystid_ff_state *s, double r)
 #if HX_FF_KIND == 0
     {
         int far = 0;
-        double d = hx_plan_step(&x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P], HX_FF_P + 1, w1p,
+        double d = hx_plan_memo(&x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P], HX_FF_P + 1, w1p,
                                 x[HX_FF_OFF_H], HX_FF_ALPHA, HX_FF_F0, HX_FF_F1, HX_FF_G0,
-                                HX_FF_BOUND, s->gaps, &status, &far);
+                                HX_FF_BOUND, &s->plan, &status, &far);
         if (far) {
             status |= 8;
         }

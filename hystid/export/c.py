@@ -192,6 +192,7 @@ def ff_plan(model: DuhemSandwich | PISandwich, **options: Any) -> _Plan:
 def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
     """(header text, source text) of the compensator."""
     from ..compensate import compensator as comp
+    from ..compensate import duhem_inverse as di
 
     chain, l2 = plan.chain, plan.l2
     ispec, fpar = chain.ispec, chain.fpar
@@ -207,6 +208,20 @@ def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
     ns = int(l2.A.shape[0])
     where = "the first reference sample" if plan.anchor == "reference" else \
         "the model's output at rest"
+    planner = (
+        "/* the reversal planner's memo (hystid.compensate.duhem_inverse.planner_memo): the "
+        "previous\n   sample's near-branch path (a ring of gaps) and the backward sets it "
+        "keeps */\n"
+        + _define("HYSTID_FF_PLAN_K", di._K)
+        + _define("HYSTID_FF_PLAN_ROOM", 2 * di.MEMO_INTERVALS * (P + 1))
+        + "typedef struct hystid_ff_planner {\n"
+        "    int base, key, end, j, target, kept, exit, fill;\n"
+        "    int count[HYSTID_FF_PREVIEW + 1], place[HYSTID_FF_PREVIEW + 1];\n"
+        "    double key_w1, key_w2, end_w1, end_w2;\n"
+        "    double gaps[HYSTID_FF_PREVIEW + 1];\n"
+        "    double scratch[4][HYSTID_FF_PLAN_K];\n"
+        "    double room[HYSTID_FF_PLAN_ROOM];\n"
+        "} hystid_ff_planner;\n")
     head = (f"\n/* Feed-forward compensator: hystid.compensate.compensate(model, r) one sample "
             f"at a time ({names[kind]}\n   inverse), in the record's units: the reference as the "
             f"sensor reads it in, the command as the\n   amplifier takes it out (limits "
@@ -228,9 +243,12 @@ def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
             + _define("HYSTID_FF_U_MAX", plan.u_limits[1])
             + "/* the command returned while the first HYSTID_FF_DELAY references are read in */\n"
             + _define("HYSTID_FF_REST_COMMAND", rest)
+            + (planner if kind == comp.KIND_DUHEM else "")
             + "typedef struct hystid_ff_state {\n"
             "    double x[HYSTID_FF_NX]; /* the Python chain's state vector */\n"
-            "    double gaps[HYSTID_FF_PREVIEW + 1]; /* planner scratch */\n"
+            + ("    hystid_ff_planner plan; /* the reversal planner's memo */\n"
+               if kind == comp.KIND_DUHEM else "")
+            + (
             "    double mx[HYSTID_FF_M_NX], my[HYSTID_FF_M_NY]; /* reference model */\n"
             "    double lx[HYSTID_FF_L2_NX], lv[HYSTID_FF_L2_NY]; /* L2^-1, causal part */\n"
             "    double fl[2 * HYSTID_FF_L2_NF]; /* L2^-1, anti-causal part */\n"
@@ -247,7 +265,7 @@ def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
             "status bits (1 step\n   clipped to the bound of condition 8, 2 no exact step, 4 "
             "saturated, 8 turning the hysteresis round) */\n"
             "double hystid_ff_desired(const hystid_ff_state *s);\n"
-            "int hystid_ff_status(const hystid_ff_state *s);\n")
+            "int hystid_ff_status(const hystid_ff_state *s);\n"))
     names_i = ("KIND", "N1A", "N1B", "Q1", "N2A", "N2B", "Q2", "NM", "L2MODE", "P", "LY", "LW",
                "NPI", "OFF_M", "OFF_Y", "OFF_W", "OFF_U", "OFF_W1", "OFF_H", "NX", "H1", "Q")
     src = "".join(_define(f"HX_FF_{n}", int(ispec[getattr(comp, f"_{n}")])) for n in names_i)
@@ -416,7 +434,7 @@ def c_sources(
     # parts and the Duhem reversal planner
     cut = MODEL_COMMON.index("static double hx_max")
     helpers = (MODEL_COMMON[:cut] if duhem else "") \
-        + (MODEL_COMMON[cut:] if not duhem or "static double hx_plan_step" in fsrc else "")
+        + (MODEL_COMMON[cut:] if not duhem or "static double hx_plan_memo" in fsrc else "")
     source_text = (banner + '#include <math.h>\n\n#include "hystid_model.h"\n' + helpers
                    + "\n/* ---- the placed model */\n" + msrc
                    + ("\n/* ---- the feed-forward compensator */\n" + fsrc if fsrc else "")
