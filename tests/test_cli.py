@@ -302,3 +302,12 @@ def test_identify_online_chooses_the_member_then_runs_it_on_line(tmp_path, capsy
     assert "ad " in out and "f2 " in out
     assert main(["identify", str(path), "--structure", "g_order=3", "--quiet"]) == 2
     assert "g_order=3 (expected 0..2)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", ["inf", "nan", "0", "-5"])
+def test_fleet_refuses_a_sampling_rate_that_is_not_a_positive_finite_number(tmp_path, capsys,
+                                                                           value):
+    with pytest.raises(SystemExit) as err:
+        main(["fleet", "identify", str(tmp_path), "--out", str(tmp_path / "out"), "--fs", value])
+    assert err.value.code == 2
+    assert "--fs: expected a positive finite number" in capsys.readouterr().err
