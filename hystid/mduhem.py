@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .operating import Envelope
-from .sandwich import InitialCondition, Sandwich
+from .sandwich import InitialCondition, UnitGainSandwich
 
 if TYPE_CHECKING:  # pragma: no cover
     import control as ct
@@ -143,11 +143,6 @@ class MultiDuhemStructure:
         return out
 
 
-def _unit_gain(a: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    """``[b_1, b_2, ..]`` with ``b_1`` set for unit DC gain: ``sum b = 1 + sum a``."""
-    return np.concatenate([[1.0 + np.sum(a) - np.sum(rest)], rest])
-
-
 def _check_rates(rates: Any, m: int | None = None) -> np.ndarray:
     r = np.ascontiguousarray(np.asarray(rates, dtype=float).ravel())
     if r.size == 0 or not np.all(np.isfinite(r)) or np.any(r <= 0):
@@ -221,7 +216,7 @@ def mduhem_block(
                     params=params, dt=dt, name=name)
 
 
-class MultiDuhemSandwich(Sandwich):
+class MultiDuhemSandwich(UnitGainSandwich):
     """Sandwich model L1 -> ``m`` parallel Duhem operators -> L2 (see the module docstring).
 
     Parameters
@@ -278,19 +273,6 @@ class MultiDuhemSandwich(Sandwich):
                          envelope=envelope, units=units)
 
     # ----------------------------------------------------------------- parameters
-    def _part(self, key: str) -> np.ndarray:
-        return np.array(self.theta[self.structure.slices()[key]])
-
-    @property
-    def a1(self) -> np.ndarray:
-        """L1 denominator coefficients ``a11 ..``."""
-        return self._part("a1")
-
-    @property
-    def b1(self) -> np.ndarray:
-        """L1 numerator coefficients ``b11, b12 ..`` (``b11`` derived: unit DC gain)."""
-        return _unit_gain(self.a1, self._part("b1"))
-
     @property
     def f1(self) -> np.ndarray:
         """Slopes ``f1_j`` of the operators' anhysteretic lines."""
@@ -300,26 +282,6 @@ class MultiDuhemSandwich(Sandwich):
     def g0(self) -> np.ndarray:
         """Reversible slopes ``g0_j`` of the operators."""
         return self._part("g0")
-
-    @property
-    def a2(self) -> np.ndarray:
-        """L2 denominator coefficients ``a21 ..``."""
-        return self._part("a2")
-
-    @property
-    def b2(self) -> np.ndarray:
-        """L2 numerator coefficients ``b21, b22 ..`` (``b21`` derived: unit DC gain)."""
-        return _unit_gain(self.a2, self._part("b2"))
-
-    @property
-    def num1(self) -> np.ndarray:
-        """Full numerator of L1 from its delay on: ``[b11, b12, ..]``."""
-        return self.b1
-
-    @property
-    def num2(self) -> np.ndarray:
-        """Full numerator of L2 from its delay on: ``[b21, b22, ..]``."""
-        return self.b2
 
     @property
     def coefficients(self) -> np.ndarray:

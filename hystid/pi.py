@@ -54,7 +54,7 @@ from .pi_operator import (  # the operator; re-exported here, where the sandwich
     play_operator,
 )
 from .poly import is_stable
-from .sandwich import InitialCondition, Sandwich
+from .sandwich import InitialCondition, UnitGainSandwich, unit_gain_numerator
 from .thresholds import pi_thresholds
 
 __all__ = [
@@ -152,25 +152,7 @@ class PIStructure:
         return out
 
 
-def unit_gain_numerator(a: np.ndarray, b_rest: np.ndarray) -> np.ndarray:
-    """Full numerator ``[b_1, b_2, ...]`` with ``b_1`` set for unit DC gain: sum b = 1 + sum a.
-
-    Parameters
-    ----------
-    a : ndarray
-        Denominator coefficients ``a_1 ..``.
-    b_rest : ndarray
-        Numerator coefficients after the first, ``b_2 ..``.
-
-    Returns
-    -------
-    ndarray
-        ``[b_1, b_2, ...]``.
-    """
-    return np.concatenate([[1.0 + np.sum(a) - np.sum(b_rest)], b_rest])
-
-
-class PISandwich(Sandwich):
+class PISandwich(UnitGainSandwich):
     """Sandwich model L1 -> Prandtl-Ishlinskii H -> L2 (eqs. 29-31).
 
     Parameters
@@ -229,33 +211,10 @@ class PISandwich(Sandwich):
                          envelope=envelope, units=units)
 
     # ----------------------------------------------------------------- parameters
-    def _part(self, key: str) -> np.ndarray:
-        return np.array(self.theta[self.structure.slices()[key]])
-
-    @property
-    def a1(self) -> np.ndarray:
-        """L1 denominator coefficients ``a11 ..``."""
-        return self._part("a1")
-
-    @property
-    def b1(self) -> np.ndarray:
-        """L1 numerator coefficients ``b11, b12 ..`` (``b11`` derived: unit DC gain)."""
-        return unit_gain_numerator(self.a1, self._part("b1"))
-
     @property
     def mu(self) -> np.ndarray:
         """Weights ``mu_i`` of the play operators."""
         return self._part("mu")
-
-    @property
-    def a2(self) -> np.ndarray:
-        """L2 denominator coefficients ``a21 ..``."""
-        return self._part("a2")
-
-    @property
-    def b2(self) -> np.ndarray:
-        """L2 numerator coefficients ``b21, b22 ..`` (``b21`` derived: unit DC gain)."""
-        return unit_gain_numerator(self.a2, self._part("b2"))
 
     @property
     def coefficients(self) -> dict[str, float]:
@@ -287,16 +246,6 @@ class PISandwich(Sandwich):
         W = np.cumsum(self.mu)
         r = self.thresholds
         return bool(self.mu[0] > 0 and np.all(W > 0) and r[0] == 0 and np.all(np.diff(r) > 0))
-
-    @property
-    def num1(self) -> np.ndarray:
-        """Full numerator of L1 from its delay on: ``[b11, b12, ..]`` (eq. 29)."""
-        return self.b1
-
-    @property
-    def num2(self) -> np.ndarray:
-        """Full numerator of L2 from its delay on: ``[b21, b22, ..]`` (eq. 31)."""
-        return self.b2
 
     # ----------------------------------------------------------------- python-control bridge
     @property

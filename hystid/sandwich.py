@@ -35,7 +35,8 @@ if TYPE_CHECKING:
 
     from .response import SandwichResponse
 
-__all__ = ["InitialCondition", "Sandwich", "params_vector"]
+__all__ = ["InitialCondition", "Sandwich", "UnitGainSandwich", "params_vector",
+           "unit_gain_numerator"]
 
 
 @dataclass
@@ -455,6 +456,72 @@ class Sandwich(Placed):
         placed = "".join(f", {k}={getattr(self, k):.6g}" for k in ("u_rest", "offset")
                          if getattr(self, k))
         return f"{type(self).__name__}({values}, fs={self.fs:g}{placed})"
+
+
+def unit_gain_numerator(a: np.ndarray, b_rest: np.ndarray) -> np.ndarray:
+    """Full numerator ``[b_1, b_2, ...]`` with ``b_1`` set for unit DC gain: sum b = 1 + sum a.
+
+    Parameters
+    ----------
+    a : ndarray
+        Denominator coefficients ``a_1 ..``.
+    b_rest : ndarray
+        Numerator coefficients after the first, ``b_2 ..``.
+
+    Returns
+    -------
+    ndarray
+        ``[b_1, b_2, ...]``.
+    """
+    return np.concatenate([[1.0 + np.sum(a) - np.sum(b_rest)], b_rest])
+
+
+class UnitGainSandwich(Sandwich):
+    """A sandwich whose L1 and L2 have unit DC gain: ``w1`` is in input units and the
+    hysteresis block carries the quasi-static loop (the PI and multi-Duhem members).
+
+    The first numerator coefficient of each linear block is derived
+    (:func:`unit_gain_numerator`); the structure gives the slices of ``theta`` by group
+    (``structure.slices()``: ``a1``, ``b1``, ``a2``, ``b2`` and the block's own).
+
+    Parameters
+    ----------
+    *args, **kwargs
+        Those of :class:`Sandwich`.
+    """
+
+    def _part(self, key: str) -> np.ndarray:
+        return np.array(self.theta[self.structure.slices()[key]])
+
+    @property
+    def a1(self) -> np.ndarray:  # type: ignore[override]
+        """L1 denominator coefficients ``a11 ..``."""
+        return self._part("a1")
+
+    @property
+    def b1(self) -> np.ndarray:
+        """L1 numerator coefficients ``b11, b12 ..`` (``b11`` derived: unit DC gain)."""
+        return unit_gain_numerator(self.a1, self._part("b1"))
+
+    @property
+    def a2(self) -> np.ndarray:  # type: ignore[override]
+        """L2 denominator coefficients ``a21 ..``."""
+        return self._part("a2")
+
+    @property
+    def b2(self) -> np.ndarray:
+        """L2 numerator coefficients ``b21, b22 ..`` (``b21`` derived: unit DC gain)."""
+        return unit_gain_numerator(self.a2, self._part("b2"))
+
+    @property
+    def num1(self) -> np.ndarray:
+        """Full numerator of L1 from its delay on: ``[b11, b12, ..]``."""
+        return self.b1
+
+    @property
+    def num2(self) -> np.ndarray:
+        """Full numerator of L2 from its delay on: ``[b21, b22, ..]``."""
+        return self.b2
 
 
 def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:
