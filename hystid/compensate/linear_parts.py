@@ -174,8 +174,11 @@ def hysteresis_gain(model: DuhemSandwich | MultiDuhemSandwich | PISandwich) -> f
 
     ``f1`` for the Duhem block (its ascending and descending branches are
     ``w2 = f1 w1 -+ (f1 - g0) / alpha``; for the generalised block the slope of its anhysteretic
-    curve at the rest, ``F'(0) = f1``); ``sum_j f1_j`` for parallel Duhem operators; for a PI
-    block the secant of the loading curve over the largest threshold.
+    curve at the rest, ``F'(0) = f1``); for a PI block the secant of the loading curve over the
+    largest threshold; for parallel Duhem operators the secant of their loading curve (a slow
+    ramp from the rest, :meth:`~hystid.mduhem.MultiDuhemSandwich.rest_state`) over half the
+    envelope's span: their slow operators stay far from their anhysteretic lines (slope
+    ``sum_j f1_j``, taken without an envelope) over the inputs the model was identified on.
 
     Parameters
     ----------
@@ -190,7 +193,11 @@ def hysteresis_gain(model: DuhemSandwich | MultiDuhemSandwich | PISandwich) -> f
     if isinstance(model, DuhemSandwich):
         return float(model.params["f1"])
     if getattr(type(model), "kind", None) == "mduhem":
-        return float(np.sum(model.f1))
+        env = model.envelope
+        if env is None or not env.u_max > env.u_min:
+            return float(np.sum(model.f1))
+        a = 0.5 * (env.u_max - env.u_min)  # L1 has unit DC gain: w1 = u - u_rest at rest
+        return float(model.rest_state(model.u_rest + a).window("w2", 1)[0] / a)
     r, mu = model.thresholds, model.mu
     a = float(r[-1] + (r[1] - r[0] if len(r) > 1 else 1.0))
     return float(np.sum(mu * np.maximum(a - r, 0.0)) / a)
