@@ -27,7 +27,7 @@ error; the model reproduces the reference to 1e-6 relative where L2 is invertibl
 ``settle`` on).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_compensate_measured.py [--smooth 21]
-        [--model auto|duhem|pi-stage] [--out FILE.json]
+        [--model auto|duhem|gduhem|pi-stage|mduhem] [--out FILE.json]
 """
 
 from __future__ import annotations

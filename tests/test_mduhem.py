@@ -206,13 +206,19 @@ def test_options_are_checked():
         identify(rec[:100], model="mduhem")
 
 
-def test_compensation_and_c_export_are_refused_with_a_reason():
+def test_compensation_has_an_inverse_and_the_c_export_is_refused_with_a_reason():
     from hystid.compensate import compensate
     from hystid.export.c import c_sources
 
     model = rich_model()
-    with pytest.raises(ValueError, match="multi-Duhem sandwich .* no inverse"):
-        compensate(model, model.simulate(_input(300), check=False).y, u_limits=(-1.0, 3.0))
+    y = model.simulate(_input(300), check=False).y
+    # the operators' own inverse (tests/test_compensate_members.py), without look-ahead
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert np.all(np.isfinite(compensate(model, y, u_limits=(-1.0, 3.0)).u))
+    with pytest.raises(ValueError, match="preview: the multi-Duhem sandwich .* without "
+                                         "look-ahead"):
+        compensate(model, y, u_limits=(-1.0, 3.0), preview=30)
     with pytest.raises(ValueError, match="multi-Duhem sandwich .* not exported"):
         c_sources(model)
 

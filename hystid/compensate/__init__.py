@@ -7,7 +7,9 @@ What users identify the model for: track a reference with the stage.
   reference model, the exact per-sample inverse of the Duhem block (eq. 7) with a reversal
   planner working on a preview of the reference, L1 inverted with its delay taken from the
   preview, input limits without windup. A :class:`~hystid.pi.PISandwich` is inverted through
-  its exact inverse PI operator.
+  its exact inverse PI operator; the generalised Duhem block and the parallel Duhem operators
+  of a :class:`~hystid.mduhem.MultiDuhemSandwich` by their per-sample inverses, without
+  look-ahead.
 * :func:`feedforward` -- the same compensator, compiled, over a whole reference;
   :func:`linear_feedforward` the uncompensated baseline.
 * :func:`compensate` -- compensation from a placed (identified) model: reference and command
@@ -24,7 +26,8 @@ What users identify the model for: track a reference with the stage.
   :func:`scan_reference` -- triangle and sine scans from rest.
 
 Modules: :mod:`~hystid.compensate.duhem_inverse` (the maths of the per-sample inverse and the
-planner), :mod:`~hystid.compensate.compensator` (the inverse chain),
+planner), :mod:`~hystid.compensate.member_inverse` (the per-sample inverses of the generalised
+and multi-Duhem blocks), :mod:`~hystid.compensate.compensator` (the inverse chain),
 :mod:`~hystid.compensate.linear_parts` (the linear blocks' inversion, reference models),
 :mod:`~hystid.compensate.placed` (compensation in the record's units),
 :mod:`~hystid.compensate.feedback`, :mod:`~hystid.compensate.closedloop`,

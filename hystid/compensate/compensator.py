@@ -10,8 +10,10 @@ The compensator runs the sandwich backwards, one sample at a time::
   inverse is stable.
 * ``H^-1`` is the per-sample inverse of eq. (7) with the reversal planner of
   :mod:`~hystid.compensate.duhem_inverse` (or the exact inverse Prandtl-Ishlinskii operator for a
-  :class:`~hystid.pi.PISandwich`, or the anhysteretic line ``w1 = w2 / f1`` for the
-  uncompensated baseline).
+  :class:`~hystid.pi.PISandwich`, or the per-sample inverse of the generalised Duhem block or of
+  the parallel Duhem operators of a :class:`~hystid.mduhem.MultiDuhemSandwich`, without
+  look-ahead, :mod:`~hystid.compensate.member_inverse`, or the anhysteretic line
+  ``w1 = w2 / f1`` for the uncompensated baseline).
 * ``L1^-1``: ``u(k) = w1(k+q1) - sum b1j u(k-j) + sum a1i w1(k+q1-i)`` (divided by the
   leading numerator coefficient for the PI sandwich), stable because L1 is minimum phase
   (Assumption 1).
@@ -33,10 +35,12 @@ State layout (flat vector, the python-control system's states)::
 
     [x_M | y_M line | w2d line | past u | past w1 | hysteresis state]
 
-with the hysteresis state ``w2(k+q1-1)`` for the Duhem block or the play-operator states ``p_i``
-for the PI block. The Duhem planner's memo (:func:`~hystid.compensate.duhem_inverse.plan_memo`:
-the previous sample's look-ahead, reused while the state follows it) is not part of the state:
-it saves work and changes no result, and a run starts it fresh.
+with the hysteresis state ``w2(k+q1-1)`` for the Duhem block (plain or generalised), the
+operators' states ``w2_j(k+q1-1)`` for the parallel Duhem operators or the play-operator states
+``p_i`` for the PI block. The Duhem planner's memo
+(:func:`~hystid.compensate.duhem_inverse.plan_memo`: the previous sample's look-ahead, reused
+while the state follows it) is not part of the state: it saves work and changes no result, and
+a run starts it fresh.
 """
 
 from __future__ import annotations
@@ -65,6 +69,12 @@ from .linear_parts import (
     dc_delay,
     hysteresis_gain,
     smoothing_model,
+)
+from .member_inverse import (
+    gduhem_forward,
+    gduhem_inverse_step,
+    mduhem_forward,
+    mduhem_inverse_step,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -102,7 +112,7 @@ TURNING = 8
 #: Status bits that mean the sample was not exact.
 NOT_EXACT = 1 | 2 | 4
 
-KIND_DUHEM, KIND_PI, KIND_LINEAR, KIND_NONE = 0, 1, 2, 3
+KIND_DUHEM, KIND_PI, KIND_LINEAR, KIND_NONE, KIND_GDUHEM, KIND_MDUHEM = 0, 1, 2, 3, 4, 5
 #: ``compensation`` names accepted by :func:`inverse` and the closed-loop helpers.
 COMPENSATIONS = {"inverse": KIND_DUHEM, "linear": KIND_LINEAR, "none": KIND_NONE}
 
@@ -111,6 +121,9 @@ COMPENSATIONS = {"inverse": KIND_DUHEM, "linear": KIND_LINEAR, "none": KIND_NONE
  _OFF_M, _OFF_Y, _OFF_W, _OFF_U, _OFF_W1, _OFF_H, _NX, _H1, _Q) = range(22)
 # fpar indices
 (_ALPHA, _F0, _F1, _G0, _BOUND, _UMIN, _UMAX, _B1LEAD, _B2LEAD, _K2, _KH) = range(11)
+# the members' hysteresis parameters follow: the generalised block's theta after fpar[_NF]
+# (its layout after ispec[_NI]); the parallel operators' rates, f1_j, g0_j (ispec[_NPI] of each)
+_NI, _NF = 22, 11
 
 
 # =========================================================================== compiled chain
@@ -220,6 +233,16 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
             if far:
                 status |= 8
             w1c = w1p + d
+        elif kind == KIND_GDUHEM:
+            d, status = gduhem_inverse_step(w2d, w1p, xn[oH], fpar[_NF:], ispec[_NI:],
+                                            fpar[_BOUND])
+            w1c = w1p + d
+        elif kind == KIND_MDUHEM:
+            m = ispec[_NPI]
+            d, status = mduhem_inverse_step(w2d, w1p, xn[oH:oH + m], fpar[_NF:_NF + m],
+                                            fpar[_NF + m:_NF + 2 * m],
+                                            fpar[_NF + 2 * m:_NF + 3 * m], fpar[_BOUND])
+            w1c = w1p + d
         elif kind == KIND_PI:
             n = ispec[_NPI]
             # inverse-operator states matching the forward states p (pi_inverse_state)
@@ -258,6 +281,12 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
             w1 -= a1[i - 1] * xn[oW1 + H1 - i]
         if kind == KIND_DUHEM:
             xn[oH] = duhem_forward(w1, w1p, xn[oH], alpha, f0, f1, g0)
+        elif kind == KIND_GDUHEM:
+            xn[oH] = gduhem_forward(fpar[_NF:], ispec[_NI:], w1, w1p, xn[oH])
+        elif kind == KIND_MDUHEM:
+            m = ispec[_NPI]
+            mduhem_forward(xn[oH:oH + m], w1, w1p, fpar[_NF:_NF + m], fpar[_NF + m:_NF + 2 * m],
+                           fpar[_NF + 2 * m:_NF + 3 * m])
         elif kind == KIND_PI:
             for i in range(ispec[_NPI]):
                 xn[oH + i] = play(w1, xn[oH + i], r_pi[i])
@@ -273,7 +302,9 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
     return chain_step
 
 
-chain_step = _stamped_chain_step(source_stamp(plan_memo, duhem_forward, play))
+chain_step = _stamped_chain_step(source_stamp(plan_memo, duhem_forward, play, gduhem_inverse_step,
+                                              gduhem_forward, mduhem_inverse_step,
+                                              mduhem_forward))
 
 
 @njit(cache=True)
@@ -356,10 +387,10 @@ class _Chain:
         """
         x = np.zeros(int(self.ispec[_NX]))
         if rest:
-            if self.ispec[_KIND] != KIND_DUHEM or self.ispec[_NM] or self.ispec[_N2A] \
-                    or self.ispec[_N2B] or self.ispec[_Q2]:
+            if self.ispec[_KIND] not in (KIND_DUHEM, KIND_GDUHEM) or self.ispec[_NM] \
+                    or self.ispec[_N2A] or self.ispec[_N2B] or self.ispec[_Q2]:
                 raise ValueError("rest: a remembered hysteresis state needs the Duhem inverse "
-                                 "with L2 left out of the chain")
+                                 "(plain or generalised block) with L2 left out of the chain")
             x[self.ispec[_OFF_Y]:self.ispec[_OFF_U]] = rest  # y_M and w2d lines; u, w1: 0
             x[self.ispec[_OFF_H]] = rest
         if y_ref is not None:
@@ -371,23 +402,31 @@ class _Chain:
 def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
            reference_lead: int | None = None, l2_identity: bool = False) -> _Chain:
     if not hasattr(model, "structure") or not hasattr(model, "L1"):
-        raise ValueError(f"model: expected a DuhemSandwich or PISandwich, got {model!r}")
-    if getattr(type(model), "kind", None) == "mduhem":
-        raise ValueError("model: the multi-Duhem sandwich (mduhem) has no inverse for "
-                         "compensation yet (expected a DuhemSandwich or PISandwich)")
+        raise ValueError(f"model: expected a DuhemSandwich, MultiDuhemSandwich or PISandwich, "
+                         f"got {model!r}")
     umin, umax = (float(v) for v in u_limits)
     if not (np.isfinite(umin) and np.isfinite(umax) and umin < umax):
         raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")
     duhem = isinstance(model, DuhemSandwich)
-    if kind == KIND_DUHEM and not duhem:
-        kind = KIND_PI
-    if kind == KIND_DUHEM:
-        from ..validate import check_plain_duhem
-
-        check_plain_duhem(model.structure.layout, "the Duhem inverse (compensation='inverse')")
-    if kind == KIND_DUHEM and not model.params["alpha"] > 0:
+    multi = getattr(type(model), "kind", None) == "mduhem"
+    if kind == KIND_DUHEM:  # "inverse": the member's own hysteresis inverse
+        if multi:
+            kind = KIND_MDUHEM
+        elif not duhem:
+            kind = KIND_PI
+        elif not model.structure.is_plain:
+            kind = KIND_GDUHEM
+    if kind in (KIND_DUHEM, KIND_GDUHEM) and not model.params["alpha"] > 0:
         raise ValueError(f"model: alpha must be positive, got {model.params['alpha']!r}")
+    if kind == KIND_GDUHEM and not abs(model.params.get("ad", 0.0)) < 1:
+        raise ValueError(f"model: expected |ad| < 1 (a positive rate on both directions), got "
+                         f"{model.params['ad']!r}")
     bound = check_bound(duhem_bound)
+    if kind in (KIND_GDUHEM, KIND_MDUHEM) and preview:
+        member = "multi-Duhem sandwich (mduhem)" if multi else "generalised Duhem block (gduhem)"
+        raise ValueError(f"preview: the {member} is inverted without look-ahead (the reversal "
+                         f"planner is the plain Duhem block's); expected 0 or None, got "
+                         f"{preview!r}")
     if kind in (KIND_LINEAR, KIND_NONE):
         preview = 0  # nothing to plan
     elif preview is None:
@@ -424,11 +463,22 @@ def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
     LY = max(q + P + 1, len(a2) + 1)
     LW = max(P + 1, len(b2t) + 1)
     H1 = max(len(a1), 1)
+    r_pi = mu_pi = r_inv = mu_inv = np.zeros(0)
+    n_ops = 0  # play operators, or parallel Duhem operators
+    ipar: np.ndarray = np.zeros(0, np.int64)
+    hpar: np.ndarray = np.zeros(0)
     if kind == KIND_PI:
         r_pi, mu_pi, r_inv, mu_inv = _pi_parts(model)
-        hyst_states = tuple(f"p{i}" for i in range(len(r_pi)))
+        n_ops = len(r_pi)
+        hyst_states = tuple(f"p{i}" for i in range(n_ops))
+    elif kind == KIND_MDUHEM:
+        n_ops = model.structure.n_operators
+        hpar = np.concatenate([model.rates, model.f1, model.g0])
+        hyst_states = tuple(f"w2_model{j}" for j in range(n_ops))
+    elif kind == KIND_GDUHEM:
+        ipar, hpar = model.structure.layout, model.theta
+        hyst_states = ("w2_model",)
     else:
-        r_pi = mu_pi = r_inv = mu_inv = np.zeros(0)
         hyst_states = ("w2_model",) if kind == KIND_DUHEM else ()
     states = (
         tuple(f"xM{i}" for i in range(nM))
@@ -440,14 +490,14 @@ def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
     )
     offs = np.cumsum([0, nM, LY, LW, len(b1t), H1, len(hyst_states)])
     ispec = np.array(
-        [kind, len(a1), len(b1t), q1, len(a2), len(b2t), q2, nM, l2mode, P, LY, LW, len(r_pi),
-         offs[0], offs[1], offs[2], offs[3], offs[4], offs[5], offs[6], H1, q],
+        [kind, len(a1), len(b1t), q1, len(a2), len(b2t), q2, nM, l2mode, P, LY, LW, n_ops,
+         offs[0], offs[1], offs[2], offs[3], offs[4], offs[5], offs[6], H1, q, *ipar],
         dtype=np.int64,
     )
     p = model.params if duhem else {}
     fpar = np.array([
         p.get("alpha", 1.0), p.get("f0", 0.0), p.get("f1", 0.0), p.get("g0", 0.0), bound,
-        umin, umax, b1lead, b2lead, k2, kh,
+        umin, umax, b1lead, b2lead, k2, kh, *hpar,
     ])
     f = np.ascontiguousarray
     return _Chain(ispec, fpar, f(a1, float), f(b1t, float), f(a2, float), f(b2t, float),
@@ -493,7 +543,7 @@ class HysteresisInverse(ct.NonlinearIOSystem):
 
     Attributes
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, MultiDuhemSandwich or PISandwich
         The model inverted.
     delay : int
         ``q1 + q2``, samples from ``u`` to ``y``.
@@ -504,7 +554,7 @@ class HysteresisInverse(ct.NonlinearIOSystem):
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, MultiDuhemSandwich or PISandwich
         The model inverted.
     chain : _Chain
         The compiled chain's arrays (made by :func:`inverse`).
@@ -591,9 +641,11 @@ def inverse(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, MultiDuhemSandwich or PISandwich
         The identified stage. L1 (and L2 when it is inverted dynamically) must be minimum
-        phase; a PI operator must have an exact inverse.
+        phase; a PI operator must have an exact inverse. A generalised Duhem block (``gduhem``)
+        and parallel Duhem operators (``mduhem``) are inverted per sample without look-ahead
+        (:mod:`~hystid.compensate.member_inverse`).
     u_limits : (float, float)
         Amplifier input limits in volts (0-10 V like the paper's amplifier). The command is
         clipped and the compensator's internal model follows the clipped command (no windup).
@@ -606,7 +658,8 @@ def inverse(
         is aligned with ``y_ref``; by default ``M``'s DC group delay (see :func:`dc_delay`).
     preview : int, optional
         Samples the Duhem reversal planner looks ahead (:data:`DEFAULT_PREVIEW` for a Duhem
-        model, 0 for a PI model, which needs none). ``0`` gives a strictly causal inverse
+        model, 0 for a PI model, which needs none; the generalised and multi-Duhem inverses have
+        no planner and take 0 only). ``0`` gives a strictly causal inverse
         that cannot prepare reversals (they are then approximate for a stage like the paper's).
         The stretch a reversal needs grows as the scan slows: on the reference stage, for a
         7 um sine, 300 samples suffice down to 5 Hz, 1 000 at 2 Hz, 3 000 at 1 Hz; a preview too
@@ -710,7 +763,7 @@ def feedforward(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, MultiDuhemSandwich or PISandwich
         The identified stage.
     y_ref : array_like
         Desired output, one value per sample.
@@ -748,7 +801,7 @@ def linear_feedforward(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, MultiDuhemSandwich or PISandwich
         The identified stage.
     y_ref : array_like
         Desired output, one value per sample.

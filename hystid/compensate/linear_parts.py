@@ -32,6 +32,7 @@ from ..model import DuhemSandwich
 from ..poly import roots_inside
 
 if TYPE_CHECKING:  # pragma: no cover
+    from ..mduhem import MultiDuhemSandwich
     from ..pi import PISandwich
 
 __all__ = ["InverseFilter", "StableInverse", "dc_delay", "hysteresis_gain", "inverse_filter",
@@ -159,7 +160,8 @@ def _pi_parts(model):
 
 
 def _linear_parts(model):
-    """``(a1, b1lead, b1tail, q1, a2, b2lead, b2tail, q2)`` of either sandwich class."""
+    """``(a1, b1lead, b1tail, q1, a2, b2lead, b2tail, q2)`` of any sandwich class (the PI and
+    multi-Duhem sandwiches carry their leading numerator coefficients in ``b1``, ``b2``)."""
     s = model.structure
     if isinstance(model, DuhemSandwich):
         return model.a1, 1.0, model.b1, s.q1, model.a2, 1.0, model.b2, s.q2
@@ -167,16 +169,20 @@ def _linear_parts(model):
     return model.a1, float(b1[0]), b1[1:], s.q1, model.a2, float(b2[0]), b2[1:], s.q2
 
 
-def hysteresis_gain(model: DuhemSandwich | PISandwich) -> float:
+def hysteresis_gain(model: DuhemSandwich | MultiDuhemSandwich | PISandwich) -> float:
     """Slope of the hysteresis block's central (anhysteretic) line, ``dw2/dw1``.
 
     ``f1`` for the Duhem block (its ascending and descending branches are
-    ``w2 = f1 w1 -+ (f1 - g0) / alpha``); for a PI block the secant of the loading curve over the
-    largest threshold.
+    ``w2 = f1 w1 -+ (f1 - g0) / alpha``; for the generalised block the slope of its anhysteretic
+    curve at the rest, ``F'(0) = f1``); for a PI block the secant of the loading curve over the
+    largest threshold; for parallel Duhem operators the secant of their loading curve (a slow
+    ramp from the rest, :meth:`~hystid.mduhem.MultiDuhemSandwich.rest_state`) over half the
+    envelope's span: their slow operators stay far from their anhysteretic lines (slope
+    ``sum_j f1_j``, taken without an envelope) over the inputs the model was identified on.
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, MultiDuhemSandwich or PISandwich
         The identified stage.
 
     Returns
@@ -186,6 +192,12 @@ def hysteresis_gain(model: DuhemSandwich | PISandwich) -> float:
     """
     if isinstance(model, DuhemSandwich):
         return float(model.params["f1"])
+    if getattr(type(model), "kind", None) == "mduhem":
+        env = model.envelope
+        if env is None or not env.u_max > env.u_min:
+            return float(np.sum(model.f1))
+        a = 0.5 * (env.u_max - env.u_min)  # L1 has unit DC gain: w1 = u - u_rest at rest
+        return float(model.rest_state(model.u_rest + a).window("w2", 1)[0] / a)
     r, mu = model.thresholds, model.mu
     a = float(r[-1] + (r[1] - r[0] if len(r) > 1 else 1.0))
     return float(np.sum(mu * np.maximum(a - r, 0.0)) / a)

@@ -48,6 +48,7 @@ from .compensator import (
     COMPENSATIONS,
     DUHEM_BOUND,
     KIND_DUHEM,
+    KIND_GDUHEM,
     KIND_LINEAR,
     NOT_EXACT,
     SATURATED,
@@ -265,11 +266,6 @@ def _plan(model: Any, *, u_limits: tuple[float, float] | None = None,
         if not hasattr(model, name):
             raise ValueError(f"model: expected an identified sandwich model (no {name!r}), got "
                              f"{model!r}")
-    if compensation == "inverse" and getattr(model, "kind", "") == "duhem":
-        from ..validate import check_plain_duhem
-
-        check_plain_duhem(model.structure.layout, "the Duhem inverse (compensation='inverse'; "
-                          "compensation='linear' takes any member)")
     try:
         limits = envelope_limits(model, margin) if u_limits is None else \
             tuple(float(v) for v in u_limits)
@@ -291,12 +287,13 @@ def _plan(model: Any, *, u_limits: tuple[float, float] | None = None,
                    reference_model=None, preview=preview, duhem_bound=duhem_bound,
                    l2_identity=True)
     chain_kind = int(chain.ispec[0])
-    if chain_kind == KIND_DUHEM:  # the inverse starts from the Duhem state remembered at rest
+    if chain_kind in (KIND_DUHEM, KIND_GDUHEM):  # from the Duhem state remembered at rest
         rest = w2_rest
     elif chain_kind == KIND_LINEAR or not w2_rest:  # the central line through the rest point
         rest = 0.0
     else:
-        raise ValueError("model: a hysteresis state at rest is only handled for the Duhem block")
+        raise ValueError("model: a hysteresis state at rest is only handled for the Duhem block "
+                         "(plain or generalised)")
     return _Plan(float(model.offset) + y_rest_rel, anchor, m_num, m_den, lead,
                  inverse_filter(model.L2), chain, float(rest), float(model.u_rest),
                  (float(limits[0]), float(limits[1])))
@@ -320,9 +317,14 @@ def compensate(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, MultiDuhemSandwich or PISandwich
         An identified model (batch or on-line), with its rest level, sensor offset, envelope
-        and units; L1 must be minimum phase, L2 must have no zero on the unit circle.
+        and units; L1 must be minimum phase, L2 must have no zero on the unit circle. Every
+        member has an inverse: the plain Duhem block with its reversal planner, the PI operator
+        its exact inverse, the generalised Duhem block (``gduhem``) and the parallel Duhem
+        operators (``mduhem``) their per-sample inverse without look-ahead
+        (:mod:`~hystid.compensate.member_inverse`: a reversal the block cannot make in one step
+        is approximate for a few samples, flagged in :attr:`Compensation.status`).
     y_ref : array_like
         Wanted displacement, one value per sample at the model's rate, in the record's output
         units (offset included: a displacement as the sensor reads it). It should start at
@@ -339,7 +341,8 @@ def compensate(
     reference_lead : int, optional
         Samples of ``M``'s delay taken from the preview.
     preview : int, optional
-        Look-ahead of the Duhem reversal planner (see :func:`~hystid.compensate.inverse`).
+        Look-ahead of the Duhem reversal planner (see :func:`~hystid.compensate.inverse`; the
+        plain Duhem block's only).
     duhem_bound : float
         Largest ``alpha |dw1|`` per sample the inverse allows.
     compensation : {"inverse", "linear"}
@@ -430,7 +433,8 @@ def _admissibility(model: Any, result: Compensation) -> list[str]:
     inexact = ((result.status & (NOT_EXACT & ~SATURATED)) != 0)
     if np.any(inexact):
         out.append(f"the hysteresis inverse has no exact step at {_spans(inexact, fs)} (a "
-                   "reversal the preview cannot prepare, or alpha |dw1| at its bound)")
+                   "reversal the block cannot make in one step and no preview prepared, or "
+                   "alpha |dw1| at its bound)")
     check = getattr(model, "admissibility", None)
     if check is not None:
         out += check(result.u)
