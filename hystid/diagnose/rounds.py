@@ -591,7 +591,8 @@ def describe_unexplained(where: Where, floor: float) -> dict[str, Any]:
     dict
         ``rms``, ``excess_rms``, ``band_hz``, ``peak_hz``, ``periodic`` (harmonics of a
         repeating input, or None), ``offset_fraction``, ``trend_fraction``, ``worst_zone`` and
-        ``branch`` (loop-width and common shares) and ``text`` (one line each).
+        ``branch`` (loop-width and common shares, and the error after the input's turning
+        points) and ``text`` (one line each).
     """
     f, t, b, z = where.frequency, where.time, where.branch, where.zone["worst"]
     excess = float(np.sqrt(max(where.rms**2 - floor**2, 0.0)))
@@ -605,11 +606,17 @@ def describe_unexplained(where: Where, floor: float) -> dict[str, Any]:
                 f"({z['rms_ratio']:.1f}x the overall RMS)")
     text.append(f"branches: loop-width part {100 * b['width_fraction']:.0f} %, common part "
                 f"{100 * b['common_fraction']:.0f} % of the excess")
+    turning = b.get("turning", {})
+    if np.isfinite(turning.get("rms_ratio", np.nan)):
+        text.append(f"after the input's turning points ({100 * turning['share_samples']:.0f} % "
+                    f"of the samples): RMS {turning['rms_ratio']:.2g}x the rest's, "
+                    f"{100 * turning['excess_share']:.0f} % of the excess")
     return {"rms": where.rms, "excess_rms": excess, "band_hz": f["band_hz"],
             "peak_hz": f["peak_hz"], "periodic": h or None,
             "offset_fraction": t["mean_fraction"], "trend_fraction": t["trend_fraction"],
             "worst_zone": z, "branch": {"width_fraction": b["width_fraction"],
-                                        "common_fraction": b["common_fraction"]},
+                                        "common_fraction": b["common_fraction"],
+                                        "turning": b.get("turning", {})},
             "text": text}
 
 

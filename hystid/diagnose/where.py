@@ -583,6 +583,41 @@ def _zone_view(segs: list[Segment]) -> tuple[dict, dict]:
     return out, series
 
 
+#: Samples after an input reversal count as "after a turning point" until the input has
+#: travelled this share of its range.
+TURNING_TRAVEL = 0.1
+
+
+def _after_turning_points(segs: list[Segment], noise: float) -> dict[str, float]:
+    """How the error after the input's turning points compares with the rest.
+
+    After each reversal of the input, the samples until it has travelled
+    :data:`TURNING_TRAVEL` of its range: their share of the samples, their RMS error over the
+    other samples' and their share of the excess error power (above the noise).
+    """
+    from ..thresholds import turning_points
+
+    near, e_all = [], []
+    for s in segs:
+        mask = np.zeros(s.n, bool)
+        span = float(np.ptp(s.u)) or 1.0
+        travel = np.cumsum(np.abs(np.diff(s.u, prepend=s.u[0])))
+        for k in turning_points(s.u)[1:-1]:
+            stop = int(np.searchsorted(travel, travel[k] + TURNING_TRAVEL * span))
+            mask[k:max(stop, k + 1)] = True
+        near.append(mask)
+        e_all.append(s.e)
+    m, e = np.concatenate(near), np.concatenate(e_all)
+    if not m.any() or m.all():
+        return {"share_samples": float(m.mean()), "rms_ratio": float("nan"),
+                "excess_share": float("nan")}
+    p_near, p_rest = float(np.mean(e[m] ** 2)), float(np.mean(e[~m] ** 2))
+    excess = max(float(np.mean(e**2)) - noise**2, 1e-300)
+    return {"share_samples": float(m.mean()),
+            "rms_ratio": float(np.sqrt(p_near / max(p_rest, 1e-300))),
+            "excess_share": float(max(p_near - noise**2, 0.0) * m.mean() / excess)}
+
+
 def _branch_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
     e = np.concatenate([s.e for s in segs])
     y = np.concatenate([s.yhat for s in segs])
@@ -617,6 +652,7 @@ def _branch_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
         "width_rms": float(np.sqrt(np.mean(comp_w**2))),
         "width_fraction": float(np.mean(comp_w**2) / excess),
         "common_fraction": float(np.mean(comp_c**2) / excess),
+        "turning": _after_turning_points(segs, noise),
     }
     series = {"edges": edges, "ascending": asc, "descending": desc,
               "y": y, "e": e, "up": up}
