@@ -1,0 +1,158 @@
+"""Replays of the cases the independent hostile-input audit (``benchmarks/audit_independent.py``)
+found answered with a traceback, a hang, a silent wrong result or an overwrite: each is now a
+clear error naming the file or option, or a result with the warning it deserves.
+
+Every test is fast (records of 0.1-0.2 s) and needs no network.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+
+import numpy as np
+import pytest
+
+from hystid.cli import main
+from hystid.errors import RecordError
+from hystid.records import Record, load_record
+from hystid.reference import reference_record
+
+FS = 30_000.0
+
+
+def cli(args: list[str], capsys) -> tuple[int, str, str]:
+    """Run ``hystid ARGS`` in this process: exit status, stdout, stderr."""
+    try:
+        code = main([str(a) for a in args])
+    except SystemExit as stop:  # argparse's refusals
+        code = stop.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def one_error_line(err: str, *names: str) -> str:
+    """The command's error: one line, no traceback, naming each of ``names``."""
+    assert "Traceback" not in err
+    lines = [ln for ln in err.strip().splitlines() if ": error:" in ln]
+    assert len(lines) == 1, err
+    for name in names:
+        assert name in lines[0], lines[0]
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def train() -> Record:
+    return reference_record(0.1, seed=0, name="train")
+
+
+@pytest.fixture(scope="module")
+def model(train):
+    from hystid.identify import identify
+
+    return identify(train).model
+
+
+@pytest.fixture(scope="module")
+def model_file(model, tmp_path_factory):
+    from hystid.modelfile import save_model
+
+    path = tmp_path_factory.mktemp("model") / "model.json"
+    save_model(model, path)
+    return path
+
+
+def edited_model(model_file, tmp_path, edit=None, raw=None):
+    """A copy of the model file after ``edit(doc)`` or ``raw(text)``."""
+    text = model_file.read_text()
+    if edit is not None:
+        doc = json.loads(text)
+        edit(doc)
+        text = json.dumps(doc)
+    if raw is not None:
+        text = raw(text)
+    path = tmp_path / "m.json"
+    path.write_text(text)
+    return path
+
+
+# --------------------------------------------------------------------------- record files
+def test_npz_member_claiming_lzma_with_bad_options_is_refused(train, tmp_path):
+    path = tmp_path / "r.npz"
+    np.savez(path, u=train.u, y=train.y, fs=FS)
+    data = bytearray(path.read_bytes())
+    for magic, at in ((b"PK\x03\x04", 8), (b"PK\x01\x02", 10)):  # every compression field
+        pos = data.find(magic)
+        while pos >= 0:
+            data[pos + at:pos + at + 2] = struct.pack("<H", 14)
+            pos = data.find(magic, pos + 4)
+    path.write_bytes(bytes(data))
+    with pytest.raises(RecordError, match="r.npz.*not a readable .npz"):
+        load_record(path)
+
+
+def test_h5_soft_links_in_a_loop_are_refused(train, tmp_path):
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "r.h5"
+    with h5py.File(path, "w") as fh:
+        fh["u"] = h5py.SoftLink("/u")
+        fh.create_dataset("y", data=train.y)
+        fh.attrs["fs"] = FS
+        fh["runs"] = h5py.SoftLink("/runs")
+    with pytest.raises(RecordError, match=r"r.h5.*'u' is a link that cannot be followed"):
+        load_record(path)
+    with pytest.raises(RecordError, match=r"r.h5.*'runs' is a link that cannot be followed"):
+        load_record(f"{path}:runs/a")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes need a POSIX system")
+def test_a_fifo_or_a_device_is_not_said_to_be_missing(tmp_path, capsys):
+    os.mkfifo(tmp_path / "p.csv")
+    with pytest.raises(RecordError, match=r"p.csv: file is not a regular file \(a FIFO"):
+        load_record(tmp_path / "p.csv")
+    if os.path.exists("/dev/zero"):
+        os.symlink("/dev/zero", tmp_path / "z.csv")
+        code, _, err = cli(["identify", tmp_path / "z.csv"], capsys)
+        assert code == 2
+        one_error_line(err, "z.csv", "not a regular file")
+    with pytest.raises(RecordError, match="none.csv: file does not exist"):
+        load_record(tmp_path / "none.csv")
+
+
+def test_a_path_of_bytes_is_read_and_other_types_are_named(train, tmp_path):
+    train.save(tmp_path / "r.csv")
+    assert load_record(os.fsencode(tmp_path / "r.csv")).n == train.n
+    for bad in (None, 123):
+        with pytest.raises(TypeError, match="path: expected a file name"):
+            load_record(bad)
+
+
+def test_units_with_control_characters_are_refused(train, tmp_path, capsys):
+    from hystid.records import parse_units
+
+    with pytest.raises(RecordError, match="control characters"):
+        Record(train.u, train.y, FS, units={"u": "V", "y": "um\nt,u,y"})
+    with pytest.raises(ValueError, match="control characters"):
+        parse_units("u=V\x1b[31m,y=um")
+    train.save(tmp_path / "r.csv")
+    with pytest.raises(RecordError, match="r.csv.*units="):
+        load_record(tmp_path / "r.csv", units={"y": "um\n"})
+    np.savez(tmp_path / "r.npz", u=train.u, y=train.y, fs=FS,
+             units=np.array(json.dumps({"u": "V", "y": "um\nt,u,y"})))
+    with pytest.raises(RecordError, match="control characters"):
+        load_record(tmp_path / "r.npz")
+
+
+def test_a_name_with_a_line_break_keeps_a_written_csv_readable(train, tmp_path):
+    rec = Record(train.u, train.y, FS, name="run 1\n# t,u,y\x1b[2J")
+    rec.save(tmp_path / "r.csv")
+    back = load_record(tmp_path / "r.csv")
+    assert back.n == rec.n and "\n" not in back.name and "\x1b" not in back.name
+
+
+def test_stored_units_hystid_cannot_read_are_refused_unless_given(train, tmp_path):
+    np.savez(tmp_path / "r.npz", u=train.u, y=train.y * 1e3, fs=FS, units=np.array("u=V,y=nm"))
+    with pytest.raises(RecordError, match=r"r.npz.*'units' entry is 'u=V,y=nm'.*--units"):
+        load_record(tmp_path / "r.npz")
+    assert load_record(tmp_path / "r.npz", units={"u": "V", "y": "nm"}).units["y"] == "nm"
