@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from hystid.cli import main
-from hystid.errors import RecordError
+from hystid.errors import ModelFileError, RecordError
 from hystid.records import Record, load_record
 from hystid.reference import reference_record
 
@@ -156,3 +156,34 @@ def test_stored_units_hystid_cannot_read_are_refused_unless_given(train, tmp_pat
     with pytest.raises(RecordError, match=r"r.npz.*'units' entry is 'u=V,y=nm'.*--units"):
         load_record(tmp_path / "r.npz")
     assert load_record(tmp_path / "r.npz", units={"u": "V", "y": "nm"}).units["y"] == "nm"
+
+
+# --------------------------------------------------------------------------- model files
+@pytest.mark.parametrize(("edit", "raw", "said"), [
+    (lambda d: d["params"].__setitem__("alpha", True), None, "'alpha' must be a number"),
+    (lambda d: d["params"].__setitem__("alpha", "0.8"), None, "'alpha' must be a number"),
+    (None, lambda s: s.replace('"alpha": ', '"alpha": ' + "9" * 400 + ', "x": ', 1),
+     "'alpha' is an integer of 400 digits"),
+    (None, lambda s: s.replace('"fs": ', '"fs": ' + "3" * 400 + ', "x": ', 1),
+     "'fs' is an integer of 400 digits"),
+    (lambda d: d["envelope"].__setitem__("slew", True), None, "envelope: expected numbers"),
+    (lambda d: d["envelope"].__setitem__("u_min", -10**400), None, "envelope: expected numbers"),
+    (lambda d: d["units"].__setitem__("y", "um\x1b[2J\nFAKE"), None,
+     "the unit of y is .* control characters"),
+])
+def test_model_file_entries_of_the_wrong_kind_are_refused(model_file, tmp_path, edit, raw,
+                                                          said):
+    from hystid.modelfile import load_model
+
+    path = edited_model(model_file, tmp_path, edit, raw)
+    with pytest.raises(ModelFileError, match=f"m.json: {said}"):
+        load_model(path)
+
+
+def test_list_entries_of_huge_integers_are_refused(tmp_path):
+    from hystid.modelfile import _numbers
+
+    with pytest.raises(ModelFileError, match="'rates' holds an integer of hundreds of digits"):
+        _numbers({"rates": [10**400, 1.0]}, "rates", "m.json", "rates")
+    with pytest.raises(ModelFileError, match="'thresholds' must be a list of numbers"):
+        _numbers({"thresholds": [0.1, True]}, "thresholds", "m.json", "thresholds")
