@@ -187,3 +187,57 @@ def test_list_entries_of_huge_integers_are_refused(tmp_path):
         _numbers({"rates": [10**400, 1.0]}, "rates", "m.json", "rates")
     with pytest.raises(ModelFileError, match="'thresholds' must be a list of numbers"):
         _numbers({"thresholds": [0.1, True]}, "thresholds", "m.json", "thresholds")
+
+
+# --------------------------------------------------------------------------- identify
+def test_a_record_in_1e_minus_300_volts_is_refused_not_divided_by_zero(train):
+    from hystid.errors import IdentificationDataError
+    from hystid.identify import identify
+
+    tiny = Record(train.u * 1e-300, train.y, FS, name="tiny")
+    with pytest.raises(IdentificationDataError, match=r"'tiny'.*input u spreads over .*1e-20"):
+        identify(tiny)
+
+
+def test_identify_names_a_bad_progress_and_a_bad_theta0(train):
+    from hystid.identify import identify
+
+    with pytest.raises(TypeError, match="progress: expected a callable"):
+        identify(train, progress=5)
+    for method in ("batch", "online"):
+        with pytest.raises(ValueError, match="theta0: expected"):
+            identify(train, method, theta0="x")
+
+
+def test_a_val_or_repeat_record_in_other_units_is_refused(train, tmp_path, capsys):
+    train.save(tmp_path / "train.csv")
+    nm = Record(train.u, train.y * 1e3, FS, units={"u": "V", "y": "nm"}, name="val")
+    nm.save(tmp_path / "vnm.npz")
+    code, _, err = cli(["identify", tmp_path / "train.csv", "--val", tmp_path / "vnm.npz"],
+                       capsys)
+    assert code == 2
+    one_error_line(err, "--val", "vnm.npz", "y=nm", "y=um")
+    code, _, err = cli(["identify", tmp_path / "train.csv", "--repeat", tmp_path / "vnm.npz"],
+                       capsys)
+    assert code == 2
+    one_error_line(err, "--repeat", "vnm.npz")
+
+
+def test_a_too_short_val_record_is_named(train, tmp_path, capsys):
+    train.save(tmp_path / "train.csv")
+    (tmp_path / "v2.csv").write_text("t,u,y\n0,1,1\n3.3333333333333335e-05,2,2\n")
+    code, _, err = cli(["identify", tmp_path / "train.csv", "--val", tmp_path / "v2.csv",
+                        "--model", "duhem", "--quiet"], capsys)
+    assert code == 2
+    one_error_line(err, "--val", "v2.csv", "too short")
+
+
+def test_a_model_that_beats_its_baselines_yet_explains_little_is_said(model, train):
+    from hystid.baselines import compare
+
+    other = reference_record(0.1, seed=1, name="other stage")
+    other = Record(other.u, 2.5 * other.y, FS, name="other stage")
+    comparison = compare(model, train, [other])
+    assert any("explains little" in note and "um" in note for note in comparison.notes)
+    same = reference_record(0.1, seed=1, name="same stage")
+    assert not any("explains little" in note for note in compare(model, train, [same]).notes)

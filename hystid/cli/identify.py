@@ -293,8 +293,12 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
                         repeats=repeats)
     k = k or 0
     finite = bool(np.all(np.isfinite(yhat[k:])))
-    validation = validate(target.y[k:], yhat[k:] if finite else np.zeros(target.n - k),
-                          target.fs)
+    try:
+        validation = validate(target.y[k:], yhat[k:] if finite else np.zeros(target.n - k),
+                              target.fs)
+    except ValueError as err:  # a validation record too short to score
+        where = f"--val {args.val}" if getattr(args, "val", None) else f"record {rec.name!r}"
+        raise ValueError(f"{where}: {err}") from err
     warnings_ = list(result.info.get("warnings", []))
     warnings_ += [f"on the validation input: {p}" for p in problems]
     warnings_ += baselines.notes
@@ -363,6 +367,12 @@ def _identify(args: argparse.Namespace) -> int:
         if other is not None and not np.isclose(other.fs, rec.fs, rtol=1e-9):
             raise CommandError(f"{label}: fs {other.fs:g} Hz differs from {rec.fs:g} Hz "
                                f"of {args.record}")
+        if other is not None and other.units != rec.units:
+            raise CommandError(f"{label}: in u={other.units.get('u')}, y={other.units.get('y')} "
+                               f"but {args.record} in u={rec.units.get('u')}, "
+                               f"y={rec.units.get('y')} (expected records in one set of units: "
+                               "a model is scored in its record's; give the records in the "
+                               "same units, or --units when the files state them wrongly)")
     train, target, scored_from = _split_for_validation(rec, val, args)
     _check_skip(args, train, structure)
     progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
