@@ -241,3 +241,16 @@ def test_a_model_that_beats_its_baselines_yet_explains_little_is_said(model, tra
     assert any("explains little" in note and "um" in note for note in comparison.notes)
     same = reference_record(0.1, seed=1, name="same stage")
     assert not any("explains little" in note for note in compare(model, train, [same]).notes)
+
+
+# --------------------------------------------------------------------------- export
+def test_a_too_short_rpem_record_is_refused_by_name(train, model_file, tmp_path, capsys):
+    Record(train.u[:2], train.y[:2], FS, name="r2").save(tmp_path / "r2.csv")
+    code, _, err = cli(["export", model_file, "--c", tmp_path / "c", "--rpem-record",
+                        tmp_path / "r2.csv"], capsys)
+    assert code == 2
+    one_error_line(err, "--rpem-record", "r2.csv", "too few")
+    code, _, err = cli(["export", model_file, "--c", tmp_path / "c", "--preview=1000000000"],
+                       capsys)
+    assert code == 2
+    one_error_line(err, "--preview:")
