@@ -254,3 +254,39 @@ def test_a_too_short_rpem_record_is_refused_by_name(train, model_file, tmp_path,
                        capsys)
     assert code == 2
     one_error_line(err, "--preview:")
+
+
+# --------------------------------------------------------------------------- compensate
+def test_a_scan_too_long_to_make_is_refused(model_file, tmp_path, capsys):
+    from hystid.compensate import scan_reference
+
+    code, _, err = cli(["compensate", model_file, "--scan", "triangle:50:2", "--seconds=1e9",
+                        "--out", tmp_path / "c.csv"], capsys)
+    assert code == 2
+    one_error_line(err, "--seconds", "600")
+    with pytest.raises(ValueError, match="periods: .* samples"):
+        scan_reference("triangle", 50.0, periods=5e10)
+
+
+def test_a_smoother_longer_than_a_second_is_refused(model, model_file, tmp_path, capsys):
+    from hystid.compensate import smoothing_model
+
+    with pytest.raises(ValueError, match="at most 1 s, 29999 samples at 30000 Hz"):
+        smoothing_model(1_000_000_001, model.dt)
+    assert smoothing_model(29_999, model.dt).dt == model.dt
+    code, _, err = cli(["compensate", model_file, "--scan", "triangle:50:2",
+                        "--smooth=1000000001", "--out", tmp_path / "c.csv"], capsys)
+    assert code == 2
+    one_error_line(err, "--smooth")
+    code, _, err = cli(["export", model_file, "--c", tmp_path / "c", "--smooth", "1000000001"],
+                       capsys)
+    assert code == 2
+    one_error_line(err, "--smooth")
+
+
+def test_u_limits_given_as_text_are_named(model, train):
+    from hystid.compensate import compensate
+
+    for bad in ("0,5", (0, "a"), 5):
+        with pytest.raises(ValueError, match="u_limits: expected two numbers"):
+            compensate(model, train.y, u_limits=bad)

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..options import MAX_SECONDS
 from .support import CommandError, bind, check_out, refused, run_command, tell
 
 __all__ = ["HEADER", "configure_parser", "parse_scan", "run", "scan_for"]
@@ -121,7 +122,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="a triangle or sine scan, e.g. triangle:50:2 (AMP peak to peak in "
                         "the model's output units, about its output at rest)")
     parser.add_argument("--seconds", default="1", metavar="S",
-                        help="length of a --scan in seconds (default 1)")
+                        help=f"length of a --scan in seconds (default 1, at most "
+                        f"{MAX_SECONDS:g})")
     parser.add_argument("--fs", default=None, metavar="HZ",
                         help="sampling rate of --reference (if it has no t column or fs)")
     parser.add_argument("--columns", default=None, metavar="t=1,u=3,y=2",
@@ -202,6 +204,9 @@ def _reference(args: argparse.Namespace, model: Any) -> tuple[np.ndarray, str]:
         with refused("--scan: "):
             kind, hz, amp = parse_scan(args.scan)
         seconds = _number(args.seconds, "--scan: --seconds", minimum=0.0, strict=True)
+        if seconds > MAX_SECONDS:
+            raise CommandError(f"--seconds {args.seconds}: a scan of at most {MAX_SECONDS:g} s "
+                               "is made (expected a shorter --seconds)")
         with refused("--scan: "):
             return scan_for(model, kind, hz, amp, seconds), f"scan {args.scan}"
     from ..errors import RecordError
