@@ -290,3 +290,18 @@ def test_u_limits_given_as_text_are_named(model, train):
     for bad in ("0,5", (0, "a"), 5):
         with pytest.raises(ValueError, match="u_limits: expected two numbers"):
             compensate(model, train.y, u_limits=bad)
+
+
+# --------------------------------------------------------------------------- fleet
+def test_a_local_cluster_of_a_billion_workers_is_refused(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    from hystid.errors import FleetError
+    from hystid.fleet import fleet_client, max_local_workers
+
+    code, _, err = cli(["fleet", "identify", tmp_path, "--out", tmp_path / "res",
+                        "--workers", "1000000000"], capsys)
+    assert code == 2
+    one_error_line(err, "--workers", str(max_local_workers()))
+    with pytest.raises(FleetError, match="workers: 1000000000 worker processes"):
+        with fleet_client(workers=10**9):
+            pass
