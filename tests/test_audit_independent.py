@@ -305,3 +305,44 @@ def test_a_local_cluster_of_a_billion_workers_is_refused(tmp_path, capsys):
     with pytest.raises(FleetError, match="workers: 1000000000 worker processes"):
         with fleet_client(workers=10**9):
             pass
+
+
+# --------------------------------------------------------------------------- diagnose
+def test_diagnose_refuses_held_out_records_in_other_units_and_bad_rounds(train):
+    from hystid.diagnose import DiagnosisError, diagnose
+
+    val = reference_record(0.1, seed=1, name="val")
+    nm = Record(val.u, val.y * 1e3, FS, units={"u": "V", "y": "nm"}, name="val nm")
+    with pytest.raises(DiagnosisError, match="'val nm': in u=V, y=nm"):
+        diagnose(train, nm, progress=False)
+    for rounds in (-1, 0, 21, True, 2.5):
+        with pytest.raises(DiagnosisError, match="max_rounds: expected"):
+            diagnose(train, val, max_rounds=rounds, progress=False)
+
+
+def test_diagnose_command_refuses_no_effects_and_names_its_options(tmp_path, capsys):
+    reference_record(0.2, seed=0, name="train").save(tmp_path / "train.csv")
+    code, _, err = cli(["diagnose", tmp_path / "train.csv", "--effects", ""], capsys)
+    assert code == 2
+    one_error_line(err, "--effects", "names no effect")
+    code, _, err = cli(["diagnose", tmp_path / "train.csv", "--train-skip", "1e9"], capsys)
+    assert code == 2
+    one_error_line(err, "--train-skip")
+
+
+def test_error_shares_stay_shares_at_the_noise_floor():
+    from hystid.diagnose.rounds import describe_unexplained
+    from hystid.diagnose.where import Segment, localise
+    from hystid.reference import paper_excitation, reference_model
+
+    model = reference_model()
+    u = paper_excitation(8000, FS, seed=5)
+    sim = model.simulate(u)
+    noise = np.random.default_rng(2).normal(0.0, 2e-3, u.size)
+    where = localise([Segment(u, sim.y + noise, sim.y, sim.w1, FS)])
+    for view, keys in ((where.time, ("mean_fraction", "trend_fraction")),
+                       (where.branch, ("width_fraction", "common_fraction"))):
+        for key in keys:
+            assert 0.0 <= view[key] <= 1.0, (key, view[key])
+    left = describe_unexplained(where, where.rms * 2)  # a floor above the error: no excess
+    assert "no error above the floor" in " ".join(left["text"])
