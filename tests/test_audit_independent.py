@@ -346,3 +346,18 @@ def test_error_shares_stay_shares_at_the_noise_floor():
             assert 0.0 <= view[key] <= 1.0, (key, view[key])
     left = describe_unexplained(where, where.rms * 2)  # a floor above the error: no excess
     assert "no error above the floor" in " ".join(left["text"])
+
+
+# --------------------------------------------------------------------------- simulate
+def test_simulate_names_a_bad_x0_and_a_bad_p0(model, train):
+    from hystid.reference import reference_model
+
+    with pytest.raises(TypeError, match="x0: expected a hystid.InitialCondition"):
+        model.simulate(train.u[:100], x0="garbage")
+    with pytest.raises(TypeError, match="x0: expected"):
+        reference_model().simulate(train.u[:100], x0=[0.0, 1.0])
+    from hystid.identify import identify
+
+    pi = identify(train, model="pi-stage").model
+    with pytest.raises(ValueError, match="p0: expected 20 finite operator states"):
+        pi.simulate(train.u[:100], p0="garbage")
