@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import struct
+import sys
 
 import numpy as np
 import pytest
@@ -243,6 +244,22 @@ def test_a_model_that_beats_its_baselines_yet_explains_little_is_said(model, tra
     assert not any("explains little" in note for note in compare(model, train, [same]).notes)
 
 
+def test_the_final_model_summary_gives_no_share_of_a_gap_of_nothing():
+    from hystid.diagnose.final_model import FinalModel
+    from hystid.metrics import gap_closed
+
+    floor, nominal, other = 0.998e-3, 1.011e-3, 0.1228
+    rows = [{"candidate": "nominal", "mean_rms": nominal, "gap_closed": 0.0},
+            {"candidate": "pi-stage", "mean_rms": other,
+             "gap_closed": gap_closed(nominal, other, floor)}]
+    text = "\n".join(FinalModel(rows, "nominal", None, floor, "kept").summary_lines("um"))
+    assert "no gap to close" in text and "121 x the nominal's RMS" in text
+    assert " % of the gap" not in text
+    rows[0]["mean_rms"] = 2 * floor  # a real gap: shares of it again
+    text = "\n".join(FinalModel(rows, "nominal", None, floor, "kept").summary_lines("um"))
+    assert "% of the gap to the floor" in text
+
+
 # --------------------------------------------------------------------------- export
 def test_a_too_short_rpem_record_is_refused_by_name(train, model_file, tmp_path, capsys):
     Record(train.u[:2], train.y[:2], FS, name="r2").save(tmp_path / "r2.csv")
@@ -361,3 +378,15 @@ def test_simulate_names_a_bad_x0_and_a_bad_p0(model, train):
     pi = identify(train, model="pi-stage").model
     with pytest.raises(ValueError, match="p0: expected 20 finite operator states"):
         pi.simulate(train.u[:100], p0="garbage")
+
+
+# --------------------------------------------------------------------------- the audit
+@pytest.mark.skipif(sys.platform == "win32", reason="the audit runs POSIX commands")
+def test_the_audit_lists_its_cases():
+    import subprocess
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "audit_independent.py"
+    out = subprocess.run([sys.executable, str(script), "--list", "--quick"], check=True,
+                         capture_output=True, text=True).stdout
+    assert int(out.strip().splitlines()[-1].split()[0]) >= 40

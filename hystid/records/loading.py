@@ -150,7 +150,7 @@ def load_record(
     of the used columns must be finite numbers, unused columns may hold anything (even nothing).
     """
     if not isinstance(path, str | bytes | os.PathLike):
-        raise TypeError(f"path: expected a file name (str or os.PathLike), got "
+        raise TypeError(f"path: expected a file name (str, bytes or os.PathLike), got "
                         f"{type(path).__name__} {path!r:.40}")
     text = os.fspath(path)
     if isinstance(text, bytes):  # a path of bytes, as os functions take them
