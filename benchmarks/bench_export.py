@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 from _common import best_time, table, write_json
 
+from hystid.cli.compensate import scan_for
 from hystid.compensate import compensate
-from hystid.compensate.command import scan_for
 from hystid.export import c_sources, ff_options, ff_plan, rpem_start
 from hystid.identify.online import rpem_run
 from hystid.reference import paper_excitation, reference_model

@@ -231,7 +231,7 @@ def _ff_case(model, r: np.ndarray, tmp_path: Path, **options) -> hc.Compensation
 
 def triangle(model, amplitude: float, seconds: float = 0.2, hz: float = 20.0) -> np.ndarray:
     """A triangle scan about the model's output at rest, reached from rest (record units)."""
-    from hystid.compensate.command import scan_for
+    from hystid.cli.compensate import scan_for
 
     return scan_for(model, "triangle", hz, amplitude, seconds)
 
