@@ -37,6 +37,7 @@ import json
 import math
 import multiprocessing
 import os
+import re
 import shutil
 import signal
 import stat
@@ -903,11 +904,12 @@ def add_record_file_cases() -> None:
             reps = -(-n // len(BASE.u))
             return {"u": np.tile(BASE.u, reps)[:n], "y": np.tile(BASE.y, reps)[:n], "fs": FS}
         return npz_file("r.npz", make)
-    idc("long_record_batch_1.2M", "r.npz", long_npz(1_200_000), quick=True,
-        what="1.2e6 samples for a batch fit: refused before any work, or done in time")
-    cli("long_record_online_3.1M", [*ID, "r.npz", "--method", "online", *IDQ], g,
+    idc("long_record_batch_1.2M", "r.npz", long_npz(1_200_000), ["--holdout", "0"], quick=True,
+        what="1.2e6 samples for a batch fit: refused before any work")
+    cli("long_record_online_3.1M", [*ID, "r.npz", "--method", "online", "--holdout", "0",
+                                    *IDQ], g,
         setup=long_npz(3_100_000), hints=("r.npz", "samples"),
-        what="3.1e6 samples for an on-line fit")
+        what="3.1e6 samples for an on-line fit: refused before any work")
     idc("npz_compressed_20M_zeros", "r.npz", npz_bomb,
         what="2 x 160 MB of zeros deflated to well under 1 MB")
 
@@ -1046,10 +1048,11 @@ def add_identify_option_cases() -> None:
             hints=hints, **kw)
 
     for v in ("0", "-1", "nan", "inf", "1e308"):
-        opt(f"fs_{v}", [f"--fs={v}"], ("--fs",), quick=v in ("0", "nan"))
+        opt(f"fs_{v}", [f"--fs={v}"], ("--fs", "fs="), quick=v in ("0", "nan"))
     opt("fs_conflicts_with_t", ["--fs", "1000"], ("--fs", "1000"))
     for v in ("5:1", "0:1e308", "nan:1", "0:0", "-1:0.1", "0.199:0.2", "abc", "0:inf"):
-        opt(f"crop_{v}", [f"--crop={v}"], ("--crop",), quick=v in ("0:1e308", "nan:1"),
+        opt(f"crop_{v}", [f"--crop={v}"], ("--crop", "train.csv"),
+            quick=v in ("0:1e308", "nan:1"),
             expect="error" if v not in ("0:1e308", "0:inf", "-1:0.1") else "any",
             judge=None if v not in ("0:1e308", "0:inf", "-1:0.1") else judge_fit())
     for v in ("1", "-0.1", "nan", "0.9999", "1e-9"):
@@ -1072,6 +1075,9 @@ def add_identify_option_cases() -> None:
         ("--history", "train.csv"), quick=True)
     opt("history_is_val", ["--method", "online", "--val", "val.csv", "--history", "val.csv",
                            "--force"], ("--history", "val.csv"))
+    opt("history_fifo_forced", ["--method", "online", "--history", "h.csv", "--force"],
+        ("--history", "h.csv"), setup=both(base, fifo("h.csv")), expect="any",
+        what="--history a named pipe, with --force")
     opt("history_is_out_file", ["--method", "online", "--history", "rep/report.json"],
         ("--history",))
     opt("history_exists", ["--method", "online", "--history", "h.csv"], ("--history", "h.csv"),
@@ -1167,6 +1173,10 @@ def add_semantic_cases() -> None:
          judge=judge_same(lambda u: u, lambda y: y * 1e-300, "y x 1e300"))
     pair("input_1e-300", lambda u, w: u * 1e-300, ident_y,
          judge=judge_same(lambda u: u * 1e-300, lambda y: y, "u x 1e-300"))
+    pair("output_1e-300", ident_u, lambda y, u, w: y * 1e-300,
+         judge=judge_same(lambda u: u, lambda y: y * 1e300, "y x 1e-300"))
+    pair("input_1e80", lambda u, w: u * 1e80, ident_y,
+         judge=judge_same(lambda u: u * 1e80, lambda y: y, "u x 1e80"))
     pair("output_negated", ident_u, lambda y, u, w: -y,
          judge=judge_same(lambda u: u, lambda y: -y, "y negated"))
     pair("online_input_offset_1e6", lambda u, w: u + 1e6, ident_y,
@@ -1290,6 +1300,13 @@ def add_simulate_cases() -> None:
         setup=lambda ws: (ws / "d").mkdir(), hints=("d", "--out"))
     cli("sim_out_proc", [*s05, "--out", "/proc/hystid_audit.csv"], g,
         hints=("/proc", "--out"))
+    cli("sim_out_fifo_forced", [*s05, "--out", "p.csv", "--force"], g, setup=fifo("p.csv"),
+        hints=("p.csv", "--out"), expect="any", judge=judge_file_ok("p.csv"),
+        what="--force onto a named pipe: replaced by the file, or refused, never blocking")
+    cli("sim_out_link_to_input", [*sim, "--model", "model.json", "--input", "train.csv",
+                                  "--out", "l.csv", "--force"], g,
+        setup=both(base, symlink("l.csv", "train.csv")), hints=("l.csv", "train.csv", "--out"),
+        what="--out a link to the record being read")
     cli("sim_out_dangling_link", [*s05, "--out", "l.csv"], g,
         setup=symlink("l.csv", "/tmp/hystid-audit-nowhere/x.csv"), hints=("l.csv", "--out"))
     for ext in ("npz", "mat", "h5"):
@@ -1301,8 +1318,19 @@ def add_simulate_cases() -> None:
                                   "s.csv"], g, setup=both(base, text_file(
                                       "r.csv", "t,u,y\n0,0,0\n3.3333333333333335e-05,1,0\n")),
         expect="any", judge=judge_file_ok("s.csv"))
+    cli("sim_input_name_control", [*sim, "--model", "model.json", "--input", "r.npz", "--out",
+                                   "s.csv"], g,
+        setup=both(base, npz_file("r.npz", lambda: {**plain_arrays(),
+                                                    "name": np.array("run 1\n# t,u,y\x1b[2J")})),
+        expect="any", judge=judge_file_ok("s.csv"),
+        what="a record named with a line break and an escape sequence")
+    cli("sim_input_units_control", [*sim, "--model", "model.json", "--input", "r.npz", "--out",
+                                    "s.csv"], g,
+        setup=both(base, npz_file("r.npz", lambda: {
+            **plain_arrays(), "units": np.array(json.dumps({"u": "V", "y": "um\nt,u,y"}))})),
+        expect="any", judge=judge_file_ok("s.csv"), hints=("r.npz", "unit"))
     cli("sim_fs_conflict", [*sim, "--model", "model.json", "--input", "train.csv", "--fs",
-                            "1000", "--out", "s.csv"], g, setup=base, hints=("--fs",))
+                            "1000", "--out", "s.csv"], g, setup=base, hints=("--fs", "fs="))
     cli("sim_input_other_rate", [*sim, "--model", "model.json", "--input", "r10k.csv", "--out",
                                  "s.csv"], g,
         setup=both(base, csv_arrays("r10k.csv", lambda: (np.arange(2000) / 1e4, BASE.u[::3],
@@ -1353,6 +1381,14 @@ def add_model_file_cases() -> None:
     sim("model_alpha_bigint", model_doc(raw=lambda s: s.replace(
         '"alpha": ' + json.dumps(json.loads(s)["params"]["alpha"]), '"alpha": ' + "9" * 400)))
     sim("model_g0_1e200", model_doc(setp("params.g0", 1e200)))
+    sim("model_fs_bigint", model_doc(raw=lambda s: re.sub(r'"fs": [0-9.e+-]+',
+                                                          '"fs": ' + "3" * 400, s)))
+    sim("model_envelope_bool", model_doc(setp("envelope.slew", True)))
+    sim("model_envelope_bigint", model_doc(raw=lambda s: s.replace('"u_min": 0.0',
+                                                                   '"u_min": -' + "9" * 400)))
+    sim("mduhem_rates_bigint", model_doc(raw=lambda s: s.replace('"rates": [',
+                                                                 '"rates": [' + "7" * 400 + ", "),
+                                         source="mduhem.json"))
     sim("model_offset_1e308", model_doc(setp("offset", 1e308)))
     sim("model_u_rest_1e300", model_doc(setp("u_rest", 1e300)))
     sim("model_rest_memory_nan", model_doc(setp("rest_memory", float("nan"))))
@@ -1550,6 +1586,8 @@ def add_compensate_cases() -> None:
         hints=("--out", "c.csv"))
     cli("comp_out_not_csv", ["compensate", "model.json", "--scan", "triangle:50:2", "--out",
                              "c.npz"], g, setup=base, hints=("--out", "c.npz"), expect="any")
+    comp("comp_reference_fifo", ["--reference", "p.csv"], ("p.csv",),
+         setup=both(base, fifo("p.csv")))
     comp("comp_reference_other_rate", ["--reference", "r10k.csv"], ("r10k.csv", "rate", "Hz"),
          setup=both(base, csv_arrays("r10k.csv", lambda: (np.arange(2000) / 1e4, BASE.u[::3],
                                                           BASE.y[::3]))))
@@ -1607,7 +1645,7 @@ def add_diagnose_cases() -> None:
         setup=lambda ws: (base(ws), (ws / "mine").mkdir(),
                           (ws / "mine/report.json").write_text("{}")),
         hints=("--out", "mine"))
-    diag("diag_record_constant_input", [], ("c.csv",), setup=csv_arrays(
+    diag("diag_record_constant_input", [], ("train.csv",), setup=csv_arrays(
         "train.csv", lambda: (BASE.t, np.full(6000, 3.0), BASE.y)))
 
 
@@ -1631,7 +1669,6 @@ def _absurd(doc: Any, path: str = "") -> list[str]:
 def judge_diag_sane(ws: Path, out: Outcome) -> tuple[str, str]:
     """A diagnosis of the base records: every share a share, every percentage printed below
     1000 %."""
-    import re
     bad: list[str] = []
     with contextlib.suppress(ValueError):
         bad = _absurd(json.loads(out.stdout))
@@ -1735,6 +1772,10 @@ def add_fleet_cases() -> None:
     for v in ("1", "nan"):
         cli(f"fleet_holdout_{v}", [*fl, "recs", "--out", "res", "--workers", "1",
                                    f"--holdout={v}"], g, setup=recs, hints=("--holdout",))
+    cli("fleet_source_fifo", [*fl, "p.csv", "--out", "res", "--workers", "1"], g,
+        setup=fifo("p.csv"), hints=("p.csv",), expect="any")
+    cli("fleet_out_fifo", [*fl, "recs", "--out", "p", "--workers", "1"], g,
+        setup=both(recs, fifo("p")), hints=("p", "--out"))
     cli("fleet_scheduler_unreachable", [*fl, "recs", "--out", "res", "--scheduler",
                                         "tcp://127.0.0.1:9"], g, setup=recs,
         hints=("--scheduler", "127.0.0.1"), quick=True)
