@@ -11,6 +11,7 @@ import json
 import os
 import struct
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -231,6 +232,21 @@ def test_a_too_short_val_record_is_named(train, tmp_path, capsys):
                         "--model", "duhem", "--quiet"], capsys)
     assert code == 2
     one_error_line(err, "--val", "v2.csv", "too short")
+
+
+def test_numeric_noise_of_the_baselines_fits_does_not_leak(tmp_path, capsys):
+    """An output of pure noise: the linear baseline's least squares overflows on the way (a
+    RuntimeWarning of scipy's); the command says what matters in its own lines only."""
+    rng = np.random.default_rng(11)
+    for name, seed in (("tr.csv", 0), ("va.csv", 1)):
+        rec = reference_record(0.2, seed=seed)
+        Record(rec.u, rng.normal(0.0, 1.0, rec.n), FS, name=name[:2]).save(tmp_path / name)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code, _, err = cli(["identify", tmp_path / "tr.csv", "--val", tmp_path / "va.csv",
+                            "--model", "duhem", "--quiet"], capsys)
+    assert code == 0 and "does not beat" in err
+    assert not [w for w in caught if "encountered" in str(w.message)]
 
 
 def test_a_model_that_beats_its_baselines_yet_explains_little_is_said(model, train):

@@ -380,9 +380,10 @@ def _identify(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():  # the fit's own checks report what these would mean
             warnings.filterwarnings("ignore", NUMERIC_NOISE, RuntimeWarning)
             result = _identify_record(train, args, progress, structure)
-        floor_set = [target, *repeats] if repeats else None
-        report, yhat, target = _report(result, train, target if val is not None or scored_from
-                                       is not None else None, args, scored_from, floor_set)
+            floor_set = [target, *repeats] if repeats else None  # the baselines' fits too
+            report, yhat, target = _report(result, train, target if val is not None or
+                                           scored_from is not None else None, args, scored_from,
+                                           floor_set)
     for w in report["warnings"]:
         if not args.json:
             tell(args, w, "warning")
