@@ -249,6 +249,18 @@ def test_numeric_noise_of_the_baselines_fits_does_not_leak(tmp_path, capsys):
     assert not [w for w in caught if "encountered" in str(w.message)]
 
 
+def test_the_drift_check_is_well_conditioned_in_any_time_unit():
+    from hystid.records_checks import output_is_drift
+
+    k = np.arange(6000.0)
+    y = 0.5 * k / 6000 + np.random.default_rng(3).normal(0.0, 1e-4, k.size)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's RankWarning for t in steps of 1e300 s
+        said = output_is_drift(k * 1e300, y)
+    assert said and "straight line in time (8.333e-305 per second)" in said[0]
+    assert "(2.5 per second)" in output_is_drift(k / 30_000, y)[0]
+
+
 def test_a_model_that_beats_its_baselines_yet_explains_little_is_said(model, train):
     from hystid.baselines import compare
 
