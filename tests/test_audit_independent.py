@@ -225,6 +225,15 @@ def test_a_val_or_repeat_record_in_other_units_is_refused(train, tmp_path, capsy
     one_error_line(err, "--repeat", "vnm.npz")
 
 
+def test_validating_on_the_record_itself_is_said(train, tmp_path, capsys):
+    train.save(tmp_path / "train.csv")
+    code, out, err = cli(["identify", tmp_path / "train.csv", "--val", tmp_path / "train.csv",
+                          "--model", "duhem", "--json"], capsys)
+    assert code == 0
+    assert any("is the identification record itself" in w
+               for w in json.loads(out)["warnings"])
+
+
 def test_a_too_short_val_record_is_named(train, tmp_path, capsys):
     train.save(tmp_path / "train.csv")
     (tmp_path / "v2.csv").write_text("t,u,y\n0,1,1\n3.3333333333333335e-05,2,2\n")

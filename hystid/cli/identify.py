@@ -279,6 +279,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
                                                                               object]:
     from ..baselines import compare, rest_zero, simulate_from_rest
     from ..metrics import validate
+    from ..safeio import same_file
 
     target = val if val is not None else rec
     k = scored_from
@@ -302,6 +303,11 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
     warnings_ = list(result.info.get("warnings", []))
     warnings_ += [f"on the validation input: {p}" for p in problems]
     warnings_ += baselines.notes
+    val_path, rec_path = getattr(args, "val", None), getattr(args, "record", None)
+    if val is not None and val_path and rec_path and same_file(val_path, rec_path):
+        warnings_.append(f"--val {val_path} is the identification record itself: these figures "
+                         "are not held out (without --val the record's end is held out, "
+                         "--holdout)")
     if not finite:
         warnings_.append("the model diverges on the validation input; its figures are not "
                          "reported")
