@@ -1110,7 +1110,9 @@ def add_identify_option_cases() -> None:
         replaceable=("mine/model.json",), expect="ok")
     opt("out_in_proc", ["--out", "/proc/hystid-audit"], ("/proc", "--out"))
     opt("out_under_file", ["--out", "train.csv/sub"], ("train.csv", "--out"))
-    opt("val_is_record", ["--val", "train.csv"], ("--val",), expect="any", judge=judge_fit())
+    opt("val_is_record", ["--val", "train.csv"], ("--val",), expect="any",
+        judge=judge_fit(need_warning=True),
+        what="--val the record itself: its figures are not held out, and must say so")
     opt("val_other_rate", ["--val", "v10k.csv"], ("--val", "v10k.csv", "rate", "fs"),
         setup=both(base, csv_arrays("v10k.csv", lambda: (np.arange(2000) / 1e4,
                                                          BASE.uv[::3], BASE.yv[::3]))))
