@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..options import MAX_SECONDS
-from .support import CommandError, bind, check_out, refused, run_command, tell
+from .support import CommandError, as_option, bind, check_out, refused, run_command, tell
 
 __all__ = ["HEADER", "configure_parser", "parse_scan", "run", "scan_for"]
 
@@ -258,8 +258,15 @@ def _compensate(args: argparse.Namespace) -> None:
         y_ref, label = _reference(args, model)
         smoother = None
         if args.smooth is not None:
-            with refused("--smooth: "):
-                smoother = smoothing_model(int(args.smooth), model.dt)
+            try:
+                window = int(args.smooth)
+            except ValueError:
+                raise CommandError(f"--smooth: expected an odd whole number of samples >= 3, "
+                                   f"got {args.smooth!r}") from None
+            try:
+                smoother = smoothing_model(window, model.dt)
+            except ValueError as err:  # even, shorter than 3 samples, longer than 1 s
+                raise CommandError(as_option(str(err), {"samples": "--smooth"})) from err
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             result = compensate(model, y_ref, u_limits=limits, margin=margin,
