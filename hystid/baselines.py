@@ -34,6 +34,11 @@ __all__ = ["BaselineComparison", "LinearModel", "StaticLine", "compare", "repeat
 #: record (its output-error fit makes hundreds of passes: 25 s for a million samples); its
 #: held-out figures are computed on the whole held-out record all the same.
 BASELINE_SAMPLES = 200_000
+#: A model that beats its baselines on a held-out record may still explain little of it (all
+#: three wrong: a record of another stage, an output drowned in noise, an output that leads
+#: its input): :func:`compare` says so when the model's held-out RMS exceeds this share of the
+#: held-out output's standard deviation (a fit below 50 %).
+POOR_FIT = 0.5
 
 
 @dataclass
@@ -304,7 +309,9 @@ class BaselineComparison:
     floor : float or None
         The repeat floor when repeats were given.
     notes : list of str
-        Sentences about the comparison (printed under the table).
+        Sentences about the comparison (printed under the table): a model that does not beat
+        a baseline, or that beats them and still explains little of the output
+        (:data:`POOR_FIT`).
     zero : {"rest", "model"}
         How the predictions were zeroed (:func:`compare`).
     """
@@ -425,5 +432,12 @@ def compare(model: Any, train: Record, records: Sequence[Record],
             notes.append(f"on {label!r} the hysteresis model ({rms:.4g}) does not beat "
                          f"the {'static line' if r_line <= r_lin else 'linear model'} "
                          f"({min(r_line, r_lin):.4g})")
+        elif rms > POOR_FIT * float(np.std(y)):
+            unit = f" {rec.units.get('y', '')}".rstrip()
+            notes.append(f"on {label!r} the hysteresis model explains little of the output "
+                         f"although it beats both baselines: its RMS error ({rms:.4g}{unit}) "
+                         f"is {100 * rms / float(np.std(y)):.0f} % of the output's standard "
+                         f"deviation ({float(np.std(y)):.4g}{unit}); is the record of this "
+                         "stage, its output driven by its input (not noise, not leading it)?")
     floor = repeat_floor(repeats) if repeats else None
     return BaselineComparison(rows, line, linear, floor, notes, zero)

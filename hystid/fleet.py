@@ -39,9 +39,9 @@ import numpy as np
 from .errors import FleetError, OutputError
 from .safeio import folder_lock
 
-__all__ = ["KINDS", "RECORD_SUFFIXES", "FailedSeed", "FleetError", "Job", "find_jobs",
-           "fleet_client", "map_seeds", "read_results", "result_paths", "run_fleet", "run_job",
-           "spawn_seeds"]
+__all__ = ["KINDS", "RECORD_SUFFIXES", "WORKERS_PER_CORE", "FailedSeed", "FleetError", "Job",
+           "find_jobs", "fleet_client", "map_seeds", "max_local_workers", "read_results",
+           "result_paths", "run_fleet", "run_job", "spawn_seeds"]
 
 #: What a fleet can do with each record.
 KINDS = ("identify", "diagnose")
@@ -58,6 +58,20 @@ BASE_COLUMNS = ("name", "status", "error", "train", "val", "held_out", "method",
 #: identification runs 1.6x slower (the allocator hands memory back to the system at every
 #: step). The local cluster unsets it; see the README for workers started by ``dask worker``.
 LOCAL_WORKER_ENV = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
+#: A local cluster starts at most this many worker processes per core of the machine (each
+#: imports hystid and numba's kernels; beyond a few per core they only wait for one another).
+WORKERS_PER_CORE = 4
+
+
+def max_local_workers() -> int:
+    """The most worker processes a local cluster starts on this machine.
+
+    Returns
+    -------
+    int
+        :data:`WORKERS_PER_CORE` times the machine's cores.
+    """
+    return WORKERS_PER_CORE * (os.cpu_count() or 1)
 
 
 # --------------------------------------------------------------------------- the records
@@ -354,7 +368,7 @@ def fleet_client(workers: int | None = None, scheduler: str | None = None,
     ----------
     workers : int, optional
         Worker processes of the local cluster (one thread each); the machine's cores by
-        default. Not allowed with ``scheduler``.
+        default, at most :func:`max_local_workers`. Not allowed with ``scheduler``.
     scheduler : str, optional
         Address of a running scheduler (``tcp://HOST:PORT``); its workers must see the
         records' paths and be able to import ``hystid``.
@@ -380,6 +394,11 @@ def fleet_client(workers: int | None = None, scheduler: str | None = None,
     n = int(workers) if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise FleetError(f"workers: expected at least 1, got {n}")
+    if n > max_local_workers():
+        raise FleetError(f"workers: {n} worker processes on a machine of {os.cpu_count()} "
+                         f"cores (expected at most {max_local_workers()}, {WORKERS_PER_CORE} a "
+                         "core; for more, start workers on other machines and give their "
+                         "scheduler)")
     import dask
 
     with warnings.catch_warnings(), dask.config.set({LOCAL_WORKER_ENV: None}):

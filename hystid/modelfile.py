@@ -47,6 +47,7 @@ from .document import (
 )
 from .model import DuhemSandwich, Structure
 from .operating import Envelope
+from .records.record import control_characters
 from .validate import check_model, check_structure_size
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -120,9 +121,7 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich | Mul
         "envelope": _envelope(doc.get("envelope"), where),
         "units": _units(doc.get("units"), where),
     }
-    params = doc.get("params")
-    if not isinstance(params, Mapping):
-        raise ModelFileError(f"{where}: 'params' must be a mapping of parameter names to numbers")
+    params = _params(doc.get("params"), where)
     try:
         if kind == "duhem":
             structure = Structure(**_structure(doc, _DUHEM_KEYS, where, _SHAPE_KEYS))
@@ -133,27 +132,22 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich | Mul
             from .mduhem import MultiDuhemSandwich, MultiDuhemStructure
 
             structure = MultiDuhemStructure(**_structure(doc, _MDUHEM_KEYS, where))
-            rates = doc.get("rates")
-            if not isinstance(rates, list) or not all(
-                    isinstance(r, int | float) and not isinstance(r, bool) for r in rates):
-                raise ModelFileError(f"{where}: 'rates' must be a list of numbers (a multi-Duhem "
-                                     "model's operator rates alpha_j)")
+            rates = _numbers(doc, "rates", where, "a multi-Duhem model's operator rates "
+                             "alpha_j")
             model = MultiDuhemSandwich(params, rates, structure, **common)
         else:
             from .pi import PISandwich, PIStructure
 
             structure = PIStructure(**_structure(doc, _PI_KEYS, where))
             check_structure_size(structure)
-            thresholds = doc.get("thresholds")
-            if not isinstance(thresholds, list):
-                raise ModelFileError(f"{where}: 'thresholds' must be a list of numbers (a PI "
-                                     "model's play-operator thresholds)")
+            thresholds = _numbers(doc, "thresholds", where, "a PI model's play-operator "
+                                  "thresholds")
             model = PISandwich(params, thresholds, structure, **common)
         check_model(model)
     except ModelFileError:
         raise
-    except (TypeError, ValueError) as err:
-        raise ModelFileError(f"{where}: {err}") from err
+    except (TypeError, ValueError, OverflowError) as err:  # OverflowError: an integer of 400
+        raise ModelFileError(f"{where}: {err}") from err     # digits in a list of numbers
     model.provenance = _provenance(doc.get("provenance"), where)
     if kind == "duhem":
         model = _with_effects(model, doc.get("effects"), where)
@@ -222,7 +216,32 @@ def _number(doc: Mapping[str, Any], key: str, where: str, default: float | None 
     value = doc.get(key, default)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ModelFileError(f"{where}: '{key}' must be a number, got {value!r}")
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError as err:  # an integer written with hundreds of digits
+        raise ModelFileError(f"{where}: '{key}' is an integer of {len(str(value))} digits "
+                             "(expected a number a float can hold)") from err
+
+
+def _numbers(doc: Mapping[str, Any], key: str, where: str, what: str) -> list[float]:
+    """The list of numbers ``doc[key]`` (JSON numbers; not true/false, not text), as floats."""
+    values = doc.get(key)
+    if not isinstance(values, list) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+        raise ModelFileError(f"{where}: '{key}' must be a list of numbers ({what})")
+    try:
+        return [float(v) for v in values]
+    except OverflowError as err:
+        raise ModelFileError(f"{where}: '{key}' holds an integer of hundreds of digits "
+                             "(expected numbers a float can hold)") from err
+
+
+def _params(data: Any, where: str) -> dict[str, float]:
+    """The ``params`` mapping: parameter names to numbers (JSON numbers; not true/false, not
+    text), each converted to a float."""
+    if not isinstance(data, Mapping):
+        raise ModelFileError(f"{where}: 'params' must be a mapping of parameter names to numbers")
+    return {str(key): _number(data, key, where) for key in data}
 
 
 def _structure(doc: Mapping[str, Any], keys: tuple[str, ...], where: str,
@@ -265,4 +284,8 @@ def _units(data: Any, where: str) -> dict[str, str] | None:
         return None
     if not isinstance(data, Mapping) or not all(isinstance(v, str) for v in data.values()):
         raise ModelFileError(f"{where}: 'units' must map signal names to strings, got {data!r}")
+    for key, value in data.items():
+        if control_characters(value):
+            raise ModelFileError(f"{where}: the unit of {key} is {value!r}, which holds control "
+                                 "characters (expected a plain unit name such as 'um')")
     return {str(k): v for k, v in data.items()}

@@ -136,10 +136,13 @@ class Envelope:
         Envelope
         """
         try:
-            return cls(float(data["u_min"]), float(data["u_max"]), float(data["slew"]))
-        except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"envelope: expected numbers u_min, u_max, slew, got {data!r}") \
-                from err
+            values = [data[k] for k in ("u_min", "u_max", "slew")]
+            if any(isinstance(v, bool | str | bytes) for v in values):  # not numbers, though
+                raise TypeError("true, false or text")              # float() takes them
+            return cls(*(float(v) for v in values))
+        except (KeyError, TypeError, ValueError, OverflowError) as err:
+            raise ValueError(f"envelope: expected numbers u_min, u_max, slew, got "
+                             f"{str(dict(data))[:120]}") from err
 
 
 def warn_admissibility(messages: list[str], name: str, stacklevel: int = 3) -> None:

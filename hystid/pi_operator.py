@@ -366,7 +366,11 @@ def _weights(weights, n: int) -> np.ndarray:
 def _initial_states(p0, n: int) -> np.ndarray:
     if p0 is None:
         return np.zeros(n)
-    p = np.array(p0, dtype=float).ravel()
+    try:
+        p = np.array(p0, dtype=float).ravel()
+    except (TypeError, ValueError, OverflowError) as err:
+        raise ValueError(f"p0: expected {n} finite operator states, got {p0!r:.60} ({err})") \
+            from err
     if p.shape != (n,) or not np.all(np.isfinite(p)):
         raise ValueError(f"p0: expected {n} finite operator states, got shape {p.shape}")
     return p

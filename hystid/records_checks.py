@@ -108,12 +108,14 @@ def output_is_drift(t: np.ndarray, y: np.ndarray) -> list[str]:
     """
     if len(y) < 8:
         return []
-    coef = np.polyfit(t - t[0], y, 1)
-    rest = y - np.polyval(coef, t - t[0])
+    k = np.arange(len(y), dtype=float)  # in samples: a line in any time unit is one in k
+    coef = np.polyfit(k, y, 1)
+    rest = y - np.polyval(coef, k)
     spread = float(np.ptp(y))
     left = float(np.quantile(np.abs(rest), 0.98))
     if spread > 0 and left < DRIFT_SHARE * spread:
-        return [f"the output is a straight line in time ({coef[0]:.4g} per second) to within "
+        per_second = coef[0] * (len(t) - 1) / (t[-1] - t[0]) if t[-1] > t[0] else coef[0]
+        return [f"the output is a straight line in time ({per_second:.4g} per second) to within "
                 f"{100 * left / spread:.2g} % of its range: it does not follow the input (is the "
                 "sensor recording the stage?); the identified model is not trustworthy"]
     return []

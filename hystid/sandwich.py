@@ -398,6 +398,9 @@ class Sandwich(Placed):
         from .response import SandwichResponse
 
         u = finite_signal(u, "u")
+        if x0 is not None and not isinstance(x0, InitialCondition):
+            raise TypeError(f"x0: expected a hystid.InitialCondition (past signal values) or "
+                            f"None (at rest), got {type(x0).__name__}")
         x0 = x0 or self.at_rest()
         P = self.structure.history
         U, W1, W2, Y = (

@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from .support import CommandError, bind, check_out, refused, run_command, tell
+from ..options import MAX_SECONDS
+from .support import CommandError, as_option, bind, check_out, refused, run_command, tell
 
 __all__ = ["HEADER", "configure_parser", "parse_scan", "run", "scan_for"]
 
@@ -121,7 +122,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="a triangle or sine scan, e.g. triangle:50:2 (AMP peak to peak in "
                         "the model's output units, about its output at rest)")
     parser.add_argument("--seconds", default="1", metavar="S",
-                        help="length of a --scan in seconds (default 1)")
+                        help=f"length of a --scan in seconds (default 1, at most "
+                        f"{MAX_SECONDS:g})")
     parser.add_argument("--fs", default=None, metavar="HZ",
                         help="sampling rate of --reference (if it has no t column or fs)")
     parser.add_argument("--columns", default=None, metavar="t=1,u=3,y=2",
@@ -202,6 +204,9 @@ def _reference(args: argparse.Namespace, model: Any) -> tuple[np.ndarray, str]:
         with refused("--scan: "):
             kind, hz, amp = parse_scan(args.scan)
         seconds = _number(args.seconds, "--scan: --seconds", minimum=0.0, strict=True)
+        if seconds > MAX_SECONDS:
+            raise CommandError(f"--seconds {args.seconds}: a scan of at most {MAX_SECONDS:g} s "
+                               "is made (expected a shorter --seconds)")
         with refused("--scan: "):
             return scan_for(model, kind, hz, amp, seconds), f"scan {args.scan}"
     from ..errors import RecordError
@@ -253,8 +258,15 @@ def _compensate(args: argparse.Namespace) -> None:
         y_ref, label = _reference(args, model)
         smoother = None
         if args.smooth is not None:
-            with refused("--smooth: "):
-                smoother = smoothing_model(int(args.smooth), model.dt)
+            try:
+                window = int(args.smooth)
+            except ValueError:
+                raise CommandError(f"--smooth: expected an odd whole number of samples >= 3, "
+                                   f"got {args.smooth!r}") from None
+            try:
+                smoother = smoothing_model(window, model.dt)
+            except ValueError as err:  # even, shorter than 3 samples, longer than 1 s
+                raise CommandError(as_option(str(err), {"samples": "--smooth"})) from err
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             result = compensate(model, y_ref, u_limits=limits, margin=margin,

@@ -18,7 +18,17 @@ from typing import TYPE_CHECKING
 
 from ..errors import DiagnosisError, OptionError, RecordError
 from ..options import crop, fraction, integer, number, parse_crop, parse_structure
-from .support import CommandError, bind, check_out, positive_arg, refused, run_command, tell
+from .support import (
+    CommandError,
+    as_option,
+    bind,
+    check_out,
+    positive_arg,
+    refused,
+    remember,
+    run_command,
+    tell,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..diagnose.final_model import FinalModel
@@ -147,6 +157,7 @@ def _load(path: str, args: argparse.Namespace, label: str) -> Record:
     with refused(errors=RecordError):
         rec = load_record(path, fs=args.fs, columns=_columns(args.columns),
                           units=_units(args.units))
+    remember(rec, path)  # its messages name the file too
     with refused(suffix=f" ({label})", errors=OptionError):
         rec = crop(rec, parse_crop(args.crop) if args.crop is not None else None)
     if args.u_scale != 1.0:
@@ -211,6 +222,12 @@ def _write(out: Path, report: dict, result: DiagnosisResult, final: FinalModel, 
         result.plot(stage)
 
 
+#: :func:`hystid.diagnose.diagnose`'s settings, as the options that set them.
+_OPTIONS = {"train_skip": "--train-skip", "holdout": "--holdout", "alpha": "--alpha",
+            "min_reduction": "--min-reduction", "max_rounds": "--max-rounds",
+            "time_budget": "--time-budget", "effects": "--effects", "initial": "--initial"}
+
+
 def _diagnose(args: argparse.Namespace) -> None:
     """``hystid diagnose``'s steps (see :func:`run`)."""
     from ..diagnose.diagnosis import DEFAULT_EFFECTS, diagnose
@@ -235,15 +252,22 @@ def _diagnose(args: argparse.Namespace) -> None:
         else:
             names = tuple(n.strip() for n in args.effects.split(",") if n.strip())
             strict = True
+            if not names:
+                raise CommandError(f"--effects {args.effects!r}: names no effect (expected "
+                                   "comma-separated families or forms, e.g. creep,drift; leave "
+                                   "--effects out for all of them)")
         model = _model(args.model, train.fs)
-        result = diagnose(
-            train, vals, model, structure=_structure(args.structure), effects=names,
-            holdout=args.holdout, alpha=args.alpha,
-            min_reduction=args.min_reduction, max_rounds=args.max_rounds,
-            train_skip=args.train_skip, initial=args.initial, refit_all=args.refit_all,
-            repeats=repeats, time_budget=args.time_budget,
-            require_excitation=strict, progress=not args.quiet,
-        )
+        try:
+            result = diagnose(
+                train, vals, model, structure=_structure(args.structure), effects=names,
+                holdout=args.holdout, alpha=args.alpha,
+                min_reduction=args.min_reduction, max_rounds=args.max_rounds,
+                train_skip=args.train_skip, initial=args.initial, refit_all=args.refit_all,
+                repeats=repeats, time_budget=args.time_budget,
+                require_excitation=strict, progress=not args.quiet,
+            )
+        except DiagnosisError as err:  # its settings said as the options that set them
+            raise DiagnosisError(as_option(str(err), _OPTIONS)) from err
         final = final_model(result, train, vals,
                             progress=None if args.quiet else (lambda m: tell(args, m)))
     report = result.to_dict()

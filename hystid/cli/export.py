@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from .support import CommandError, bind, run_command, tell
+from .support import CommandError, as_option, bind, run_command, tell
 
 __all__ = ["configure_parser", "run"]
 
@@ -132,13 +132,13 @@ def _export(args: argparse.Namespace) -> None:
                                  ("preview", args.preview), ("anchor", args.anchor))
                if v is not None}
     notes: list[str] = []
+    record = None
     try:
         model = load_model(args.model)
         if args.smooth is not None:
             from ..compensate import smoothing_model
 
             options["reference_model"] = smoothing_model(args.smooth, model.dt)
-        record = None
         if args.rpem_record is not None:
             from ..records import load_record
 
@@ -147,7 +147,10 @@ def _export(args: argparse.Namespace) -> None:
                          compensator=options or None, rpem_sigma=args.rpem_sigma,
                          rpem_record=record, notes=notes)
     except ValueError as err:  # a ModelFileError, an OutputError, the generator's refusals
-        raise CommandError(_one_line(str(err))) from err
+        message = _as_option(str(err))
+        if record is not None and message.startswith(f"record {record.name!r}"):
+            message = f"--rpem-record {args.rpem_record}: {message}"
+        raise CommandError(_one_line(message)) from err
     except OSError as err:
         raise CommandError(_one_line(
             f"--c {args.c_dir}: cannot write there ({err.strerror or err}"
@@ -156,6 +159,17 @@ def _export(args: argparse.Namespace) -> None:
         tell(args, note, "note")
     if not args.quiet:
         print("wrote " + ", ".join(str(p) for p in paths))
+
+
+#: The API's names of the compensator's and identifier's settings, as the options say them.
+_OPTIONS = {"preview": "--preview", "u_limits": "--u-limits", "margin": "--margin",
+            "samples": "--smooth", "sigma": "--rpem-sigma", "anchor": "--anchor"}
+
+
+def _as_option(message: str) -> str:
+    """A refusal of :func:`~hystid.export.c.export_c` that starts with a setting's API name
+    (``preview: ...``) said with the option's (``--preview: ...``)."""
+    return as_option(message, _OPTIONS)
 
 
 def _one_line(message: str) -> str:

@@ -34,6 +34,18 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _workers(text: str) -> int:
+    from ..fleet import WORKERS_PER_CORE, max_local_workers
+
+    value = _positive_int(text)
+    if value > max_local_workers():
+        raise argparse.ArgumentTypeError(
+            f"expected at most {max_local_workers()} ({WORKERS_PER_CORE} worker processes a "
+            f"core of this machine; for more, start workers elsewhere and give --scheduler), "
+            f"got {text!r}")
+    return value
+
+
 def _fraction(text: str) -> float:
     try:
         value = float(text)
@@ -67,7 +79,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder of the result table (<kind>.csv and <kind>.parquet)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=_positive_int, default=None, metavar="N",
+    where.add_argument("--workers", type=_workers, default=None, metavar="N",
                        help="worker processes of the local cluster (default: the machine's cores)")
     where.add_argument("--scheduler", type=_scheduler, default=None, metavar="tcp://HOST:PORT",
                        help="use a running Dask scheduler; its workers must see the records' "

@@ -279,6 +279,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
                                                                               object]:
     from ..baselines import compare, rest_zero, simulate_from_rest
     from ..metrics import validate
+    from ..safeio import same_file
 
     target = val if val is not None else rec
     k = scored_from
@@ -293,11 +294,20 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
                         repeats=repeats)
     k = k or 0
     finite = bool(np.all(np.isfinite(yhat[k:])))
-    validation = validate(target.y[k:], yhat[k:] if finite else np.zeros(target.n - k),
-                          target.fs)
+    try:
+        validation = validate(target.y[k:], yhat[k:] if finite else np.zeros(target.n - k),
+                              target.fs)
+    except ValueError as err:  # a validation record too short to score
+        where = f"--val {args.val}" if getattr(args, "val", None) else f"record {rec.name!r}"
+        raise ValueError(f"{where}: {err}") from err
     warnings_ = list(result.info.get("warnings", []))
     warnings_ += [f"on the validation input: {p}" for p in problems]
     warnings_ += baselines.notes
+    val_path, rec_path = getattr(args, "val", None), getattr(args, "record", None)
+    if val is not None and val_path and rec_path and same_file(val_path, rec_path):
+        warnings_.append(f"--val {val_path} is the identification record itself: these figures "
+                         "are not held out (without --val the record's end is held out, "
+                         "--holdout)")
     if not finite:
         warnings_.append("the model diverges on the validation input; its figures are not "
                          "reported")
@@ -363,6 +373,12 @@ def _identify(args: argparse.Namespace) -> int:
         if other is not None and not np.isclose(other.fs, rec.fs, rtol=1e-9):
             raise CommandError(f"{label}: fs {other.fs:g} Hz differs from {rec.fs:g} Hz "
                                f"of {args.record}")
+        if other is not None and other.units != rec.units:
+            raise CommandError(f"{label}: in u={other.units.get('u')}, y={other.units.get('y')} "
+                               f"but {args.record} in u={rec.units.get('u')}, "
+                               f"y={rec.units.get('y')} (expected records in one set of units: "
+                               "a model is scored in its record's; give the records in the "
+                               "same units, or --units when the files state them wrongly)")
     train, target, scored_from = _split_for_validation(rec, val, args)
     _check_skip(args, train, structure)
     progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
@@ -370,9 +386,10 @@ def _identify(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():  # the fit's own checks report what these would mean
             warnings.filterwarnings("ignore", NUMERIC_NOISE, RuntimeWarning)
             result = _identify_record(train, args, progress, structure)
-        floor_set = [target, *repeats] if repeats else None
-        report, yhat, target = _report(result, train, target if val is not None or scored_from
-                                       is not None else None, args, scored_from, floor_set)
+            floor_set = [target, *repeats] if repeats else None  # the baselines' fits too
+            report, yhat, target = _report(result, train, target if val is not None or
+                                           scored_from is not None else None, args, scored_from,
+                                           floor_set)
     for w in report["warnings"]:
         if not args.json:
             tell(args, w, "warning")

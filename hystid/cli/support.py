@@ -37,10 +37,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..records import Record
 
 __all__ = ["DEMO_KERNELS", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "RECORD_FILES", "UNITS_HELP",
-           "CommandError", "OneLineParser", "Progress", "bind", "check_model_on", "check_out",
-           "check_seconds", "columns_arg", "file_arg", "for_cli", "jsonable", "kernels_cached",
-           "load", "non_negative_arg", "one_of", "positive_arg", "refused", "remember",
-           "run_command", "seconds_arg", "seed_arg", "table", "tell", "units_arg"]
+           "CommandError", "OneLineParser", "Progress", "as_option", "bind", "check_model_on",
+           "check_out", "check_seconds", "columns_arg", "file_arg", "for_cli", "jsonable",
+           "kernels_cached", "load", "non_negative_arg", "one_of", "positive_arg", "refused",
+           "remember", "run_command", "seconds_arg", "seed_arg", "table", "tell", "units_arg"]
 
 #: Exit status of a refused input or a failed write.
 EXIT_BAD_INPUT = 2
@@ -134,6 +134,26 @@ def refused(prefix: str = "", suffix: str = "",
         yield
     except errors as err:
         raise CommandError(f"{prefix}{err}{suffix}") from err
+
+
+def as_option(message: str, options: dict[str, str]) -> str:
+    """A library message that starts with a setting's Python name (``train_skip: ...``) said
+    with the option's (``--train-skip: ...``).
+
+    Parameters
+    ----------
+    message : str
+        The message.
+    options : dict
+        Python name to option, e.g. ``{"train_skip": "--train-skip"}``.
+
+    Returns
+    -------
+    str
+        The message, its first word replaced when it is one of ``options``.
+    """
+    head, sep, rest = message.partition(":")
+    return f"{options[head]}:{rest}" if sep and head in options else message
 
 
 def tell(args: argparse.Namespace, message: str, kind: str = "") -> None:

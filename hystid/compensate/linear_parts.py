@@ -116,6 +116,10 @@ def dc_delay(reference_model: ct.LTI | str | None) -> int:
     return max(int(round(tau)), 0)
 
 
+#: Longest reference smoother :func:`smoothing_model` makes, in seconds.
+MAX_SMOOTH_SECONDS = 1.0
+
+
 def smoothing_model(samples: int, dt: float) -> ct.TransferFunction:
     """A linear-phase smoother for references with corners (triangles): a Hann-window FIR.
 
@@ -128,7 +132,8 @@ def smoothing_model(samples: int, dt: float) -> ct.TransferFunction:
     Parameters
     ----------
     samples : int
-        Odd window length ``L >= 3``.
+        Odd window length ``L >= 3``, spanning at most :data:`MAX_SMOOTH_SECONDS` (and at
+        least 3 samples whatever ``dt``).
     dt : float
         Sampling period in seconds.
 
@@ -136,9 +141,25 @@ def smoothing_model(samples: int, dt: float) -> ct.TransferFunction:
     -------
     control.TransferFunction
         Unit static gain, ``(L-1)/2`` samples of delay.
+
+    Raises
+    ------
+    ValueError
+        For a window that is not odd, shorter than 3 samples or longer than
+        :data:`MAX_SMOOTH_SECONDS`.
     """
-    if int(samples) != samples or samples < 3 or samples % 2 == 0:
+    if not (isinstance(samples, int | np.integer | float) and not isinstance(samples, bool)) \
+            or int(samples) != samples or samples < 3 or samples % 2 == 0:
         raise ValueError(f"samples: expected an odd window length >= 3, got {samples!r}")
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt: expected a positive sampling period in seconds, got {dt!r}")
+    whole = int(round(MAX_SMOOTH_SECONDS / dt))
+    longest = max(3, whole if whole % 2 else whole - 1)
+    if samples > longest:
+        raise ValueError(f"samples: a window of {int(samples)} samples spans "
+                         f"{samples * dt:.3g} s (expected at most {MAX_SMOOTH_SECONDS:g} s, "
+                         f"{longest} samples at {1 / dt:g} Hz: a smoother longer than that "
+                         "flattens the scan it smooths)")
     L = int(samples)
     h = np.hanning(L + 2)[1:-1]
     h /= h.sum()

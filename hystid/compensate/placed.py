@@ -266,11 +266,16 @@ def _plan(model: Any, *, u_limits: tuple[float, float] | None = None,
         if not hasattr(model, name):
             raise ValueError(f"model: expected an identified sandwich model (no {name!r}), got "
                              f"{model!r}")
-    try:
-        limits = envelope_limits(model, margin) if u_limits is None else \
-            tuple(float(v) for v in u_limits)
-    except TypeError as err:
-        raise ValueError(f"u_limits: expected (low, high), got {u_limits!r}") from err
+    if u_limits is None:
+        limits = envelope_limits(model, margin)
+    else:
+        try:
+            if isinstance(u_limits, str | bytes):
+                raise TypeError("text")
+            limits = tuple(float(v) for v in u_limits)
+        except (TypeError, ValueError, OverflowError) as err:
+            raise ValueError(f"u_limits: expected two numbers (low, high), got "
+                             f"{u_limits!r}") from err
     if len(limits) != 2 or not (np.all(np.isfinite(limits)) and limits[0] < limits[1]):
         raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")
     if anchor not in ("model", "reference"):

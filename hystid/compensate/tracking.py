@@ -11,6 +11,10 @@ from ..signals import finite_signal
 
 __all__ = ["ScanReference", "TrackingMetrics", "scan_reference", "tracking_metrics"]
 
+#: Most samples :func:`scan_reference` makes (400 MB a signal): a longer scan is refused
+#: before anything is allocated.
+MAX_SCAN_SAMPLES = 50_000_000
+
 
 @dataclass
 class ScanReference:
@@ -80,6 +84,12 @@ def scan_reference(
     -------
     ScanReference
         Time, desired output and the samples to skip in the tracking figures.
+
+    Raises
+    ------
+    ValueError
+        For a kind, frequency, rate, duration or range it cannot scan, or a scan of more than
+        :data:`MAX_SCAN_SAMPLES` samples.
     """
     if kind not in ("triangle", "sine"):
         raise ValueError(f"kind: expected 'triangle' or 'sine', got {kind!r}")
@@ -94,6 +104,10 @@ def scan_reference(
     n_rest = int(round(rest * fs))
     n_lead = int(round(lead_in * fs))
     n_scan = int(round(periods * fs / frequency))
+    if n_rest + n_lead + n_scan > MAX_SCAN_SAMPLES:
+        raise ValueError(f"periods: {periods:g} periods at {frequency:g} Hz and {fs:g} Hz make "
+                         f"{n_rest + n_lead + n_scan:,} samples (expected at most "
+                         f"{MAX_SCAN_SAMPLES:,})")
     ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(n_lead) / max(n_lead, 1))
     phase = (np.arange(n_scan) * frequency / fs) % 1.0
     if kind == "triangle":

@@ -72,6 +72,7 @@ __all__ = [
     "ALIKE",
     "DEFAULT_EFFECTS",
     "IN_NOMINAL",
+    "MAX_ROUNDS",
     "MIN_TRAIN_SAMPLES",
     "MIN_VAL_SAMPLES",
     "DiagnosisError",
@@ -79,6 +80,9 @@ __all__ = [
     "EffectOutcome",
     "diagnose",
 ]
+
+#: Most greedy rounds a diagnosis runs (``max_rounds``; ``hystid diagnose --max-rounds``).
+MAX_ROUNDS = 20
 
 # --------------------------------------------------------------------------- main entry
 def diagnose(
@@ -136,7 +140,7 @@ def diagnose(
     min_reduction : float
         Smallest relative reduction of the held-out RMS worth having (0.02 = 2 %).
     max_rounds : int
-        Greedy rounds at most.
+        Greedy rounds at most (1 to :data:`MAX_ROUNDS`).
     transient : float
         Seconds dropped at the start of each separate held-out record (the paper's 0.0017 s).
     train_skip : float
@@ -196,6 +200,10 @@ def diagnose(
         raise DiagnosisError(f"initial: expected 'auto', 'rest' or 'level', got {initial!r}")
     if not 0 < alpha < 1:
         raise DiagnosisError(f"alpha: expected a level in (0, 1), got {alpha}")
+    if isinstance(max_rounds, bool) or not isinstance(max_rounds, int | np.integer) \
+            or not 1 <= max_rounds <= MAX_ROUNDS:
+        raise DiagnosisError(f"max_rounds: expected a whole number of rounds in 1..{MAX_ROUNDS}, "
+                             f"got {max_rounds!r}")
     if not 0 <= min_reduction < 1:
         raise DiagnosisError(f"min_reduction: expected a fraction in [0, 1), got {min_reduction}")
     if refit_samples is not None and refit_samples < MIN_TRAIN_SAMPLES:

@@ -35,6 +35,10 @@ __all__ = ["FINAL_MEMBERS", "FinalModel", "final_model"]
 FINAL_MEMBERS = ("pi-stage",)
 #: A candidate replaces a simpler one only when it is better by more than this share.
 MARGIN = 0.1
+#: A nominal model whose held-out RMS is within this factor of the floor is at the floor: the
+#: summary then compares the candidates with its RMS instead of giving shares of a gap of
+#: nothing (the localisation's "nothing to localise" uses the same factor).
+AT_FLOOR = 1.05
 
 
 @dataclass
@@ -94,11 +98,17 @@ class FinalModel:
                  "and zeroed on its rest output, as hystid.baselines.compare scores; the rounds "
                  "above score after the transient, from the record's level, so their RMS and "
                  "gap closed differ for the same model):"]
+        nominal = self.rows[0]["mean_rms"]
+        at_floor = nominal <= AT_FLOOR * self.floor
+        if at_floor:  # a share of a gap this small would say -900000 % for a worse candidate
+            lines.append(f"  (the nominal model is at the floor of {self.floor:.4g} {unit}: no "
+                         "gap to close; each candidate is compared with the nominal's RMS)")
         for r in self.rows:
             mark = "  <- model.json" if r["candidate"] == self.chosen else ""
-            lines.append(f"  {r['candidate']:<28} {r['mean_rms']:.4g} {unit}, "
-                         f"{100 * r['gap_closed']:.0f} % of the gap to the floor "
-                         f"({self.floor:.4g} {unit}){mark}")
+            how = (f"{r['mean_rms'] / nominal:.3g} x the nominal's RMS" if at_floor else
+                   f"{100 * r['gap_closed']:.0f} % of the gap to the floor "
+                   f"({self.floor:.4g} {unit})")
+            lines.append(f"  {r['candidate']:<28} {r['mean_rms']:.4g} {unit}, {how}{mark}")
         lines.append(self.verdict)
         return lines
 

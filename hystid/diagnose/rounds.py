@@ -95,10 +95,17 @@ def _check_inputs(train: Record, vals: list[Record], holdout: float, transient: 
     if not isinstance(train, Record):
         raise DiagnosisError(f"train: expected a Record, got {type(train).__name__}")
     for i, v in enumerate(vals):
+        if not isinstance(v, Record):
+            raise DiagnosisError(f"val[{i}]: expected a Record, got {type(v).__name__}")
         if not np.isclose(v.fs, train.fs, rtol=1e-9):
             raise DiagnosisError(
                 f"val[{i}] {v.name!r}: sampling rate {v.fs:g} Hz differs from the train record's "
                 f"{train.fs:g} Hz (expected the same rate)")
+        if v.units != train.units:
+            raise DiagnosisError(
+                f"val[{i}] {v.name!r}: in u={v.units.get('u')}, y={v.units.get('y')} but the "
+                f"train record in u={train.units.get('u')}, y={train.units.get('y')} (expected "
+                "records in one set of units)")
     if vals:
         if train.n < MIN_TRAIN_SAMPLES:
             raise DiagnosisError(
@@ -604,10 +611,13 @@ def describe_unexplained(where: Where, floor: float) -> dict[str, Any]:
                     f"({1 / h['f0_hz']:.4g} s)")
     text.append(f"worst zone: {z['by']} in [{z['bin'][0]:.3g}, {z['bin'][1]:.3g}] "
                 f"({z['rms_ratio']:.1f}x the overall RMS)")
-    text.append(f"branches: loop-width part {100 * b['width_fraction']:.0f} %, common part "
-                f"{100 * b['common_fraction']:.0f} % of the excess")
+    if excess > 0:
+        text.append(f"branches: loop-width part {100 * b['width_fraction']:.0f} %, common part "
+                    f"{100 * b['common_fraction']:.0f} % of the excess")
+    else:
+        text.append("branches: no error above the floor to share between them")
     turning = b.get("turning", {})
-    if np.isfinite(turning.get("rms_ratio", np.nan)):
+    if excess > 0 and np.isfinite(turning.get("rms_ratio", np.nan)):
         text.append(f"after the input's turning points ({100 * turning['share_samples']:.0f} % "
                     f"of the samples): RMS {turning['rms_ratio']:.2g}x the rest's, "
                     f"{100 * turning['excess_share']:.0f} % of the excess")

@@ -419,7 +419,10 @@ def _time_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
     trend = np.concatenate([_poly_trend(a, s.t0 + np.arange(s.n) / fs)
                             for a, s in zip(e_ap, segs, strict=True)])
     var_e = float(np.mean((e - e.mean()) ** 2)) + e.mean() ** 2
-    excess = max(var_e - noise**2, 1e-300)
+    excess = var_e - noise**2  # the shares below are of it: none when the error is all noise
+
+    def share(power: float) -> float:
+        return min(power / excess, 1.0) if excess > 0 else 0.0
     slope = np.polyfit(t, np.concatenate(e_ap), 1)[0] if n > 2 else 0.0
     # step-aligned averages: e after input steps, signed by the step direction
     u = np.concatenate([s.u for s in segs])
@@ -452,9 +455,9 @@ def _time_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
         "time_of_max_s": float(t[int(np.argmax(roll))]),
         "first_tenth_rms": early,
         "mean": float(e.mean()),
-        "mean_fraction": float(e.mean() ** 2 / excess),
+        "mean_fraction": share(float(e.mean() ** 2)),
         "trend_rms": float(np.sqrt(np.mean(trend**2))),
-        "trend_fraction": float(np.mean(trend**2) / excess),
+        "trend_fraction": share(float(np.mean(trend**2))),
         "slope_per_s": float(slope),
         "steps": len(steps),
         "step_error_peak": float(np.max(np.abs(step_avg))) if len(steps) >= 5 else 0.0,
@@ -643,15 +646,19 @@ def _branch_view(segs: list[Segment], noise: float) -> tuple[dict, dict]:
         comp_c[m] = common[i]
         comp_w[m & up] = width[i]
         comp_w[m & down] = -width[i]
-    excess = max(float(np.mean(e**2)) - noise**2, 1e-300)
+    # shares of the error power above the noise floor: none when there is none (the branch
+    # means carry noise too, so their powers may add up to more than a small excess)
+    excess = float(np.mean(e**2)) - noise**2
+    parts = float(np.mean(comp_w**2) + np.mean(comp_c**2))
+    share = max(excess, parts) if excess > 0 else np.inf
     view = {
         "y_edges": [float(v) for v in edges],
         "ascending_mean": [None if not np.isfinite(v) else float(v) for v in asc],
         "descending_mean": [None if not np.isfinite(v) else float(v) for v in desc],
         "common_rms": float(np.sqrt(np.mean(comp_c**2))),
         "width_rms": float(np.sqrt(np.mean(comp_w**2))),
-        "width_fraction": float(np.mean(comp_w**2) / excess),
-        "common_fraction": float(np.mean(comp_c**2) / excess),
+        "width_fraction": float(np.mean(comp_w**2) / share),
+        "common_fraction": float(np.mean(comp_c**2) / share),
         "turning": _after_turning_points(segs, noise),
     }
     series = {"edges": edges, "ascending": asc, "descending": desc,

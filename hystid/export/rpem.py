@@ -112,7 +112,8 @@ def rpem_start(
     model : DuhemSandwich
         The model to start from.
     record : Record, optional
-        A record of the stage for the starting information and residual scale.
+        A record of the stage for the starting information and residual scale, of at least
+        the identifier's ``n_start`` samples.
     sigma : float, optional
         Initial residual scale (output units; step 2 clips at ``clip`` times it); by default
         the model's RMS error on ``record``, else a thousandth of the output span the model's
@@ -135,6 +136,11 @@ def rpem_start(
         if not np.isclose(float(record.fs), model.fs, rtol=1e-9):
             raise ValueError(f"record: sampled at {float(record.fs):g} Hz, the model at "
                              f"{model.fs:g} Hz")
+        if record.n < ident.n_start:
+            raise ValueError(f"record {record.name!r}: {record.n} samples are too few for the "
+                             f"identifier's starting covariance (expected at least "
+                             f"{ident.n_start}, the samples its own start-up solve takes; "
+                             f"{INFORMATION_SAMPLES} are used)")
         m = INFORMATION_SAMPLES
         P, measured = warm_information(model, record.u[:m], record.y[:m])
     else:

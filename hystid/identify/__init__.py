@@ -98,6 +98,9 @@ def identify(
     taken from the leading rest segment (see :mod:`hystid.identify.prepare`).
     """
     _check_call(record, structure)
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress: expected a callable progress(k, n) or None, got "
+                        f"{type(progress).__name__} {progress!r:.40}")
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     from .prepare import without_input_glitches

@@ -43,12 +43,18 @@ def initial_theta(structure: Structure, theta0: float | dict | np.ndarray) -> np
         The start vector in the order of ``structure.names``.
     """
     names = structure.names
-    if np.isscalar(theta0):
-        theta = np.full(len(names), float(theta0))
-    elif isinstance(theta0, dict):
-        return DuhemSandwich(theta0, structure).theta
-    else:
-        theta = np.asarray(theta0, dtype=float).ravel()
+    try:
+        if np.isscalar(theta0):
+            theta = np.full(len(names), float(theta0))
+        elif isinstance(theta0, dict):
+            return DuhemSandwich(theta0, structure).theta
+        else:
+            theta = np.asarray(theta0, dtype=float).ravel()
+    except (TypeError, ValueError, OverflowError) as err:
+        if str(err).startswith("theta0"):
+            raise
+        raise ValueError(f"theta0: expected a finite scalar or {len(names)} values "
+                         f"{list(names)}, got {theta0!r} ({err})") from err
     if theta.shape != (len(names),) or not np.all(np.isfinite(theta)):
         raise ValueError(f"theta0: expected a finite scalar or {len(names)} values {list(names)}")
     return theta

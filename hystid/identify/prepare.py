@@ -51,6 +51,13 @@ FAR_SPREADS = 3.0
 JUMP_SLEWS = 10.0
 #: Share of samples pinned at an extreme for the sensor to count as saturated.
 SATURATION_SHARE = 0.005
+#: Range of the input's scale (:func:`scales`) a record may have in its own units: the
+#: identified parameters scale with powers of it (``alpha / u_scale``, ``f3 y_scale /
+#: u_scale**3``), so a record in 1e-300 V divides by a cube that is zero, and one far beyond
+#: this range gives numbers a model file does not hold (:data:`hystid.validate.MAX_MAGNITUDE`).
+#: Any unit a stage is driven in lies well inside. (The output's scale enters the parameters
+#: linearly: an output in 1e-300 um is identified like one in um.)
+SCALE_RANGE = (1e-90, 1e90)
 
 
 @dataclass
@@ -375,6 +382,17 @@ def burn_in(u: np.ndarray, at_rest: bool, limit: float = 0.25, sweeps: float = 2
     return min(k, int(limit * len(u)))
 
 
+def _check_scales(record: Record, u_scale: float) -> None:
+    """Refuse a record whose input spreads outside :data:`SCALE_RANGE`."""
+    low, high = SCALE_RANGE
+    if not low <= u_scale <= high:
+        unit = record.units.get("u", "")
+        raise IdentificationDataError(
+            f"record {record.name!r}: the input u spreads over {u_scale:.3g} {unit} (expected "
+            f"a spread between {low:g} and {high:g} in the record's units: the parameters "
+            "scale with its powers; give the record in other units)")
+
+
 def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     """Run the preparation steps of this module on a record.
 
@@ -392,12 +410,14 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     Raises
     ------
     IdentificationDataError
-        When the record cannot identify a stage (see :func:`check_excitation`).
+        When the record cannot identify a stage (see :func:`check_excitation`), or its input
+        spreads outside :data:`SCALE_RANGE`.
     """
     check_excitation(record)
     u, y = record.u, record.y
     u_rest, at_rest, n_lead = rest_level(u)
     u_scale, y_med, y_scale = scales(u, y, u_rest)
+    _check_scales(record, u_scale)
     bad, notes = bad_samples(y)
     notes += record_warnings(u, y, record.fs)
     for first, stop in burst_spans(u, y):

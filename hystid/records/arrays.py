@@ -40,9 +40,26 @@ class _Arrays:
     name: str | None = None
     units: dict[str, str] | None = None
     default_name: str = "record"
+    units_stored: Any = None  # the file's own 'units' entry, as stored
 
 
-def _record_from_arrays(src: _Arrays, fs: float | None, name: str | None) -> Record:
+def _check_stored_units(src: _Arrays, units_given: bool) -> None:
+    """Refuse a ``units`` entry the file holds but :func:`_units` cannot read, unless the
+    caller states the units itself (then the entry is not needed)."""
+    if units_given or src.units is not None or src.units_stored is None:
+        return
+    text = _text(src.units_stored)
+    shown = repr(text)[:80] if text is not None else \
+        f"an array of shape {np.shape(src.units_stored)}"
+    raise RecordError(f"its 'units' entry is {shown}, which hystid cannot read (expected the "
+                      "text of a JSON mapping such as {\"u\": \"V\", \"y\": \"um\"}); state "
+                      "the units with units= (--units u=V,y=um on the command line)",
+                      file=src.file)
+
+
+def _record_from_arrays(src: _Arrays, fs: float | None, name: str | None,
+                        units_given: bool = False) -> Record:
+    _check_stored_units(src, units_given)
     vectors = {role: _as_vector(values, src, role) for role, values in src.arrays.items()}
     lengths = {src.labels[role]: v.size for role, v in vectors.items()}
     if len(set(lengths.values())) > 1:
@@ -201,10 +218,13 @@ _ARCHIVE_ERRORS: tuple[type[BaseException], ...] = (OSError, ValueError, EOFErro
 
 
 def _archive_errors() -> tuple[type[BaseException], ...]:
+    import lzma
     import zipfile
     import zlib
 
-    return (*_ARCHIVE_ERRORS, zipfile.BadZipFile, zlib.error, RuntimeError, NotImplementedError)
+    # lzma.LZMAError: a member that claims LZMA compression with options the module refuses
+    return (*_ARCHIVE_ERRORS, zipfile.BadZipFile, zlib.error, lzma.LZMAError, RuntimeError,
+            NotImplementedError)
 
 
 def _read_npz(file: str, roles: dict[str, str | int]) -> _Arrays:
@@ -241,6 +261,7 @@ def _read_npz(file: str, roles: dict[str, str | int]) -> _Arrays:
         extra = {key: fetch(key) for key in ("fs", "name", "units") if key in found}
     return _Arrays(file, "array", arrays, labels, fs=extra.get("fs"),
                    name=_text(extra.get("name")), units=_units(extra.get("units")),
+                   units_stored=extra.get("units"),
                    default_name=Path(file).stem)
 
 
@@ -270,6 +291,7 @@ def _read_mat(file: str, roles: dict[str, str | int]) -> _Arrays:
     arrays, labels = _collect(file, "variable", names, found, content.__getitem__)
     return _Arrays(file, "variable", arrays, labels, fs=content.get("fs"),
                    name=_text(content.get("name")), units=_units(content.get("units")),
+                   units_stored=content.get("units"),
                    default_name=Path(file).stem)
 
 
@@ -339,7 +361,11 @@ def _h5_node(handle: Any, group: str | None, file: str) -> Any:
             raise RecordError(f"group {part!r} is an external link to {link.filename}:"
                               f"{link.path} (refused: a record is read from its own file only)",
                               file=file)
-        node = node.get(part) if link is not None else None
+        try:
+            node = node.get(part) if link is not None else None
+        except (RuntimeError, KeyError, OSError) as err:  # a soft link in a loop
+            raise RecordError(f"group {part!r} is a link that cannot be followed ({err})",
+                              file=file) from err
         if node is None:
             break
     return node
@@ -353,7 +379,14 @@ def _h5_dataset(node: Any, key: str, file: str) -> Any:
     if isinstance(link, h5py.ExternalLink):
         raise RecordError(f"dataset {key!r} is an external link to {link.filename}:{link.path} "
                           "(refused: a record is read from its own file only)", file=file)
-    dset = node[key]
+    try:
+        dset = node[key]
+    except (RuntimeError, KeyError, OSError) as err:  # a soft link in a loop, or dangling
+        raise RecordError(f"dataset {key!r} is a link that cannot be followed ({err})",
+                          file=file) from err
+    if not isinstance(dset, h5py.Dataset):
+        raise RecordError(f"{key!r} is a {type(dset).__name__.lower()}, not a dataset "
+                          "(expected a dataset of numbers)", file=file)
     if dset.external:
         raise RecordError(f"dataset {key!r} keeps its data in external files "
                           f"{[e[0] for e in dset.external]} (refused: a record is read from its "
@@ -406,6 +439,7 @@ def _read_h5(file: str, group: str | None, roles: dict[str, str | int]) -> _Arra
     default = Path(file).stem + (f":{group}" if group else "")
     return _Arrays(where, "dataset", arrays, labels, fs=fs, fs_label=fs_label,
                    name=_text(attrs.get("name")), units=_units(attrs.get("units")),
+                   units_stored=attrs.get("units"),
                    default_name=default)
 
 
@@ -416,4 +450,7 @@ def _h5_is_dataset(node: Any, key: str) -> bool:
     link = node.get(key, getlink=True)
     if isinstance(link, h5py.ExternalLink):
         return True
-    return isinstance(node.get(key), h5py.Dataset)
+    try:
+        return isinstance(node.get(key), h5py.Dataset)
+    except (RuntimeError, KeyError, OSError):  # a soft link that cannot be followed
+        return isinstance(link, h5py.SoftLink)  # refused with the reason when it is used

@@ -17,6 +17,7 @@ from .record import (
     _SUFFIXES,
     Record,
     _unknown_extension,
+    control_characters,
 )
 
 
@@ -68,8 +69,10 @@ def parse_units(text: str) -> dict[str, str]:
     out: dict[str, str] = {}
     for part in text.split(","):
         role, sep, unit = (s.strip() for s in part.partition("="))
-        if not sep or role not in ("u", "y") or not unit or role in out:
-            raise ValueError(f"expected u=UNIT,y=UNIT (each at most once) like u=V,y=um, got "
+        if not sep or role not in ("u", "y") or not unit or role in out \
+                or control_characters(unit):
+            raise ValueError(f"expected u=UNIT,y=UNIT (each at most once, plain names without "
+                             f"control characters) like u=V,y=um, got "
                              f"{text!r}")
         out[role] = unit
     return out
@@ -103,7 +106,7 @@ def load_record(
 
     Parameters
     ----------
-    path : str or os.PathLike
+    path : str, bytes or os.PathLike
         The file. ``.csv`` and ``.txt``: delimited text; ``.npz``; ``.mat``; ``.h5`` and
         ``.hdf5``, where ``file.h5:group/path`` reads the datasets of that group.
     fs : float, optional
@@ -146,7 +149,12 @@ def load_record(
     row has as many fields as the header (or as the first row when there is no header); values
     of the used columns must be finite numbers, unused columns may hold anything (even nothing).
     """
+    if not isinstance(path, str | bytes | os.PathLike):
+        raise TypeError(f"path: expected a file name (str, bytes or os.PathLike), got "
+                        f"{type(path).__name__} {path!r:.40}")
     text = os.fspath(path)
+    if isinstance(text, bytes):  # a path of bytes, as os functions take them
+        text = os.fsdecode(text)
     file, group = _split_h5_group(text)
     suffix = Path(file).suffix.lower()
     if Path(file).is_dir():
@@ -154,7 +162,9 @@ def load_record(
     if suffix not in _SUFFIXES:
         raise RecordError(_unknown_extension(suffix), file=text)
     if not Path(file).is_file():
-        reason = "is a directory" if Path(file).is_dir() else "does not exist"
+        reason = ("is a directory" if Path(file).is_dir() else
+                  "is not a regular file (a FIFO, a device or a socket)" if Path(file).exists()
+                  else "does not exist")
         raise RecordError(f"file {reason} (expected a record file)", file=file)
     roles = _check_columns(columns, text)
     stated = _check_units(units, text)
@@ -167,7 +177,7 @@ def load_record(
             source = _read_mat(file, roles)
         else:
             source = _read_h5(file, group, roles)
-        rec = _record_from_arrays(source, fs, name)
+        rec = _record_from_arrays(source, fs, name, units_given=bool(stated))
     if stated:
         rec.units = {**rec.units, **stated}
     return rec
@@ -177,7 +187,8 @@ def _check_units(units: Mapping[str, str] | None, where: str) -> dict[str, str]:
     if units is None:
         return {}
     if not isinstance(units, Mapping) or not set(units) <= {"u", "y"} or not all(
-            isinstance(v, str) and v.strip() for v in units.values()):
+            isinstance(v, str) and v.strip() and not control_characters(v)
+            for v in units.values()):
         raise RecordError(f"units={units!r} (expected a mapping of 'u' and/or 'y' to unit "
                           "names, e.g. {'u': 'N', 'y': 'm'})", file=where)
     return {k: v.strip() for k, v in units.items()}

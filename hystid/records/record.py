@@ -42,6 +42,30 @@ _META_RE = re.compile(r"name=(?P<name>.*), fs=(?P<fs>[^,]*), units(?P<units>.*)$
 Locator = Callable[[int], dict[str, Any]]
 
 
+def control_characters(text: str) -> bool:
+    """Whether a label holds control characters (a line break, an escape sequence).
+
+    A unit or a name is written into files' header lines and printed on terminals: a line break
+    there would end the header line early, an escape sequence would drive the terminal.
+
+    Parameters
+    ----------
+    text : str
+        The label.
+
+    Returns
+    -------
+    bool
+        True when any character is a control character (Unicode category Cc).
+    """
+    return any(ord(c) < 32 or 127 <= ord(c) < 160 for c in text)
+
+
+def _printable(text: str) -> str:
+    """``text`` with every run of whitespace or control characters made one space."""
+    return " ".join("".join(" " if control_characters(c) else c for c in text).split())
+
+
 # --------------------------------------------------------------------------- the record
 @dataclass(eq=False, repr=False)
 class Record:
@@ -93,6 +117,10 @@ class Record:
         if not isinstance(self.units, Mapping):
             raise RecordError(f"{where}: units must be a mapping such as {_DEFAULT_UNITS!r}")
         self.units = {str(key): str(value) for key, value in self.units.items()}
+        for key, value in self.units.items():
+            if control_characters(value):
+                raise RecordError(f"{where}: the unit of {key} is {value!r}, which holds control "
+                                  "characters (expected a plain unit name such as 'um')")
 
     # ----------------------------------------------------------------------- properties
     @property
@@ -287,8 +315,9 @@ def _unknown_extension(suffix: str) -> str:
 
 # --------------------------------------------------------------------------- writers
 def _meta_line(rec: Record) -> str:
-    name = " ".join(rec.name.splitlines())
-    units = " ".join(f"{key}={value.replace(' ', '_')}" for key, value in rec.units.items())
+    name = _printable(rec.name)
+    units = " ".join(f"{key}={_printable(value).replace(' ', '_')}"
+                     for key, value in rec.units.items())
     return f"# {_META_PREFIX} name={name}, fs={rec.fs!r}, units {units}\n"
 
 
