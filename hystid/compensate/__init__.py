@@ -48,14 +48,13 @@ from .compensator import (
     SATURATED,
     TURNING,
     Feedforward,
-    HysteresisInverse,
     feedforward,
     hysteresis_gain,
-    inverse,
     linear_feedforward,
     smoothing_model,
 )
 from .feedback import FeedbackDesign, design_feedback, flexure_mode, linear_plant
+from .hysteresis_inverse import HysteresisInverse, inverse
 from .linear_parts import StableInverse, stable_inverse
 from .placed import Compensation, CompensationWarning, compensate, envelope_limits
 from .robustness import PERTURBABLE, LoopMargins, margins_on, perturbed_stage

@@ -7,7 +7,7 @@
               yd                 u_fb                   du                       |
               +-------(+)--e--[C (anti-windup)]<---------+-----------(-)---------+
 
-* ``ff`` is :func:`~hystid.compensate.compensator.inverse` (``feedforward=True``), its
+* ``ff`` is :func:`~hystid.compensate.hysteresis_inverse.inverse` (``feedforward=True``), its
   uncompensated baseline (``"linear"``) or the reference path alone (``False``): it always
   gives ``yd``, the desired output aligned with ``y``.
 * ``C`` is a :class:`~hystid.compensate.feedback.FeedbackDesign` realised with back-calculation
@@ -47,7 +47,6 @@ from .compensator import (
     COMPENSATIONS,
     DUHEM_BOUND,
     TURNING,
-    HysteresisInverse,
     _as_reference,
     _build,
     _pad_hold,
@@ -56,6 +55,7 @@ from .compensator import (
 )
 from .duhem_inverse import planner_memo
 from .feedback import FeedbackDesign
+from .hysteresis_inverse import HysteresisInverse
 from .tracking import TrackingMetrics, tracking_metrics
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -240,7 +240,7 @@ def closed_loop(
     plant : sandwich model or python-control system, optional
         The stage actually driven (input ``u``, output ``y``); the model itself by default.
     u_limits, reference_model, reference_lead, preview, duhem_bound
-        As for :func:`~hystid.compensate.compensator.inverse`.
+        As for :func:`~hystid.compensate.hysteresis_inverse.inverse`.
     hold_while_turning : bool
         Feed ``C`` a zero error while the compensator turns the hysteresis round.
     noise_input : bool
@@ -293,7 +293,7 @@ def closed_loop(
 
 def _ff_block(model, feedforward, u_limits, reference_model, reference_lead, preview,
               duhem_bound) -> HysteresisInverse:
-    from .compensator import inverse
+    from .hysteresis_inverse import inverse
 
     return inverse(model, u_limits=u_limits, reference_model=reference_model,
                    reference_lead=reference_lead, preview=preview, duhem_bound=duhem_bound,
@@ -439,7 +439,7 @@ def simulate_closed_loop(
     seed : int or None
         Seed of the noise.
     u_limits, reference_model, reference_lead, preview, duhem_bound
-        As for :func:`~hystid.compensate.compensator.inverse`.
+        As for :func:`~hystid.compensate.hysteresis_inverse.inverse`.
     hold_while_turning : bool
         As for :func:`closed_loop`.
 

@@ -27,9 +27,9 @@ import numpy as np
 from scipy import stats
 
 from ..model import DuhemSandwich
+from .correlation import correlation
 from .effects import EFFECTS, MAX_DELAY, N_SLOTS
 from .refit import FitData, Parametrisation, simulate_fit_data
-from .where import correlation
 
 __all__ = [
     "MIN_SEPARATION",
