@@ -30,9 +30,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["as_layout", "duhem_w2", "is_plain", "jacobian_block", "offsets", "shape_offsets",
-           "shape_terms", "simulate_into", "sensitivities_into", "step", "step_sens",
-           "step_sens_row"]
+__all__ = ["as_layout", "duhem_w2", "is_plain", "jacobian_block", "l2_output", "l2_output_sens",
+           "offsets", "shape_offsets", "shape_terms", "simulate_into", "sensitivities_into", "step",
+           "step_sens", "step_sens_row"]
 
 
 @njit(cache=True)
@@ -251,6 +251,35 @@ def _shape_sens(theta, layout, S1, S2, ks, w1p, w2p, dw1):
     if i_ad >= 0:
         S2[ks, i_ad] += theta[i_alpha] * sd * E * absd
         S2[ks, i_ad + 1] += sd * dw1
+
+
+@njit(cache=True, inline="always")
+def l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k):
+    """``Y[k]`` of an L2 whose whole numerator ``c[ib2:ib2+n2b]`` is given (the unit-gain
+    members, eq. 31): ``y(k) = sum_j b2j w2(k-q2-j) - sum_i a2i y(k-1-i)``."""
+    y = 0.0
+    for j in range(n2b):
+        y += c[ib2 + j] * W2[k - q2 - j]
+    for i in range(n2a):
+        y -= c[ia2 + i] * Y[k - 1 - i]
+    Y[k] = y
+
+
+@njit(cache=True, inline="always")
+def l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc):
+    """:func:`l2_output` with the sensitivities ``SY[k, :nc]`` from those of ``w2``."""
+    l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
+    for q in range(nc):
+        s = 0.0
+        for j in range(n2b):
+            s += c[ib2 + j] * SW2[k - q2 - j, q]
+        for i in range(n2a):
+            s -= c[ia2 + i] * SY[k - 1 - i, q]
+        SY[k, q] = s
+    for i in range(n2a):
+        SY[k, ia2 + i] -= Y[k - 1 - i]
+    for j in range(n2b):
+        SY[k, ib2 + j] += W2[k - q2 - j]
 
 
 @njit(cache=True)

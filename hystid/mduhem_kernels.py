@@ -25,6 +25,8 @@ from __future__ import annotations
 
 from numba import njit
 
+from .kernels import l2_output, l2_output_sens
+
 __all__ = ["coefficient_offsets", "mduhem_sensitivities_into", "mduhem_simulate_into",
            "mduhem_step"]
 
@@ -96,12 +98,7 @@ def mduhem_step(c, lay, U, W1, W2, Y, p, k):
         p[j] = p[j] + c[ial + j] * (c[if1 + j] * v - p[j]) * ad + c[ig0 + j] * d
         w2 += p[j]
     W2[k] = w2
-    y = 0.0
-    for j in range(n2b):
-        y += c[ib2 + j] * W2[k - q2 - j]
-    for i in range(n2a):
-        y -= c[ia2 + i] * Y[k - 1 - i]
-    Y[k] = y
+    l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
 
 
 @njit(cache=True)
@@ -201,20 +198,4 @@ def mduhem_sensitivities_into(c, lay, U, W1, W2, Y, p, S1, SW2, SY, SP, start):
             w2 += p[j]
         W2[k] = w2
         # L2
-        y = 0.0
-        for j in range(n2b):
-            y += c[ib2 + j] * W2[k - q2 - j]
-        for i in range(n2a):
-            y -= c[ia2 + i] * Y[k - 1 - i]
-        Y[k] = y
-        for q in range(nc):
-            s = 0.0
-            for j in range(n2b):
-                s += c[ib2 + j] * SW2[k - q2 - j, q]
-            for i in range(n2a):
-                s -= c[ia2 + i] * SY[k - 1 - i, q]
-            SY[k, q] = s
-        for i in range(n2a):
-            SY[k, ia2 + i] -= Y[k - 1 - i]
-        for j in range(n2b):
-            SY[k, ib2 + j] += W2[k - q2 - j]
+        l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..kernels import l2_output_sens
 from ..model import InitialCondition
 from ..pi import PISandwich, PIStructure
 from ..pi_operator import play
@@ -144,23 +145,7 @@ def pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k):
             SW2[k, m] += c[imu + i] * SP[i, m]
     W2[k] = w2
     # eq. (31)
-    y = 0.0
-    for j in range(n2b):
-        y += c[ib2 + j] * W2[k - q2 - j]
-    for i in range(n2a):
-        y -= c[ia2 + i] * Y[k - 1 - i]
-    Y[k] = y
-    for m in range(nc):
-        s = 0.0
-        for j in range(n2b):
-            s += c[ib2 + j] * SW2[k - q2 - j, m]
-        for i in range(n2a):
-            s -= c[ia2 + i] * SY[k - 1 - i, m]
-        SY[k, m] = s
-    for i in range(n2a):
-        SY[k, ia2 + i] -= Y[k - 1 - i]
-    for j in range(n2b):
-        SY[k, ib2 + j] += W2[k - q2 - j]
+    l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc)
 
 
 @njit(cache=True)
