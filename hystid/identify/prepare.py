@@ -285,9 +285,13 @@ def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]],
     """Runs of input samples that were recorded wrong: the stage never saw them.
 
     A run of at most :data:`MAX_GLITCH` samples, inside the record, more than
-    :data:`FAR_SPREADS` input spreads (2 % to 98 % quantiles) from the median input, while the
-    output over the run and the samples after it stays within the spread of its own
-    sample-to-sample steps (an input that really went there would move the stage). A model run
+    :data:`FAR_SPREADS` input spreads (2 % to 98 % quantiles) from the median input, or beyond
+    the input's 1 % to 99 % quantiles by more than :data:`JUMP_SLEWS` times its slew (99 %
+    quantile of its steps: a sample 100 V above the range of a stage driven over 170 V), while
+    the output over the run and the samples after it stays within the spread of its own
+    sample-to-sample steps, about its own course (the chord from the sample before the run to
+    the end of the window: an output moving steadily is not one that reacts) or about its
+    level before the run (an input that really went there would move the stage). A model run
     through such a sample would carry its memory (the hysteresis state, the filters) for the
     rest of the record.
 
@@ -305,7 +309,10 @@ def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]],
     """
     lo, med, hi = np.quantile(u, [0.02, 0.5, 0.98])
     spread = max(float(hi - lo), 1e-300)
-    far = np.abs(u - med) > FAR_SPREADS * spread
+    q_lo, q_hi = np.quantile(u, [0.01, 0.99])
+    slew = float(np.quantile(np.abs(np.diff(u)), 0.99)) if len(u) > 1 else 0.0
+    beyond = JUMP_SLEWS * slew if slew > 0 else np.inf  # 99 %: not set by a glitch's own jumps
+    far = (np.abs(u - med) > FAR_SPREADS * spread) | (u > q_hi + beyond) | (u < q_lo - beyond)
     runs, notes = [], []
     step = float(np.quantile(np.abs(np.diff(y)), 0.99)) if len(y) > 1 else 0.0
     k = 0
@@ -319,11 +326,14 @@ def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]],
         inside = k > 0 and stop < len(u)
         if inside and stop - k <= MAX_GLITCH:
             window = y[k - 1:min(len(y), stop + 5 * MAX_GLITCH)]
-            if np.max(np.abs(window - y[k - 1])) <= 3.0 * max(step, 1e-300) * (stop - k + 1):
+            chord = np.linspace(window[0], window[-1], len(window))
+            moved = min(np.max(np.abs(window - y[k - 1])), np.max(np.abs(window - chord)))
+            if moved <= 3.0 * max(step, 1e-300) * (stop - k + 1):
                 runs.append((k, stop))
                 notes.append(f"the input reads {u[k]:.4g} at sample {k}"
                              + (f" (to {stop - 1})" if stop - k > 1 else "")
-                             + f", {abs(u[k] - med) / spread:.0f} input spreads from its median, "
+                             + f", {abs(u[k] - med) / spread:.2g} input spreads from its median "
+                             f"(the input otherwise spans {q_lo:.4g} to {q_hi:.4g}), "
                              "while the output does not move: a recording glitch; identified "
                              "with the input interpolated over it")
         k = stop
