@@ -15,7 +15,7 @@ from .offline import fit_output_error
 from .result import IdentificationResult, converged_at
 
 __all__ = ["METHODS", "IdentificationResult", "converged_at", "fit_output_error", "identify",
-           "min_samples"]
+           "min_samples", "place_after_run"]
 
 METHODS = ("batch", "eria", "online", "ekf")
 SAMPLES_PER_PARAMETER = 10
@@ -216,7 +216,8 @@ def _run_recursive(record: Record, method: str, structure: Structure | None,
 
 
 def run_placed(record: Record, make: Callable[[Record], Any],
-               progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
+               progress: Callable[[int, int], None] | None = None, *,
+               zero_at_start: bool = False) -> IdentificationResult:
     """Run a recursive estimator on the record less its rest level and place the model back.
 
     The estimator sees ``u - u_rest`` and ``y - y_ref`` (the rest level and the output at rest
@@ -232,6 +233,10 @@ def run_placed(record: Record, make: Callable[[Record], Any],
         ``make(relative_record) -> estimator`` with a ``fit(record, progress=...)`` method.
     progress : callable, optional
         ``progress(k, n)`` during the run.
+    zero_at_start : bool
+        For an estimator without an offset that starts its model at zero: when the record
+        does not start at rest, its output is taken relative to its first samples (not to its
+        median); the offset is fitted after the run (:func:`place_after_run`).
 
     Returns
     -------
@@ -239,21 +244,112 @@ def run_placed(record: Record, make: Callable[[Record], Any],
         The placed model; ``info["warnings"]`` adds what the preparation found and whether the
         model is admissible on the record.
     """
+    import numpy as np
+
     from .prepare import prepare
 
     prep = prepare(record)
-    relative = Record(record.u - prep.u_rest, record.y - prep.y_ref, record.fs, record.units,
+    y_ref = prep.y_ref
+    if zero_at_start and not prep.at_rest:
+        head = record.y[:START_SAMPLES]
+        head = head[np.isfinite(head)]
+        y_ref = float(np.median(head)) if head.size else y_ref
+    relative = Record(record.u - prep.u_rest, record.y - y_ref, record.fs, record.units,
                       record.name)
     result = make(relative).fit(relative, progress=progress)
     model = result.model
-    model.u_rest, model.offset = prep.u_rest + model.u_rest, prep.y_ref + model.offset
+    model.u_rest, model.offset = prep.u_rest + model.u_rest, y_ref + model.offset
     model.envelope, model.units = prep.envelope, dict(record.units)
+    placed = place_after_run(model, record, prep)
+    if placed is not None:
+        result.info["placement"] = placed
     problems = (model.admissibility(record.u) if hasattr(model, "admissibility")
                 else model.envelope.violations(record.u))
     notes = list(prep.notes) + [f"on the identification record: {w}" for w in problems
                                 if "condition" in w or "diverged" in w]
     result.info["warnings"] = list(result.info.get("warnings", [])) + notes
     return result
+
+
+#: Leading samples whose median is the output's zero for an estimator without an offset
+#: (``run_placed(zero_at_start=True)``) on a record that does not start at rest.
+START_SAMPLES = 5
+
+
+#: A model whose error on its own record exceeds this many times the output's spread has run
+#: away (condition 8); :func:`place_after_run` leaves it as it is (its warnings say why).
+DIVERGED_SPREAD = 10.0
+
+
+def place_after_run(model: Any, record: Record, prep: Any) -> dict[str, float] | None:
+    """Fit the sensor offset (and a Duhem model's state at rest) to a record after a recursive
+    run, as the batch fit does.
+
+    A recursive estimator learns the parameters; the offset it tracks (or has none of) and the
+    Duhem state the stage held at rest before the record
+    (:attr:`~hystid.model.DuhemSandwich.rest_memory`: a stage brought to a held level sits on
+    one branch of its loop) are not those of the model simulated from rest over the whole
+    record, and a model started from the loop's centre carries that branch gap through the
+    record. Eq. (7) is affine in ``w2`` given ``w1``, so the output on the record is affine in
+    the rest memory: two simulations and a least-squares solve of two unknowns (the memory and
+    the offset; the offset alone for the other members) over the samples the batch fit would
+    score place the model exactly. The placement is kept only when it lowers that RMS.
+
+    Parameters
+    ----------
+    model : Sandwich
+        The placed model (changed in place).
+    record : Record
+        The record the model was identified on.
+    prep : Prepared
+        Its preparation (:func:`~hystid.identify.prepare.prepare`): the samples scored.
+
+    Returns
+    -------
+    dict or None
+        ``offset_change`` and ``rest_memory`` (output units; 0 for a member without one) and
+        the RMS over the scored samples ``before`` and ``after``; None when the model is not
+        finite, the record leaves nothing to fit or the placement does not lower the RMS.
+    """
+    import numpy as np
+
+    from ..baselines import simulate_from_rest
+    from ..model import DuhemSandwich
+
+    if not np.all(np.isfinite(model.theta)):
+        return None
+    duhem = isinstance(model, DuhemSandwich)
+    scored = np.zeros(record.n, bool)
+    scored[prep.fitted] = True
+    scored &= np.asarray(prep.weight, bool) & np.isfinite(record.y)
+    if np.count_nonzero(scored) < 3:
+        return None
+    unit = float(prep.y_scale)
+    memory = model.rest_memory if duhem else 0.0
+    columns = [np.ones(record.n)]
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        y0 = simulate_from_rest(model, record.u, check=False)
+        if duhem:
+            model.rest_memory = memory + unit
+            columns.append((simulate_from_rest(model, record.u, check=False) - y0) / unit)
+            model.rest_memory = memory
+    a = np.column_stack(columns)[scored]
+    r = (record.y - y0)[scored]
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(r))):
+        return None
+    if np.sqrt(np.mean(r ** 2)) > DIVERGED_SPREAD * max(float(np.std(record.y[scored])), 1e-300):
+        return None  # the model runs away on its own record: nothing to place
+    x, *_ = np.linalg.lstsq(a, r, rcond=None)
+    after = float(np.sqrt(np.mean((r - a @ x) ** 2)))
+    before = float(np.sqrt(np.mean(r ** 2)))
+    if not np.all(np.isfinite(x)) or after >= before:
+        return None
+    model.offset += float(x[0])
+    if duhem:
+        model.rest_memory = memory + float(x[1])
+    return {"offset_change": float(x[0]), "rest_memory": memory + float(x[-1]) if duhem else 0.0,
+            "before": before, "after": after}
 
 
 def _check_call(record: Any, structure: Any = None) -> None:

@@ -28,6 +28,7 @@ on its held-out end; it keeps the simplest member that a richer one does not bea
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -135,12 +136,46 @@ class Member:
         rule = self.settings.get("thresholds", "range")
         r = RULES[rule](record.u[prepare(record).fitted], self.structure.n_operators)
         if is_stage_structure(self.structure):
+            settings = {"warmup": short_record_warmup(record.u, self.n_params), **settings}
             return run_placed(record, lambda rel: PIStageOnline(
                 **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
-                progress)
+                progress, zero_at_start=True)
         return run_placed(record, lambda rel: PIRecursiveIdentifier(
             **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
-            progress)
+            progress, zero_at_start=True)
+
+
+#: Warm-up of the ``pi-stage`` on-line identifier, in excited samples (0.2 s at 10 kHz), and
+#: the share of a shorter record's excitation it takes instead (a 200 Hz stage's record of a
+#: few seconds holds a few hundred samples: the warm-up fit takes its first half, the recursion
+#: and re-solves the rest), never under :data:`WARMUP_PER_PARAMETER` samples per parameter.
+WARMUP = 2000
+WARMUP_SHARE = 0.5
+WARMUP_PER_PARAMETER = 5
+
+
+def short_record_warmup(u: np.ndarray, n_params: int) -> int:
+    """Warm-up of the ``pi-stage`` on-line identifier for a record's input.
+
+    Parameters
+    ----------
+    u : ndarray
+        The record's input.
+    n_params : int
+        Parameters of the member.
+
+    Returns
+    -------
+    int
+        :data:`WARMUP`, or :data:`WARMUP_SHARE` of the excited samples (those from the first
+        that leaves ``u[0]``) when that is fewer, but at least
+        :data:`WARMUP_PER_PARAMETER` ``n_params`` (a record too short for that is refused by
+        the identifier, which says so).
+    """
+    u = np.asarray(u, float)
+    moved = np.flatnonzero(np.abs(u - u[0]) > 0.0) if u.size else np.array([], int)
+    excited = u.size - int(moved[0]) if moved.size else 0
+    return int(max(WARMUP_PER_PARAMETER * n_params, min(WARMUP, WARMUP_SHARE * excited)))
 
 
 #: Evaluations of a PI member's polishing solve. On stage A's records the fit's optimum is the
@@ -227,12 +262,27 @@ def _split(record: Record, holdout: float) -> tuple[int, int]:
     return k, stop
 
 
-def _heldout_rms(model: Any, record: Record, k: int, stop: int) -> float:
+def _scored_tail(record: Record, k: int, stop: int) -> np.ndarray:
+    """Which of samples ``k..stop-1`` the choice scores: those the whole record's preparation
+    keeps (an output burst or spike there is left out, as the fits leave it out)."""
+    from .prepare import prepare
+
+    keep = np.ones(stop - k, bool)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            weight = np.asarray(prepare(record).weight, bool)[k:stop]
+    except ValueError:
+        return keep
+    return weight if np.count_nonzero(weight) >= 0.5 * len(keep) else keep
+
+
+def _heldout_rms(model: Any, record: Record, k: int, stop: int, scored: np.ndarray) -> float:
     from ..baselines import simulate_from_rest
 
     with np.errstate(all="ignore"):
         yhat = simulate_from_rest(model, record.u, check=False)
-    rms = float(np.sqrt(np.mean((yhat[k:stop] - record.y[k:stop]) ** 2)))
+        rms = float(np.sqrt(np.mean((yhat[k:stop] - record.y[k:stop])[scored] ** 2)))
     return rms if np.isfinite(rms) else float("inf")
 
 
@@ -287,6 +337,7 @@ def select_member(
         raise ValueError("candidates: expected at least one member")
     k, stop = _split(record, holdout)
     head = record[:k]
+    scored = _scored_tail(record, k, stop)
     rows, fits = [], {}
     for m in members:
         t0 = time.perf_counter()
@@ -294,13 +345,13 @@ def select_member(
         fit = m.fit(head, **settings)
         fits[m.name] = fit
         rows.append({"member": m.name, "what": m.what, "n_params": m.n_params,
-                     "heldout_rms": _heldout_rms(fit.model, record, k, stop),
+                     "heldout_rms": _heldout_rms(fit.model, record, k, stop, scored),
                      "seconds": time.perf_counter() - t0})
         _say(progress, f"model choice: {m.name} held-out RMS {rows[-1]['heldout_rms']:.4g} "
              f"{record.units.get('y', '')} on samples {k}..{stop - 1}")
-    y = record.y[k:stop]
-    baselines = {"static_line": StaticLine.fit(head).predict(record.u)[k:stop],
-                 "linear": LinearModel.fit(head, 3, 3, 1).predict(record.u)[k:stop]}
+    y = record.y[k:stop][scored]
+    baselines = {"static_line": StaticLine.fit(head).predict(record.u)[k:stop][scored],
+                 "linear": LinearModel.fit(head, 3, 3, 1).predict(record.u)[k:stop][scored]}
     baseline_rms = {b: float(np.sqrt(np.mean((p - y) ** 2))) for b, p in baselines.items()}
     best = min(r["heldout_rms"] for r in rows)
     chosen = min((r for r in rows if r["heldout_rms"] <= (1.0 + margin) * best),

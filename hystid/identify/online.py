@@ -415,6 +415,22 @@ class OnlineIdentifier(RecursiveIdentifier):
             self._scal[_FIRST] = -1.0 if value is None else value
 
     # ----------------------------------------------------------------- start-up
+    def _restart(self, record: Record) -> None:
+        """:meth:`reset`; on a record whose excitation ends before the longest start-up window,
+        that window is the whole excitation (a short record still gets its start-up solve
+        checked and retried on all its samples, not on a window it never fills)."""
+        from .base import record_signals
+
+        u, _, _ = record_signals(record, self.fs)
+        self.reset()
+        tol = 1e-12 * max(1.0, abs(float(u[0]))) if len(u) else 0.0
+        moving = np.flatnonzero(np.abs(u - u[0]) > tol)
+        if not len(moving):
+            return
+        excited = len(u) - int(moving[0]) + min(REST_KEEP, int(moving[0]))
+        if self.n_start < excited < self._stages[-1]:
+            self._stages = [s for s in self._stages if s < excited] + [excited]
+
     def _window(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The first ``n`` buffered samples: input, output, which outputs are finite."""
         y = self._start_y[:n]
