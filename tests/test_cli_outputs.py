@@ -305,3 +305,21 @@ def test_the_measured_record_with_wrong_options(extra, needle, tmp_path):
     line = error_line(proc.stderr)
     assert needle in line and "Traceback" not in proc.stderr, line
     assert list(tmp_path.iterdir()) == []
+
+
+def test_validation_line_scores_a_record_not_at_rest_as_the_held_out_table(tmp_path, capsys):
+    # A validation record that starts mid-swing (a stage-B look-alike's 1 Hz sine): the
+    # validation line scored it from sample 0 (3.1 um RMS, the model's start from rest) while
+    # the held-out table, from its burn-in, said 0.069 um. Both now score from the burn-in.
+    from hystid.testing import stage_b_like
+
+    stage_b_like(seed=0).save(tmp_path / "b0.csv")
+    stage_b_like(seed=1).save(tmp_path / "b1.csv")
+    out = tmp_path / "rep"
+    code, text, _ = run(["identify", tmp_path / "b0.csv", "--val", tmp_path / "b1.csv",
+                         "--out", out, "--model", "duhem"], capsys)
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    held = report["baselines"]["rows"][0]["model"]
+    assert report["validation"]["rms"] == pytest.approx(held, rel=1e-9)
+    assert "from sample" in report["validated_on"] and "burn-in" in text

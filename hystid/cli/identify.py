@@ -292,6 +292,10 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         else (result.model.envelope.violations(target.u) if result.model.envelope else [])
     baselines = compare(result.model, rec, [(target, k) if k is not None else target],
                         repeats=repeats)
+    if k is None and val is not None:  # scored from the burn-in, as compare() scores it
+        from ..identify.prepare import burn_in, rest_level
+
+        k = burn_in(target.u, rest_level(target.u)[1]) or None
     k = k or 0
     finite = bool(np.all(np.isfinite(yhat[k:])))
     try:
@@ -320,7 +324,9 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         "units": dict(rec.units),
         "structure": getattr(result.model.structure, "__dict__", {}),
         "validation": validation.to_dict() if finite else None,
-        "validated_on": ("validation record" if getattr(args, "val", None) else
+        "validated_on": (("validation record" + (f" from sample {k}: it does not start at "
+                                                  "rest, its start is a burn-in" if k else ""))
+                         if getattr(args, "val", None) else
                          f"held-out end of the record (samples {k}..{target.n - 1})" if k
                          else "identification record"),
         "zeroed_on": ("the output at rest at the start of the validation record (a sensor's "
