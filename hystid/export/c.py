@@ -248,7 +248,8 @@ def _ff_part(
                   comp.KIND_MDUHEM: "the multi-Duhem sandwich's inverse (mduhem)"}.get(
                       kind, f"compensator kind {kind}")
         raise ValueError(f"{member} is not exported to C (the C step has the plain Duhem, "
-                         "Prandtl-Ishlinskii and central-line inverses)")
+                         "Prandtl-Ishlinskii and central-line inverses: the central line is "
+                         "exported with the compensator option compensation='linear')")
     rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX])) + model.u_rest
     P = int(ispec[comp._P])
     M = bool(plan.m_num.size)
