@@ -27,14 +27,14 @@ What each function is:
   ``compensate(model, r).u`` after those first calls.
 * ``hystid_rpem_step`` -- one sample of the on-line identifier's recursion
   (:func:`hystid.identify.online.rpem_run`), warm-started from the saved model (see
-  :func:`hystid.export.rpem.rpem_start`); Duhem models with the paper's block only. The
-  start-up solve of :class:`~hystid.identify.online.OnlineIdentifier` (a batch fit) is not
-  part of the export.
+  :func:`hystid.export.rpem.rpem_start`); Duhem models only (the paper's block and the
+  generalised one). The start-up solve of :class:`~hystid.identify.online.OnlineIdentifier`
+  (a batch fit) is not part of the export.
 
 The placed model is written for the Duhem sandwich (the paper's block and the generalised one:
 ``f_order``, ``g_order``, ``directional``), the Prandtl-Ishlinskii sandwiches and the multi-Duhem
 sandwich; the compensator for those whose inverse the C step has (the plain Duhem block's, the
-PI operator's and the central line), the on-line identifier for the plain Duhem sandwich.
+PI operator's and the central line), the on-line identifier for the Duhem sandwiches.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ import numpy as np
 from ..model import DuhemSandwich
 from ._c_ff import FF_CHAIN, FF_PLANNER
 from ._c_model import DUHEM_STEP, GDUHEM_STEP, MDUHEM_STEP, MODEL_COMMON, PI_STEP, SHAPE_TERMS
-from ._c_rpem import RPEM_STEP
+from ._c_rpem import GDUHEM_RPEM_STEP, RPEM_STEP
 from .rpem import rpem_start
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -395,7 +395,7 @@ def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
     windows = np.concatenate([a[pos - w:pos] for a in ident._windows[:5]])
     src += (_array("hx_r_est0", ident._est) + _array("hx_r_p0", ident.P)
             + _array("hx_r_scal0", ident._scal) + _array("hx_r_win0", windows))
-    return head, src + RPEM_STEP
+    return head, src + (RPEM_STEP if s.is_plain else GDUHEM_RPEM_STEP)
 
 
 # =========================================================================== assembling
@@ -426,8 +426,8 @@ def c_sources(
         A record of the stage for the on-line identifier's starting information.
     notes : list of str, optional
         Receives what the export leaves out and why (a model whose compensator cannot be
-        built is exported without it, ``HYSTID_NO_FF`` defined; a generalised Duhem or a
-        multi-Duhem model without the on-line identifier, ``HYSTID_NO_RPEM`` defined).
+        built is exported without it, ``HYSTID_NO_FF`` defined; a multi-Duhem model without
+        the on-line identifier, ``HYSTID_NO_RPEM`` defined).
 
     Returns
     -------
@@ -463,12 +463,11 @@ def c_sources(
         if notes is not None:
             notes.append(f"no feed-forward compensator in the export: {reason}")
     rhead = rsrc = ""
-    if plain:
+    if duhem:
         rhead, rsrc = _rpem_part(rpem_start(model, rpem_record, rpem_sigma))
-    elif duhem or isinstance(model, MultiDuhemSandwich):
-        reason = ("the C on-line identifier has the plain Duhem block's recursion, not the "
-                  "generalised block's" if duhem else "the multi-Duhem sandwich has no on-line "
-                  "identifier (it is identified in batch only)")
+    elif isinstance(model, MultiDuhemSandwich):
+        reason = "the multi-Duhem sandwich has no on-line identifier (it is identified in " \
+                 "batch only)"
         rhead = f"\n/* No on-line identifier: {reason}. */\n#define HYSTID_NO_RPEM 1\n"
         if notes is not None:
             notes.append(f"no on-line identifier in the export: {reason}")
