@@ -18,7 +18,7 @@ limits wide enough never to saturate (every sample follows the plan), and with a
 the model step of the ``gduhem`` member (the generalised Duhem block: cubic curve, quadratic
 slope) and of the ``mduhem`` member (six Duhem operators in parallel), identified on a simulated
 stage A and run on the paper's excitation scaled into their input envelope (they are exported
-without compensator and on-line identifier).
+without compensator; the gduhem member's on-line identifier step is timed too).
 
 Usage: OPENBLAS_NUM_THREADS=1 python benchmarks/bench_export.py [--quick] [--samples N]
            [--out FILE.json]
@@ -175,10 +175,15 @@ def model_rates(model, folder: Path, n: int) -> dict:
         y = model.simulate(u, check=False).y
         t_py = best_time(lambda: model.simulate(u, check=False), repeat=5, min_time=0)
     t_c, checksum = c_rate(exe, folder, "model", u, y, reps=5)
-    return {"c_samples_per_s": n / t_c, "python_samples_per_s": n / t_py,
-            "ratio_c_vs_python": t_py / t_c,
-            "checksum_relative_difference": abs(checksum - float(np.cumsum(y)[-1]))
-            / float(np.sum(np.abs(y)))}
+    out = {"c_samples_per_s": n / t_c, "python_samples_per_s": n / t_py,
+           "ratio_c_vs_python": t_py / t_c,
+           "checksum_relative_difference": abs(checksum - float(np.cumsum(y)[-1]))
+           / float(np.sum(np.abs(y)))}
+    if getattr(type(model), "kind", None) == "duhem":  # the generalised block's RPEM step
+        nf = min(n, 300_000)
+        t_rpem, _ = c_rate(exe, folder, "rpem", u[:nf], y[:nf], reps=3)
+        out["c_rpem_samples_per_s"] = nf / t_rpem
+    return out
 
 
 def ff_rates(model, folder: Path, n: int, options: dict, scan_limits: tuple | None = None) -> dict:
@@ -268,7 +273,9 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
                    for name in ("gduhem", "mduhem")}
     c_rate_model = n / t_c
     py_rate = n / t_py
-    rates = [c_rate_model, nf / t_rpem] + [v["c_samples_per_s"] for v in ff.values()]
+    rates = [c_rate_model, nf / t_rpem] + [v["c_samples_per_s"] for v in ff.values()] \
+        + [v[k] for v in members.values() for k in ("c_samples_per_s", "c_rpem_samples_per_s")
+           if k in v]
     return {"samples": n, "goal_c_samples_per_s": GOAL,
             "c_model_samples_per_s": c_rate_model, "python_simulate_samples_per_s": py_rate,
             "ratio_c_vs_python": c_rate_model / py_rate,
@@ -306,6 +313,9 @@ def render(payload: dict) -> str:
     for key, m in payload.get("members", {}).items():
         rows.append([f"C hystid_model_step, {names[key]}", f"{m['c_samples_per_s']:.3g}",
                      f"{m['ratio_c_vs_python']:.2g}x numba"])
+        if "c_rpem_samples_per_s" in m:
+            rows.append([f"C hystid_rpem_step, {names[key]}", f"{m['c_rpem_samples_per_s']:.3g}",
+                         ""])
     labels = {"duhem": "reference stage (Duhem", "pi_stage": "pi-stage (PI",
               "duhem_unsaturated": "reference stage, limits +-100 V: no saturation (Duhem",
               "duhem_preview_3000": "reference stage (Duhem"}
