@@ -14,7 +14,11 @@ the ``pi-stage`` member identified on a simulated stage A (``hystid.testing``; L
 outside the unit circle: its anti-causal inverse runs as a FIR every sample). Goal: one million
 samples per second for every step. Beside the goal, the Duhem compensator on the same scan with
 limits wide enough never to saturate (every sample follows the plan), and with a preview of
-3 000 samples (where shifting the step's reference lines costs more than the planner).
+3 000 samples (where shifting the step's reference lines costs more than the planner). Also
+the model step of the ``gduhem`` member (the generalised Duhem block: cubic curve, quadratic
+slope) and of the ``mduhem`` member (six Duhem operators in parallel), identified on a simulated
+stage A and run on the paper's excitation scaled into their input envelope (they are exported
+without compensator; the gduhem member's on-line identifier step is timed too).
 
 Usage: OPENBLAS_NUM_THREADS=1 python benchmarks/bench_export.py [--quick] [--samples N]
            [--out FILE.json]
@@ -150,6 +154,38 @@ def pi_stage_model():
                         model="pi-stage").model
 
 
+def member_model(name: str):
+    """The ``gduhem`` or ``mduhem`` member identified on a simulated stage A."""
+    from hystid.identify import identify
+    from hystid.testing import stage_a_like
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return identify(stage_a_like(seconds=0.3, rest_seconds=0.1), model=name).model
+
+
+def model_rates(model, folder: Path, n: int) -> dict:
+    """C ``hystid_model_step`` and ``model.simulate`` on the paper's excitation scaled into the
+    model's input envelope (from its rest level to 80 % of the way to the envelope's top)."""
+    exe = compile_export(model, folder)
+    e = np.tile(paper_excitation(30_000, seed=0), n // 30_000 + 1)[:n]
+    u = model.u_rest + 0.8 * (model.envelope.u_max - model.u_rest) * e / float(np.max(e))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        y = model.simulate(u, check=False).y
+        t_py = best_time(lambda: model.simulate(u, check=False), repeat=5, min_time=0)
+    t_c, checksum = c_rate(exe, folder, "model", u, y, reps=5)
+    out = {"c_samples_per_s": n / t_c, "python_samples_per_s": n / t_py,
+           "ratio_c_vs_python": t_py / t_c,
+           "checksum_relative_difference": abs(checksum - float(np.cumsum(y)[-1]))
+           / float(np.sum(np.abs(y)))}
+    if getattr(type(model), "kind", None) == "duhem":  # the generalised block's RPEM step
+        nf = min(n, 300_000)
+        t_rpem, _ = c_rate(exe, folder, "rpem", u[:nf], y[:nf], reps=3)
+        out["c_rpem_samples_per_s"] = nf / t_rpem
+    return out
+
+
 def ff_rates(model, folder: Path, n: int, options: dict, scan_limits: tuple | None = None) -> dict:
     """C ``hystid_ff_step`` and Python ``compensate`` over a triangle scan of ``n`` samples,
     with the C output checked against Python sample by sample. The scan's amplitude is set by
@@ -233,14 +269,19 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
             "duhem_preview_3000": ff_rates(model, folder / "p3000", nf,
                                            {**REFERENCE_LIMITS, "preview": 3000}),
         }
+        members = {name: model_rates(member_model(name), folder / name, n)
+                   for name in ("gduhem", "mduhem")}
     c_rate_model = n / t_c
     py_rate = n / t_py
-    rates = [c_rate_model, nf / t_rpem] + [v["c_samples_per_s"] for v in ff.values()]
+    rates = [c_rate_model, nf / t_rpem] + [v["c_samples_per_s"] for v in ff.values()] \
+        + [v[k] for v in members.values() for k in ("c_samples_per_s", "c_rpem_samples_per_s")
+           if k in v]
     return {"samples": n, "goal_c_samples_per_s": GOAL,
             "c_model_samples_per_s": c_rate_model, "python_simulate_samples_per_s": py_rate,
             "ratio_c_vs_python": c_rate_model / py_rate,
             "c_rpem_samples_per_s": nf / t_rpem, "python_rpem_samples_per_s": nf / t_rpem_py,
             "ff": ff, "ff_context": context, "checksum_relative_difference": agree,
+            "members": members,
             "meets_goal": bool(c_rate_model >= GOAL),
             "every_step_meets_goal": bool(min(rates) >= GOAL)}
 
@@ -267,6 +308,14 @@ def render(payload: dict) -> str:
          f"{payload['c_rpem_samples_per_s'] / payload['python_rpem_samples_per_s']:.2g}x "
          "rpem_run"],
     ]
+    names = {"gduhem": "gduhem member (generalised Duhem block)",
+             "mduhem": "mduhem member (6 Duhem operators)"}
+    for key, m in payload.get("members", {}).items():
+        rows.append([f"C hystid_model_step, {names[key]}", f"{m['c_samples_per_s']:.3g}",
+                     f"{m['ratio_c_vs_python']:.2g}x numba"])
+        if "c_rpem_samples_per_s" in m:
+            rows.append([f"C hystid_rpem_step, {names[key]}", f"{m['c_rpem_samples_per_s']:.3g}",
+                         ""])
     labels = {"duhem": "reference stage (Duhem", "pi_stage": "pi-stage (PI",
               "duhem_unsaturated": "reference stage, limits +-100 V: no saturation (Duhem",
               "duhem_preview_3000": "reference stage (Duhem"}
@@ -278,12 +327,15 @@ def render(payload: dict) -> str:
                      f"{ff['c_samples_per_s'] / ff['python_samples_per_s']:.2g}x compensate"])
     goal = "met" if payload["every_step_meets_goal"] else "NOT met"
     worst = max(ff["checksum_relative_difference"] for ff in every.values())
+    worst_member = max([m["checksum_relative_difference"]
+                        for m in payload.get("members", {}).values()] or [0.0])
     return (table(rows, ["step", "samples/s", "ratio"])
             + f"\n\n{payload['samples']} samples of the reference stage (the identifier and the "
               f"compensators {payload['ff']['duhem']['samples']}); goal "
               f"{payload['goal_c_samples_per_s']:.0e} C samples/s for every step: {goal}; the "
               f"sums of the C and Python outputs differ by "
-              f"{payload['checksum_relative_difference']:.1e} of sum |y| for the model, "
+              f"{payload['checksum_relative_difference']:.1e} of sum |y| for the model "
+              f"({worst_member:.1e} for the gduhem and mduhem members), "
               f"{worst:.1e} of sum |u| for the compensators (the tests compare sample by "
               "sample).")
 

@@ -10,7 +10,7 @@ nothing, so the numbers are the same.
 
 from __future__ import annotations
 
-__all__ = ["RPEM_STEP"]
+__all__ = ["GDUHEM_RPEM_STEP", "RPEM_STEP"]
 
 RPEM_STEP = r"""
 /* indices of scal (as _K, _LAM, ... of hystid.identify.online) */
@@ -372,3 +372,138 @@ long hystid_rpem_restarts(const hystid_rpem_state *s)
     return (long)s->scal[HX_S_NREC];
 }
 """
+
+#: ``kernels.step_sens_row`` for the generalised Duhem block (its ``_shape_sens`` branch); needs
+#: ``hx_shape_terms`` and the ``HX_I_*`` shape indices of the model's part
+#: (:data:`hystid.export._c_model.SHAPE_TERMS`).
+_SHAPE_STEP_SENS = r"""/* kernels.step_sens_row at index k (= ks) of the windows, with theta: the
+   generalised eq. (7), w2(k) = w2(k-1) + A [f0 sgn(w1p) + F - w2(k-1)] |dw1| + G dw1
+   (hx_shape_terms) */
+static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
+{
+    double *U = s->u, *W1 = s->w1, *W2 = s->w2, *Y = s->yh;
+    double (*S1)[HX_R_NPAR] = s->s1, (*S2)[HX_R_NPAR] = s->s2, (*SY)[HX_R_NPAR] = s->sy;
+#if HX_R_I_F0 >= 0
+    const double f0 = theta[HX_R_I_F0];
+#else
+    const double f0 = 0.0;
+#endif
+    double w1, y, w1p, w2p, dw1, s1, sd, absd, ddw1, sy;
+    double A, F, G, dF, dG, E, dE, rate, pw;
+    int i, j, p;
+    /* step: eqs. (1), (7), (2) */
+    w1 = U[k - HX_R_Q1];
+    for (j = 1; j <= HX_R_N1B; j++) {
+        w1 += theta[HX_R_I_B1 + j - 1] * U[k - HX_R_Q1 - j];
+    }
+    for (i = 1; i <= HX_R_N1A; i++) {
+        w1 -= theta[HX_R_I_A1 + i - 1] * W1[k - i];
+    }
+    W1[k] = w1;
+    w1p = W1[k - 1];
+    w2p = W2[k - 1];
+    dw1 = w1 - w1p;
+    hx_shape_terms(theta, w1p, hx_sgn(dw1), &A, &F, &G, &dF, &dG);
+    W2[k] = w2p + A * (f0 * hx_sgn(w1p) + F - w2p) * fabs(dw1) + G * dw1;
+    y = W2[k - HX_R_Q2];
+    for (j = 1; j <= HX_R_N2B; j++) {
+        y += theta[j - 1] * W2[k - HX_R_Q2 - j];
+    }
+    for (i = 1; i <= HX_R_N2A; i++) {
+        y -= theta[HX_R_I_A2 + i - 1] * Y[k - i];
+    }
+    Y[k] = y;
+    /* sensitivities */
+    dw1 = W1[k] - w1p;
+    for (p = 0; p < HX_R_NPAR; p++) {
+        s1 = 0.0;
+        for (i = 1; i <= HX_R_N1A; i++) {
+            s1 -= theta[HX_R_I_A1 + i - 1] * S1[k - i][p];
+        }
+        S1[k][p] = s1;
+    }
+    for (j = 1; j <= HX_R_N1B; j++) {
+        S1[k][HX_R_I_B1 + j - 1] += U[k - HX_R_Q1 - j];
+    }
+    for (i = 1; i <= HX_R_N1A; i++) {
+        S1[k][HX_R_I_A1 + i - 1] -= W1[k - i];
+    }
+    /* kernels._shape_sens: E = f0 sgn(w1p) + F - w2p, dE its derivative along p */
+    sd = hx_sgn(dw1);
+    absd = fabs(dw1);
+    hx_shape_terms(theta, w1p, sd, &A, &F, &G, &dF, &dG);
+    E = f0 * hx_sgn(w1p) + F - w2p;
+    for (p = 0; p < HX_R_NPAR; p++) {
+        ddw1 = S1[k][p] - S1[k - 1][p];
+        dE = dF * S1[k - 1][p] - S2[k - 1][p];
+        S2[k][p] = S2[k - 1][p] + A * (dE * absd + E * sd * ddw1) + G * ddw1
+                   + dG * S1[k - 1][p] * dw1;
+    }
+#if HX_DIRECTIONAL
+    rate = 1.0 + theta[HX_I_AD] * sd;
+#else
+    rate = 1.0;
+#endif
+    S2[k][HX_R_I_ALPHA] += rate * E * absd;
+    S2[k][HX_R_I_F1] += A * w1p * absd;
+#if HX_R_I_F0 >= 0
+    S2[k][HX_R_I_F0] += A * hx_sgn(w1p) * absd;
+#endif
+    S2[k][HX_R_I_G0] += dw1;
+    pw = w1p;
+    for (j = 0; j < HX_NF; j++) { /* f2, f3 */
+        pw *= w1p;
+        S2[k][HX_I_F2 + j] += A * pw * absd;
+    }
+    pw = 1.0;
+    for (j = 0; j < HX_NG; j++) { /* g1, g2 */
+        pw *= w1p;
+        S2[k][HX_I_G1 + j] += pw * dw1;
+    }
+#if HX_DIRECTIONAL
+    S2[k][HX_I_AD] += theta[HX_R_I_ALPHA] * sd * E * absd;
+    S2[k][HX_I_AD + 1] += sd * dw1;
+#endif
+    for (p = 0; p < HX_R_NPAR; p++) {
+        sy = S2[k - HX_R_Q2][p];
+        for (j = 1; j <= HX_R_N2B; j++) {
+            sy += theta[j - 1] * S2[k - HX_R_Q2 - j][p];
+        }
+        for (i = 1; i <= HX_R_N2A; i++) {
+            sy -= theta[HX_R_I_A2 + i - 1] * SY[k - i][p];
+        }
+        SY[k][p] = sy;
+    }
+    for (j = 1; j <= HX_R_N2B; j++) {
+        SY[k][j - 1] += W2[k - HX_R_Q2 - j];
+    }
+    for (i = 1; i <= HX_R_N2A; i++) {
+        SY[k][HX_R_I_A2 + i - 1] -= Y[k - i];
+    }
+}
+
+"""
+
+_ALPHA_CHECK = """    if (theta[HX_R_I_ALPHA] <= 0.0) {
+        return 0;
+    }
+"""
+
+
+def _generalised(text: str) -> str:
+    """:data:`RPEM_STEP` for the generalised Duhem block: its step and sensitivities
+    (:data:`_SHAPE_STEP_SENS`) and, with directions, the admissible set's ``|ad| < 1``."""
+    start = text.index("/* kernels.step_sens_row")
+    end = text.index("/* _resync")
+    assert text.count(_ALPHA_CHECK) == 1
+    text = text[:start] + _SHAPE_STEP_SENS + text[end:]
+    return text.replace(_ALPHA_CHECK, _ALPHA_CHECK + """#if HX_DIRECTIONAL
+    if (!(fabs(theta[HX_I_AD]) < 1.0)) {
+        return 0; /* the rates alpha (1 +- ad) must stay positive */
+    }
+#endif
+""")
+
+
+#: The on-line identifier's step for the generalised Duhem block.
+GDUHEM_RPEM_STEP = _generalised(RPEM_STEP)

@@ -27,8 +27,14 @@ What each function is:
   ``compensate(model, r).u`` after those first calls.
 * ``hystid_rpem_step`` -- one sample of the on-line identifier's recursion
   (:func:`hystid.identify.online.rpem_run`), warm-started from the saved model (see
-  :func:`hystid.export.rpem.rpem_start`); Duhem models only. The start-up solve of
-  :class:`~hystid.identify.online.OnlineIdentifier` (a batch fit) is not part of the export.
+  :func:`hystid.export.rpem.rpem_start`); Duhem models only (the paper's block and the
+  generalised one). The start-up solve of :class:`~hystid.identify.online.OnlineIdentifier`
+  (a batch fit) is not part of the export.
+
+The placed model is written for the Duhem sandwich (the paper's block and the generalised one:
+``f_order``, ``g_order``, ``directional``), the Prandtl-Ishlinskii sandwiches and the multi-Duhem
+sandwich; the compensator for those whose inverse the C step has (the plain Duhem block's, the
+PI operator's and the central line), the on-line identifier for the Duhem sandwiches.
 """
 
 from __future__ import annotations
@@ -43,13 +49,14 @@ import numpy as np
 
 from ..model import DuhemSandwich
 from ._c_ff import FF_CHAIN, FF_PLANNER
-from ._c_model import DUHEM_STEP, MODEL_COMMON, PI_STEP
-from ._c_rpem import RPEM_STEP
+from ._c_model import DUHEM_STEP, GDUHEM_STEP, MDUHEM_STEP, MODEL_COMMON, PI_STEP, SHAPE_TERMS
+from ._c_rpem import GDUHEM_RPEM_STEP, RPEM_STEP
 from .rpem import rpem_start
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..compensate.placed import _Plan
     from ..identify.online import OnlineIdentifier
+    from ..mduhem import MultiDuhemSandwich
     from ..pi import PISandwich
     from ..records import Record
 
@@ -85,10 +92,11 @@ def _define(name: str, value: float | int) -> str:
 
 
 # =========================================================================== the parts
-def _model_part(model: DuhemSandwich | PISandwich) -> tuple[str, str]:
+def _model_part(model: DuhemSandwich | PISandwich | MultiDuhemSandwich) -> tuple[str, str]:
     """(header text, source text) of the placed model."""
     s = model.structure
     duhem = isinstance(model, DuhemSandwich)
+    multi = _is_mduhem(model)
     hist = s.history
     head = (_define("HYSTID_FS", model.fs) + _define("HYSTID_U_REST", model.u_rest)
             + _define("HYSTID_OFFSET", model.offset) + _define("HYSTID_MODEL_WINDOW", hist + 1))
@@ -96,6 +104,13 @@ def _model_part(model: DuhemSandwich | PISandwich) -> tuple[str, str]:
              "    double w2[HYSTID_MODEL_WINDOW], y[HYSTID_MODEL_WINDOW];\n"
     if duhem:
         head += "#define HYSTID_KIND_DUHEM 1\n"
+        if not s.is_plain:
+            head += ("/* the generalised Duhem block: f_order, g_order, directional */\n"
+                     "#define HYSTID_DUHEM_GENERALISED 1\n")
+    elif multi:
+        head += "#define HYSTID_KIND_MDUHEM 1\n" + _define("HYSTID_MODEL_OPERATORS",
+                                                           len(model.rates))
+        fields += "    double p[HYSTID_MODEL_OPERATORS]; /* the Duhem operators' states */\n"
     else:
         head += "#define HYSTID_KIND_PI 1\n" + _define("HYSTID_MODEL_OPERATORS",
                                                        len(model.thresholds))
@@ -118,11 +133,36 @@ def _model_part(model: DuhemSandwich | PISandwich) -> tuple[str, str]:
         src += (_define("HX_ALPHA", p["alpha"]) + _define("HX_F0", p.get("f0", 0.0))
                 + _define("HX_F1", p["f1"]) + _define("HX_G0", p["g0"])
                 + _define("HX_W2_REST", rest.window("w2", 1)[0])
-                + _define("HX_Y_REST", rest.window("y", 1)[0]) + DUHEM_STEP)
+                + _define("HX_Y_REST", rest.window("y", 1)[0]))
+        if s.is_plain:
+            src += DUHEM_STEP
+        else:
+            src += (_shape_indices(s) + _array("hx_theta", model.theta) + SHAPE_TERMS
+                    + GDUHEM_STEP)
+    elif multi:
+        src += (_define("HX_NOP", len(model.rates)) + _array("hx_alpha", model.rates)
+                + _array("hx_f1", model.f1) + _array("hx_g0", model.g0) + MDUHEM_STEP)
     else:
         src += (_define("HX_NPI", len(model.thresholds)) + _array("hx_r", model.thresholds)
                 + _array("hx_mu", model.mu) + PI_STEP)
     return head, src
+
+
+def _is_mduhem(model: Any) -> bool:
+    return getattr(type(model), "kind", None) == "mduhem"
+
+
+def _shape_indices(structure: Any) -> str:
+    """``HX_I_*``: where :func:`hystid.kernels.shape_terms` reads each group in ``theta`` (0 for
+    a group the structure has not: the loops over it are empty then), and the group sizes."""
+    from ..kernels import offsets, shape_offsets
+
+    layout = structure.layout
+    _, i_alpha, _, i_f1, _, i_g0, _, _ = (int(v) for v in offsets(layout))
+    i_f2, i_g1, i_ad = (max(int(v), 0) for v in shape_offsets(layout))
+    return "".join(_define(f"HX_{k}", int(v)) for k, v in (
+        ("I_ALPHA", i_alpha), ("I_F1", i_f1), ("I_G0", i_g0), ("I_F2", i_f2), ("I_G1", i_g1),
+        ("I_AD", i_ad), ("NF", layout[7]), ("NG", layout[8]), ("DIRECTIONAL", layout[9])))
 
 
 #: The keyword arguments of :func:`hystid.compensate.compensate` the exported compensator takes.
@@ -130,7 +170,9 @@ FF_KEYS = ("u_limits", "margin", "reference_model", "reference_lead", "preview",
            "compensation", "anchor")
 
 
-def ff_options(model: DuhemSandwich | PISandwich, **options: Any) -> dict[str, Any]:
+def ff_options(
+    model: DuhemSandwich | PISandwich | MultiDuhemSandwich, **options: Any
+) -> dict[str, Any]:
     """The keyword arguments of :func:`hystid.compensate.compensate` the export runs with.
 
     The exported step is ``compensate(model, r, **ff_options(model, ...))`` one sample at a
@@ -141,7 +183,7 @@ def ff_options(model: DuhemSandwich | PISandwich, **options: Any) -> dict[str, A
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, PISandwich or MultiDuhemSandwich
         The model.
     **options
         Any of :data:`FF_KEYS`.
@@ -168,12 +210,12 @@ def ff_options(model: DuhemSandwich | PISandwich, **options: Any) -> dict[str, A
     return kw
 
 
-def ff_plan(model: DuhemSandwich | PISandwich, **options: Any) -> _Plan:
+def ff_plan(model: DuhemSandwich | PISandwich | MultiDuhemSandwich, **options: Any) -> _Plan:
     """The stages the exported ``hystid_ff_step`` runs (see :func:`ff_options`).
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, PISandwich or MultiDuhemSandwich
         The model.
     **options
         As for :func:`ff_options`.
@@ -189,7 +231,9 @@ def ff_plan(model: DuhemSandwich | PISandwich, **options: Any) -> _Plan:
     return placed._plan(model, **ff_options(model, **options))
 
 
-def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
+def _ff_part(
+    plan: _Plan, model: DuhemSandwich | PISandwich | MultiDuhemSandwich
+) -> tuple[str, str]:
     """(header text, source text) of the compensator."""
     from ..compensate import compensator as comp
     from ..compensate import duhem_inverse as di
@@ -200,8 +244,12 @@ def _ff_part(plan: _Plan, model: DuhemSandwich | PISandwich) -> tuple[str, str]:
     names = {comp.KIND_DUHEM: "Duhem", comp.KIND_PI: "Prandtl-Ishlinskii",
              comp.KIND_LINEAR: "central-line"}
     if kind not in names:
-        raise ValueError(f"compensator kind {kind} cannot be exported (the C step has the Duhem, "
-                         "Prandtl-Ishlinskii and central-line inverses)")
+        member = {comp.KIND_GDUHEM: "the generalised Duhem block's inverse (gduhem)",
+                  comp.KIND_MDUHEM: "the multi-Duhem sandwich's inverse (mduhem)"}.get(
+                      kind, f"compensator kind {kind}")
+        raise ValueError(f"{member} is not exported to C (the C step has the plain Duhem, "
+                         "Prandtl-Ishlinskii and central-line inverses: the central line is "
+                         "exported with the compensator option compensation='linear')")
     rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX])) + model.u_rest
     P = int(ispec[comp._P])
     M = bool(plan.m_num.size)
@@ -347,12 +395,12 @@ def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
     windows = np.concatenate([a[pos - w:pos] for a in ident._windows[:5]])
     src += (_array("hx_r_est0", ident._est) + _array("hx_r_p0", ident.P)
             + _array("hx_r_scal0", ident._scal) + _array("hx_r_win0", windows))
-    return head, src + RPEM_STEP
+    return head, src + (RPEM_STEP if s.is_plain else GDUHEM_RPEM_STEP)
 
 
 # =========================================================================== assembling
 def c_sources(
-    model: DuhemSandwich | PISandwich,
+    model: DuhemSandwich | PISandwich | MultiDuhemSandwich,
     *,
     source: str = "",
     compensator: Mapping[str, Any] | None = None,
@@ -364,8 +412,9 @@ def c_sources(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
-        The model (placed or not).
+    model : DuhemSandwich, PISandwich or MultiDuhemSandwich
+        The model (placed or not; the Duhem sandwich with the paper's block or the generalised
+        one).
     source : str
         Where the model came from (a file name), for the header's comment.
     compensator : mapping, optional
@@ -377,7 +426,8 @@ def c_sources(
         A record of the stage for the on-line identifier's starting information.
     notes : list of str, optional
         Receives what the export leaves out and why (a model whose compensator cannot be
-        built is exported without it, ``HYSTID_NO_FF`` defined).
+        built is exported without it, ``HYSTID_NO_FF`` defined; a multi-Duhem model without
+        the on-line identifier, ``HYSTID_NO_RPEM`` defined).
 
     Returns
     -------
@@ -390,20 +440,16 @@ def c_sources(
         For a model kind the export has no C for (it names the kind), when the compensator
         cannot be built with the ``compensator`` options given, or a number is not finite.
     """
-    if getattr(type(model), "kind", None) == "mduhem":
-        raise ValueError("model: the C export writes the Duhem and PI sandwiches; the "
-                         "multi-Duhem sandwich (mduhem) is not exported yet")
-    if isinstance(model, DuhemSandwich):
-        from ..validate import check_plain_duhem
-
-        check_plain_duhem(model.structure.layout, "the C export")
     from .. import __version__
+    from ..mduhem import MultiDuhemSandwich
     from ..pi import PISandwich
 
-    if not isinstance(model, DuhemSandwich | PISandwich):
+    if not isinstance(model, DuhemSandwich | PISandwich | MultiDuhemSandwich):
         raise ValueError(f"model: a {type(model).__name__} cannot be exported to C (the export "
-                         "has the Duhem and the Prandtl-Ishlinskii sandwiches)")
+                         "has the Duhem, the Prandtl-Ishlinskii and the multi-Duhem "
+                         "sandwiches)")
     duhem = isinstance(model, DuhemSandwich)
+    plain = duhem and model.structure.is_plain
     mhead, msrc = _model_part(model)
     try:
         fhead, fsrc = _ff_part(ff_plan(model, **dict(compensator or {})), model)
@@ -419,7 +465,16 @@ def c_sources(
     rhead = rsrc = ""
     if duhem:
         rhead, rsrc = _rpem_part(rpem_start(model, rpem_record, rpem_sigma))
-    kind = "Duhem" if duhem else "Prandtl-Ishlinskii"
+    elif isinstance(model, MultiDuhemSandwich):
+        reason = "the multi-Duhem sandwich has no on-line identifier (it is identified in " \
+                 "batch only)"
+        rhead = f"\n/* No on-line identifier: {reason}. */\n#define HYSTID_NO_RPEM 1\n"
+        if notes is not None:
+            notes.append(f"no on-line identifier in the export: {reason}")
+    else:
+        rhead = "\n#define HYSTID_NO_RPEM 1 /* Duhem models only */\n"
+    kind = ("Duhem" if plain else "generalised Duhem" if duhem else
+            "Prandtl-Ishlinskii" if isinstance(model, PISandwich) else "multi-Duhem")
     units = f"u in {model.units.get('u', '?')}, y in {model.units.get('y', '?')}"
     banner = (f"/* Generated by hystid {__version__} (hystid export --c) from "
               f"{source or 'a model'}:\n   the {kind} sandwich {model.name!r} at "
@@ -428,22 +483,23 @@ def c_sources(
               "(-ffp-contract=off:\n   GCC's default with -std=c99; clang contracts by "
               "default). */\n")
     header = (banner + "#ifndef HYSTID_MODEL_H\n#define HYSTID_MODEL_H\n\n" + mhead + fhead
-              + (rhead if duhem else "\n#define HYSTID_NO_RPEM 1 /* Duhem models only */\n")
+              + rhead
               + "\n#endif /* HYSTID_MODEL_H */\n")
     # an unused static function is an error: sgn for the Duhem parts, min and max for the PI
-    # parts and the Duhem reversal planner
+    # parts and the Duhem reversal planner (the multi-Duhem step needs neither)
     cut = MODEL_COMMON.index("static double hx_max")
+    pi = isinstance(model, PISandwich)
     helpers = (MODEL_COMMON[:cut] if duhem else "") \
-        + (MODEL_COMMON[cut:] if not duhem or "static double hx_plan_memo" in fsrc else "")
+        + (MODEL_COMMON[cut:] if pi or "static double hx_plan_memo" in fsrc else "")
     source_text = (banner + '#include <math.h>\n\n#include "hystid_model.h"\n' + helpers
                    + "\n/* ---- the placed model */\n" + msrc
                    + ("\n/* ---- the feed-forward compensator */\n" + fsrc if fsrc else "")
-                   + ("\n/* ---- the on-line identifier */\n" + rsrc if duhem else ""))
+                   + ("\n/* ---- the on-line identifier */\n" + rsrc if rsrc else ""))
     return {"hystid_model.h": header, "hystid_model.c": source_text}
 
 
 def export_c(
-    model: DuhemSandwich | PISandwich,
+    model: DuhemSandwich | PISandwich | MultiDuhemSandwich,
     folder: str | os.PathLike[str],
     *,
     force: bool = False,
@@ -457,7 +513,7 @@ def export_c(
 
     Parameters
     ----------
-    model : DuhemSandwich or PISandwich
+    model : DuhemSandwich, PISandwich or MultiDuhemSandwich
         The model.
     folder : str or os.PathLike
         The folder (created with its parents when missing).
