@@ -10,6 +10,7 @@ sensor offset), not from the model the identifiers fit.
 
 import copy
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from hystid.baselines import compare
 from hystid.identify import identify, place_after_run
 from hystid.identify.members import WARMUP, member, short_record_warmup
 from hystid.identify.prepare import prepare
+from hystid.records import load_record
 from hystid.testing import as_measured_suite, stage_b_like
 
 #: Issue 21's goal: the on-line model within this factor of the batch fit's held-out RMS.
@@ -117,3 +119,25 @@ def test_duhem_online_start_up_spans_a_short_record(seed):
     assert len(res.info["start_up"]["checks"]) > 1  # retried on the longer window
     assert np.all(online <= 1.5 * batch), (online, batch)
     assert np.all(online < 0.5 * linear), (online, linear)
+
+
+STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
+
+
+@pytest.mark.skipif(not STAGE_A.exists(), reason=f"measured stage A not found at {STAGE_A}")
+def test_duhem_online_stays_admissible_on_measured_stage_a():
+    # The recursion checked condition (8) on the current sample's |dw1| only: on prbn_1 it ended
+    # at alpha max|dw1| = 6.4 on its own record and ran away on prbn_2 (held-out RMS 2e16 um;
+    # 117-131 nm on the others). With alpha capped below 2 / (largest |dw1| seen), measured:
+    # 81 / 72 / 70 / 75 / 75 nm against the batch fit's 39 / 75 / 72 / 78 / 77 nm (prbn_2 is
+    # 2.05x the batch fit and above the linear model's 55 nm: the member misses issue 21's
+    # 1.25x there; the default on-line choice, pi-stage, meets it).
+    train = load_record(STAGE_A / "prbn_1.csv")
+    held = [load_record(STAGE_A / f"{n}.csv")
+            for n in ("prbn_2", "sine50_1", "sine50_2", "tri50_1", "tri50_2")]
+    _, batch, linear = _fit(train, held, model="duhem")
+    res, online, _ = _fit(train, held, model="duhem", method="online")
+    for rec in [train, *held]:
+        assert not [w for w in res.model.admissibility(rec.u) if "condition (8)" in w], rec.name
+    assert np.all(np.isfinite(online)) and np.all(online < 2.5 * batch), (online, batch)
+    assert np.count_nonzero(online <= RATIO * batch) >= 4, (online, batch)

@@ -26,6 +26,7 @@ RPEM_STEP = r"""
 #define HX_S_HOLD 9
 #define HX_S_GOODAGE 10
 #define HX_S_NPRESET 11
+#define HX_S_DW1MAX 12
 
 static int hx_schur_cohn(const double *c, int n, double kmax, double *work)
 {
@@ -210,7 +211,7 @@ void hystid_rpem_init(hystid_rpem_state *s)
         s->cand[i] = 0.0;
         s->work[i] = 0.0;
     }
-    for (i = 0; i < 12; i++) {
+    for (i = 0; i < 13; i++) {
         s->scal[i] = hx_r_scal0[i];
     }
     for (i = 0; i < HX_R_W; i++) {
@@ -286,9 +287,20 @@ void hystid_rpem_step(hystid_rpem_state *s, double u, double y)
         for (i = 0; i < HX_R_NE; i++) {
             cand[i] = est[i] + PH[i] * (ec / denom);
         }
-        /* 4. projection onto the admissible set (Assumption 1, condition 8) */
+        /* 4. projection onto the admissible set (Assumption 1; condition 8 over the largest
+              |dw1| seen so far: alpha capped below 2 / max|dw1|) */
         dw1 = fabs(s->w1[L] - s->w1[L - 1]);
-        if (hx_admissible(cand, HX_R_KMAX, s->work) && cand[HX_R_I_ALPHA] * dw1 < 2.0) {
+        if (dw1 > scal[HX_S_DW1MAX]) {
+            scal[HX_S_DW1MAX] = dw1;
+        }
+        if (hx_admissible(cand, HX_R_KMAX, s->work)) {
+            if (scal[HX_S_DW1MAX] > 0.0) {
+                v = 2.0 * HX_R_ALPHA_MARGIN / scal[HX_S_DW1MAX];
+                if (cand[HX_R_I_ALPHA] >= v) {
+                    cand[HX_R_I_ALPHA] = v;
+                    scal[HX_S_NPROJ] += 1.0;
+                }
+            }
             for (i = 0; i < HX_R_NE; i++) {
                 est[i] = cand[i];
             }

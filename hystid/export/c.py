@@ -358,7 +358,7 @@ def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
             "    double est[HYSTID_RPEM_NPAR + 1], est_good[HYSTID_RPEM_NPAR + 1];\n"
             "    double P[HYSTID_RPEM_NPAR + 1][HYSTID_RPEM_NPAR + 1];\n"
             "    double P_good[HYSTID_RPEM_NPAR + 1][HYSTID_RPEM_NPAR + 1];\n"
-            "    double scal[12], PH[HYSTID_RPEM_NPAR + 1], cand[HYSTID_RPEM_NPAR + 1];\n"
+            "    double scal[13], PH[HYSTID_RPEM_NPAR + 1], cand[HYSTID_RPEM_NPAR + 1];\n"
             "    double work[HYSTID_RPEM_NPAR + 1];\n"
             "    double u[HYSTID_RPEM_WINDOW], w1[HYSTID_RPEM_WINDOW], w2[HYSTID_RPEM_WINDOW];\n"
             "    double yh[HYSTID_RPEM_WINDOW], ym[HYSTID_RPEM_WINDOW];\n"
@@ -382,7 +382,7 @@ def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
         ("NPAR", npar), ("NE", npar + 1), ("W", w), ("N1A", s.n1a), ("N1B", s.n1b),
         ("N2A", s.n2a), ("N2B", s.n2b), ("Q1", s.q1), ("Q2", s.q2), ("I_ALPHA", i_alpha),
         ("I_F0", i_f0), ("I_F1", i_f1), ("I_B1", i_b1), ("I_G0", i_g0), ("I_A1", i_a1),
-        ("I_A2", i_a2), ("RESYNC", max(s.n2a, s.q2 + s.n2b))))
+        ("I_A2", i_a2), ("RESYNC", max(s.n2a, s.q2 + s.n2b)), ("ALPHA_MARGIN", on.ALPHA_MARGIN)))
     if i_b2 != 0:  # the C code reads b2j at theta[j - 1]
         raise ValueError("unexpected parameter layout: b2 does not lead theta")
     settings = {"LAM_INF": "LAM_INF", "LAM_RATE": "LAM_RATE", "CLIP": "CLIP",

@@ -94,6 +94,19 @@ def _default_sigma(model: DuhemSandwich) -> float:
     return float(value) if np.isfinite(value) and value > 0 else 1e-3
 
 
+def _largest_dw1(model: DuhemSandwich, record: Record | None, ident: OnlineIdentifier) -> float:
+    """The largest ``|dw1|`` the model makes on the starting information's input (the
+    record's first samples, else the paper's excitation in the envelope): where the
+    recursion's condition (8) cap starts (0: set by the first samples it sees)."""
+    u = (record.u[:INFORMATION_SAMPLES] if record is not None
+         else _synthetic_input(model, INFORMATION_SAMPLES))
+    if u is None or len(u) < 2:
+        return 0.0
+    w1 = model.simulate(u, check=False).w1
+    value = float(np.max(np.abs(np.diff(w1))))
+    return value if np.isfinite(value) else 0.0
+
+
 def rpem_start(
     model: DuhemSandwich, record: Record | None = None, sigma: float | None = None
 ) -> OnlineIdentifier:
@@ -160,6 +173,7 @@ def rpem_start(
     ident._P_good[:] = ident.P
     ident._scal[on._SIG] = sigma
     ident._scal[on._SHORT] = ident._scal[on._LONG] = sigma**2
+    ident._scal[on._DW1MAX] = _largest_dw1(model, record, ident)
     w = ident.window
     rest = model.at_rest()
     U, W1, W2, Yh, Ym = ident._windows[:5]

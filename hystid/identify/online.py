@@ -65,6 +65,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .result import HistoryRecorder, IdentificationResult
 
 from .online_kernels import (
+    _DW1MAX,
     _FIRST,
     _I_CAP,
     _I_NPAR,
@@ -80,6 +81,7 @@ from .online_kernels import (
     _NREC,
     _SHORT,
     _SIG,
+    ALPHA_MARGIN,
     DIAGNOSTICS,
     _buffer_size,
     _views,
@@ -511,6 +513,13 @@ class OnlineIdentifier(RecursiveIdentifier):
         U[Pp:] = u
         S1, S2, SY = (np.zeros((Pp + n, npar)) for _ in range(3))
         sensitivities_into(theta, s.layout, U, W1, W2, Y, S1, S2, SY, Pp)
+        # condition (8) over the window: the recursion keeps alpha below 2 / max|dw1| from here
+        dw1max = float(np.max(np.abs(np.diff(W1[Pp:])), initial=0.0))
+        i_alpha = s.names.index("alpha")
+        if dw1max > 0 and theta[i_alpha] * dw1max >= 2.0 * ALPHA_MARGIN:
+            theta = theta.copy()
+            theta[i_alpha] = 2.0 * ALPHA_MARGIN / dw1max
+            sensitivities_into(theta, s.layout, U, W1, W2, Y, S1, S2, SY, Pp)
         r = (y - Y[Pp:] - offset)[ok]
         sigma = max(float(np.sqrt(np.mean(r**2))), 1e-12)
         J = SY[Pp:][ok]
@@ -532,6 +541,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         self._ints[_I_POS] = w
         self._scal[_SIG] = sigma
         self._scal[_SHORT] = self._scal[_LONG] = sigma**2
+        self._scal[_DW1MAX] = dw1max
         self._scal[_K] = k
         last = self.start_checks[-1]
         self.start_info = {"rms_residual": sigma, "start": last.start, "samples": n,

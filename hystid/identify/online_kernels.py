@@ -23,8 +23,10 @@ DIAGNOSTICS = ("e", "sigma", "lambda", "trace_P", "rms_short", "rms_long", "offs
 
 # scal layout
 (_K, _LAM, _SIG, _SHORT, _LONG, _NPROJ, _NCLIP, _NREC, _FIRST, _HOLD, _GOODAGE,
- _NPRESET) = range(12)
-_NSCAL = 12
+ _NPRESET, _DW1MAX) = range(13)
+_NSCAL = 13
+#: The projection caps alpha at this share of condition (8)'s bound over the largest |dw1| seen.
+ALPHA_MARGIN = 0.95
 # settings layout
 (_S_LAM_INF, _S_LAM_RATE, _S_CLIP, _S_TRACE, _S_DIV_RATIO, _S_DIV_HOLD, _S_PRESET, _S_KMAX,
  _S_SHORT, _S_LONG, _S_SIG, _S_TRACK) = range(12)
@@ -182,9 +184,16 @@ def _rpem_sample(est, P, est_good, P_good, scal, sett, diag, PH, cand, work, U, 
         denom = lam + hPh
         for i in range(ne):
             cand[i] = est[i] + PH[i] * (ec / denom)
-        # 4. projection onto the admissible set (Assumption 1, condition 8)
+        # 4. projection onto the admissible set (Assumption 1; condition 8 over the largest
+        #    |dw1| seen so far: alpha capped below 2 / max|dw1|)
         dw1 = abs(W1[L] - W1[L - 1])
-        if admissible_into(cand[:npar], layout, kmax, work) and cand[i_alpha] * dw1 < 2.0:
+        if dw1 > scal[_DW1MAX]:
+            scal[_DW1MAX] = dw1
+        if admissible_into(cand[:npar], layout, kmax, work):
+            cap_alpha = 2.0 * ALPHA_MARGIN / scal[_DW1MAX] if scal[_DW1MAX] > 0 else np.inf
+            if cand[i_alpha] >= cap_alpha:
+                cand[i_alpha] = cap_alpha
+                scal[_NPROJ] += 1.0
             est[:] = cand
         else:
             scal[_NPROJ] += 1.0
