@@ -1,0 +1,108 @@
+"""A model identified on one sine, used on other inputs: what a narrow-band record identifies.
+
+The record: 4 s of a 1 Hz sine over 0-3.6 V on the 200 Hz stage-B look-alike
+(``hystid.testing.stage_b_like``: Preisach hysteresis, an amplifier lag, a mode near Nyquist, a
+-111 um sensor offset), started mid-swing. Held out: the same stage (``hystid.testing.measured
+.stage_b``, simulated independently of every model) driven by a 0.5 Hz, a 2 Hz and a 0.2 Hz sine
+over the same range, a 1 Hz sine of two thirds the amplitude, and a 1 Hz sine started from rest
+at 0 V. Each member is identified with defaults and scored like every accuracy table of the
+project (:func:`hystid.baselines.compare`), beside the static line and the linear model.
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/bench_narrowband.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import warnings
+
+import numpy as np
+from _common import table, write_json
+
+from hystid.baselines import compare
+from hystid.identify import identify
+from hystid.records import Record
+from hystid.testing import stage_b_like
+from hystid.testing.measured import stage_b
+
+COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_narrowband.py"
+#: (label, model, method) identified on the sine.
+FITS = (("duhem", "duhem", "batch"), ("pi-stage", "pi-stage", "batch"),
+        ("auto", "auto", "batch"), ("auto, on-line", "auto", "online"))
+#: Held-out inputs: (label, frequency Hz, amplitude V about 1.8 V, seconds, from rest at 0 V).
+HELD_OUT = (("0.5 Hz", 0.5, 1.8, 8.0, False), ("2 Hz", 2.0, 1.8, 4.0, False),
+            ("1 Hz, 2/3 amplitude", 1.0, 1.2, 4.0, False), ("0.2 Hz", 0.2, 1.8, 20.0, False),
+            ("1 Hz from rest at 0 V", 1.0, 1.8, 6.0, True))
+
+
+def held_out_record(freq: float, amp: float, seconds: float, from_rest: bool,
+                    seed: int) -> Record:
+    """The stage-B look-alike driven by a sine (its phase from ``seed``), as measured."""
+    fs = 200.0
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(round(seconds * fs))) / fs
+    if from_rest:
+        u = np.r_[np.zeros(int(fs)), 1.8 - amp * np.cos(2 * np.pi * freq * t)]
+    else:
+        u = 1.8 + amp * np.sin(2 * np.pi * freq * t + rng.uniform(0, 2 * np.pi))
+    y = stage_b().simulate(u)["y"] - 111.2 + 0.02 * rng.standard_normal(u.size)
+    return Record(u=u, y=y, fs=fs, units={"u": "V", "y": "um"}, name=f"{freq:g} Hz")
+
+
+def measure() -> dict:
+    """Identify every fit on the sine and score it on every held-out record.
+
+    Returns
+    -------
+    dict
+        ``held_out`` labels and ``rows``: per fit, the member chosen, the held-out RMS [um]
+        per record, and the baselines'.
+    """
+    train = stage_b_like(seed=0)
+    held = [held_out_record(f, a, s, r, seed=i + 1)
+            for i, (_, f, a, s, r) in enumerate(HELD_OUT)]
+    rows = []
+    for label, model, method in FITS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            result = identify(train, model=model, method=method)
+            c = compare(result.model, train, held)
+        rows.append({"fit": label, "member": result.info.get("model", model),
+                     "rms": [r["model"] for r in c.rows],
+                     "static_line": [r["static_line"] for r in c.rows],
+                     "linear": [r["linear"] for r in c.rows]})
+    return {"held_out": [h[0] for h in HELD_OUT], "rows": rows}
+
+
+def render(payload: dict) -> str:
+    """The table as printed.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+    """
+    head = ["held-out RMS [um], identified on a 1 Hz sine", *payload["held_out"]]
+    body = [[f"`{r['fit']}`" + (f" (chose `{r['member']}`)" if r["fit"].startswith("auto")
+                                 else ""), *(f"{v:.3g}" for v in r["rms"])]
+            for r in payload["rows"]]
+    base = payload["rows"][0]
+    body.append(["static line", *(f"{v:.3g}" for v in base["static_line"])])
+    body.append(["linear (duhem orders)", *(f"{v:.3g}" for v in base["linear"])])
+    return table(body, head)
+
+
+def main() -> None:
+    """Run, print the table, write ``narrowband.json``."""
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
+    payload = measure()
+    print(render(payload))
+    print(f"-> {write_json('narrowband', payload)}")
+
+
+if __name__ == "__main__":
+    main()
