@@ -311,3 +311,16 @@ def test_fleet_refuses_a_sampling_rate_that_is_not_a_positive_finite_number(tmp_
         main(["fleet", "identify", str(tmp_path), "--out", str(tmp_path / "out"), "--fs", value])
     assert err.value.code == 2
     assert "--fs: expected a positive finite number" in capsys.readouterr().err
+
+
+def test_two_files_holding_records_of_one_name_are_told_apart(capsys, tmp_path):
+    # Two files whose records carry the same name: a message about the first named the second
+    # file (the name -> file map kept the last one loaded).
+    from hystid.testing import stage_b_like
+
+    stage_b_like(seed=0).save(tmp_path / "b0.csv")
+    stage_b_like(seed=1).save(tmp_path / "b1.csv")
+    code, _, err = run(["diagnose", tmp_path / "b0.csv", "--val", tmp_path / "b1.csv",
+                        "--out", tmp_path / "d"], capsys)
+    assert code == 2
+    assert "b0.csv" in err and "b1.csv" not in err, err

@@ -374,6 +374,8 @@ def remember(rec: Record, path: str) -> Record:
     """
     from ..validate import check_magnitudes
 
+    if RECORD_FILES.get(rec.name, str(path)) != str(path):  # two files, one record name
+        rec.name = f"{rec.name} ({Path(path).name})"
     RECORD_FILES[rec.name] = str(path)
     with refused():
         check_magnitudes(rec, str(path))
