@@ -275,6 +275,23 @@ def _split_for_validation(rec: Record, val: Record | None,
     return rec[:k], rec, k
 
 
+def _mended_for_scoring(target, held_from: int | None) -> tuple[object, list[str]]:
+    """The scored record with its input glitches interpolated over, as the fit mends the
+    record it identifies on (a glitch would otherwise drive the model through a spike that
+    never reached the stage); what was mended, for glitches the fit's own notes do not name
+    (those in a held-out end from ``held_from``, or anywhere in a validation record)."""
+    from ..identify.prepare import input_glitches, without_input_glitches
+
+    runs, notes = input_glitches(target.u, target.y)
+    if not runs:
+        return target, []
+    mended, _ = without_input_glitches(target)
+    start = held_from or 0
+    said = [f"scored record: {n}" for (k, _), n in zip(runs, notes, strict=True)
+            if k >= start]
+    return mended, said
+
+
 def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dict, np.ndarray,
                                                                               object]:
     from ..baselines import compare, rest_zero, simulate_from_rest
@@ -283,6 +300,9 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
 
     target = val if val is not None else rec
     k = scored_from
+    # glitches the fit mended and named are not named again (the record itself validated)
+    target, mended = _mended_for_scoring(
+        target, k if k is not None else (0 if val is not None else target.n))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         yhat = simulate_from_rest(result.model, target.u, check=False)
@@ -305,6 +325,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         where = f"--val {args.val}" if getattr(args, "val", None) else f"record {rec.name!r}"
         raise ValueError(f"{where}: {err}") from err
     warnings_ = list(result.info.get("warnings", []))
+    warnings_ += mended
     warnings_ += [f"on the validation input: {p}" for p in problems]
     warnings_ += baselines.notes
     val_path, rec_path = getattr(args, "val", None), getattr(args, "record", None)
