@@ -244,3 +244,19 @@ def test_cli_mends_a_glitch_in_the_validation_record(tmp_path, capsys):
         if name == "g":
             assert "at sample 4500" in err and "glitch" in err
     assert figures["g"] == pytest.approx(figures["clean"], rel=1e-6)
+
+
+def test_diagnose_cli_mends_its_scored_records(capsys):
+    # hystid diagnose scores --val and --repeat records: their glitches are mended and said
+    from argparse import Namespace
+
+    from hystid.cli.diagnose import _mended
+
+    val = stage_a_like("tri50", seconds=0.5, rest_seconds=0.2, seed=1)
+    u = val.u.copy()
+    u[4500] = 1e4
+    rec = Record(u=u, y=val.y, fs=val.fs, units=val.units, name="glitch")
+    mended = _mended(rec, Namespace(prog="hystid diagnose"), "--val g.csv")
+    err = capsys.readouterr().err
+    assert "--val g.csv" in err and "at sample 4500" in err
+    assert abs(mended.u[4500]) < np.max(np.abs(val.u)) and rec.u[4500] == 1e4

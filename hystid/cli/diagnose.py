@@ -151,6 +151,17 @@ def _units(text: str | None) -> dict | None:
         return parse_units(text)
 
 
+def _mended(rec: Record, args: argparse.Namespace, label: str) -> Record:
+    """A scored record with its input glitches interpolated over, as the fit mends the
+    training record (the diagnosis' own identify does), said as a warning."""
+    from ..identify.prepare import without_input_glitches
+
+    mended, notes = without_input_glitches(rec)
+    for note in notes:
+        tell(args, f"{label}: {note}", "warning")
+    return mended
+
+
 def _load(path: str, args: argparse.Namespace, label: str) -> Record:
     from ..records import Record, load_record
 
@@ -238,8 +249,9 @@ def _diagnose(args: argparse.Namespace) -> None:
         check_out(args, args.out, OUTPUT_FILES,
                   inputs=(args.train, *args.val, *args.repeat, args.model))
         train = _load(args.train, args, "TRAIN")
-        vals = [_load(p, args, f"--val {p}") for p in args.val]
-        repeats = [_load(p, args, f"--repeat {p}") for p in args.repeat]
+        vals = [_mended(_load(p, args, f"--val {p}"), args, f"--val {p}") for p in args.val]
+        repeats = [_mended(_load(p, args, f"--repeat {p}"), args, f"--repeat {p}")
+                   for p in args.repeat]
         try:  # the diagnosis refits the batch fit many times: the batch fit's cap holds
             for path, rec in zip([args.train, *args.val], [train, *vals], strict=True):
                 check_magnitudes(rec, path)
