@@ -340,8 +340,8 @@ def _ff_part(
     member = ""
     if kind == comp.KIND_GDUHEM:  # the chain's theta, read by the model part's hx_shape_terms
         theta, layout = fpar[comp._NF:], ispec[comp._NI:]
-        if not (np.array_equal(layout, model.structure.layout) and theta.size
-                == len(model.theta)):  # pragma: no cover - the chain is built from the model
+        # hx_shape_terms reads theta at the HX_I_* indices of the model's layout
+        if not np.array_equal(layout, model.structure.layout):  # pragma: no cover
             raise ValueError("the compensator's generalised Duhem block is not the model's")
         i_f0 = int(offsets(layout)[2])
         src += _define("HX_FF_GD_F0", float(theta[i_f0]) if i_f0 >= 0 else 0.0)
