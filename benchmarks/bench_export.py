@@ -17,8 +17,10 @@ limits wide enough never to saturate (every sample follows the plan), and with a
 3 000 samples (where shifting the step's reference lines costs more than the planner). Also
 the model step of the ``gduhem`` member (the generalised Duhem block: cubic curve, quadratic
 slope) and of the ``mduhem`` member (six Duhem operators in parallel), identified on a simulated
-stage A and run on the paper's excitation scaled into their input envelope (they are exported
-without compensator; the gduhem member's on-line identifier step is timed too).
+stage A and run on the paper's excitation scaled into their input envelope (the gduhem member's
+on-line identifier step is timed too), and their compensators (the per-sample inverses without
+look-ahead of ``hystid.compensate.member_inverse``) on the same kind of triangle scan as the
+others, within the limits the model's envelope sets.
 
 Usage: OPENBLAS_NUM_THREADS=1 python benchmarks/bench_export.py [--quick] [--samples N]
            [--out FILE.json]
@@ -219,7 +221,7 @@ def _rest_command(model, kw: dict) -> float:
 
 def measure(quick: bool = False, samples: int | None = None) -> dict:
     """Time the C steps and ``model.simulate`` on the reference stage, the compensators also on
-    the pi-stage member.
+    the pi-stage member, the model steps and compensators of the gduhem and mduhem members.
 
     Parameters
     ----------
@@ -269,8 +271,10 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
             "duhem_preview_3000": ff_rates(model, folder / "p3000", nf,
                                            {**REFERENCE_LIMITS, "preview": 3000}),
         }
-        members = {name: model_rates(member_model(name), folder / name, n)
-                   for name in ("gduhem", "mduhem")}
+        member_models = {name: member_model(name) for name in ("gduhem", "mduhem")}
+        members = {name: model_rates(m, folder / name, n) for name, m in member_models.items()}
+        ff.update({name: ff_rates(m, folder / f"{name}_ff", nf, {})
+                   for name, m in member_models.items()})
     c_rate_model = n / t_c
     py_rate = n / t_py
     rates = [c_rate_model, nf / t_rpem] + [v["c_samples_per_s"] for v in ff.values()] \
@@ -317,6 +321,8 @@ def render(payload: dict) -> str:
             rows.append([f"C hystid_rpem_step, {names[key]}", f"{m['c_rpem_samples_per_s']:.3g}",
                          ""])
     labels = {"duhem": "reference stage (Duhem", "pi_stage": "pi-stage (PI",
+              "gduhem": "gduhem member (generalised Duhem, per sample",
+              "mduhem": "mduhem member (6 Duhem operators, per sample",
               "duhem_unsaturated": "reference stage, limits +-100 V: no saturation (Duhem",
               "duhem_preview_3000": "reference stage (Duhem"}
     every = {**payload["ff"], **payload.get("ff_context", {})}

@@ -469,8 +469,8 @@ def unseen_inputs(model, n: int = 6_000, seed: int = 5) -> list[np.ndarray]:
 @pytest.mark.parametrize("name", [*GDUHEM, "directional-by-hand", "mduhem"])
 def test_member_model_step_matches_simulate_on_unseen_inputs(name, members, tmp_path):
     """The generalised Duhem block and the multi-Duhem sandwich: the C step against simulate,
-    from rest (the remembered Duhem state included), on inputs the fit never saw; exported
-    without the compensator (and the multi-Duhem without an on-line identifier), saying why."""
+    from rest (the remembered Duhem state included), on inputs the fit never saw; exported with
+    the compensator (the multi-Duhem without an on-line identifier, saying why)."""
     model = members[name]
     if name == "mduhem":
         assert len(model.rates) == 6
@@ -483,12 +483,11 @@ def test_member_model_step_matches_simulate_on_unseen_inputs(name, members, tmp_
     texts = c_sources(model, notes=notes)
     head = texts["hystid_model.h"]
     multi = name == "mduhem"
-    assert "#define HYSTID_NO_FF 1" in head
+    assert "HYSTID_NO_FF" not in head and "hystid_ff_step" in texts["hystid_model.c"]
     assert ("#define HYSTID_NO_RPEM 1" in head) == multi
-    assert len(notes) == 1 + multi and "compensator" in notes[0]
-    assert ("multi-Duhem" if multi else "generalised Duhem") in notes[0]
+    assert len(notes) == multi
     if multi:
-        assert "on-line identifier" in notes[1]
+        assert "on-line identifier" in notes[0]
     includes = [line for line in texts["hystid_model.c"].splitlines()
                 if line.startswith("#include")]
     assert includes == ["#include <math.h>", '#include "hystid_model.h"']
@@ -502,18 +501,95 @@ def test_member_model_step_matches_simulate_on_unseen_inputs(name, members, tmp_
 @needs_cc
 @pytest.mark.parametrize("name", ["gduhem", "mduhem"])
 def test_member_central_line_compensator_is_exported_when_asked(name, members, tmp_path):
-    """The members' own inverses are not in C; the central-line compensator is, asked for."""
+    """The members' central-line compensator (the uncompensated baseline), asked for; a
+    look-ahead, which their inverses have not, is refused."""
     model = members[name]
-    with pytest.raises(ValueError, match="inverse .* not exported to C .* compensation='linear'"):
-        c_sources(model, compensator={"preview": 0})
+    with pytest.raises(ValueError, match="preview: the .* without look-ahead"):
+        c_sources(model, compensator={"preview": 30})
     _ff_case(model, triangle(model, 3.0, seconds=0.3), tmp_path, compensation="linear")
+
+
+def output_span(model) -> float:
+    """How far the model's output moves from its rest when its input ramps from the rest
+    level to either end of its envelope (the narrower side, record units)."""
+    env = model.envelope
+    rest = model.simulate(np.full(2, model.u_rest), check=False).y[-1]
+    ends = [model.simulate(np.linspace(model.u_rest, end, 3_000), check=False).y[-1]
+            for end in (env.u_min, env.u_max)]
+    return min(abs(y - rest) for y in ends)
+
+
+def member_reference(model, reference: str) -> tuple[np.ndarray, dict]:
+    """A reference the model was not identified on (record units) and the compensator's
+    options for it: a triangle inside the model's envelope, the displacement of a stage_a_like
+    record of another kind and seed (the rest anchored at its first sample), or a triangle
+    larger than the limits let the model reach."""
+    from hystid.testing import stage_a_like
+
+    if reference == "triangle":
+        return triangle(model, output_span(model), seconds=0.3), {}
+    if reference == "measured-like":
+        rec = stage_a_like("tri100", seconds=0.3, rest_seconds=0.05, seed=3)
+        return rec.y, {"anchor": "reference"}
+    return triangle(model, 4.0 * output_span(model), seconds=0.3, hz=30.0), {}
+
+
+@needs_cc
+@pytest.mark.parametrize("reference", ["triangle", "measured-like", "saturating"])
+@pytest.mark.parametrize("name", [*GDUHEM, "directional-by-hand", "mduhem"])
+def test_ff_step_matches_compensate_for_a_member(name, reference, members, tmp_path):
+    """The generalised Duhem block's and the multi-Duhem sandwich's per-sample inverses in C:
+    ``hystid_ff_step`` against ``compensate`` sample by sample (command, desired output,
+    status) on references the models were not identified on, the saturating one included."""
+    model = members[name]
+    r, options = member_reference(model, reference)
+    res = _ff_case(model, r, tmp_path, **options)
+    src = c_sources(model, compensator=options or None)["hystid_model.c"]
+    assert ("hx_md_inverse_step" if name == "mduhem" else "hx_gd_inverse_step") in src
+    assert "static double hx_plan_memo" not in src  # no look-ahead: no reversal planner
+    saturated = np.mean((res.status & hc.SATURATED) != 0)
+    if reference == "saturating":
+        assert saturated > 0.2
+    else:
+        assert saturated < 0.01 and np.mean(res.exact) > 0.9
+
+
+def turning_member(model):
+    """The member made unable to reverse in one step after a long branch (the Duhem block's
+    curve slope above twice its reversible slope; the operators' reversible slopes cut to
+    0.3): its inverse takes the approximate turning step there (status 2)."""
+    from hystid.mduhem import MultiDuhemSandwich
+
+    if isinstance(model, MultiDuhemSandwich):
+        params = {k: v * (0.3 if k.startswith("g0") else 1.0) for k, v in model.params.items()}
+        return MultiDuhemSandwich(params, model.rates, model.structure, fs=model.fs,
+                                  name="turning", u_rest=model.u_rest, offset=model.offset,
+                                  envelope=model.envelope, units=model.units)
+    return DuhemSandwich({**model.params, "f1": 6.0 * model.params["f1"]}, model.structure,
+                         fs=model.fs, name="turning", u_rest=model.u_rest, offset=model.offset,
+                         rest_memory=model.rest_memory, envelope=model.envelope,
+                         units=model.units)
+
+
+@needs_cc
+@pytest.mark.parametrize("name", ["directional-by-hand", "mduhem"])
+def test_ff_step_matches_compensate_through_unreachable_reversals(name, members, tmp_path):
+    """Members whose reversals cannot be made in one step: the C inverse takes the same
+    approximate steps (status 2) and the bound of condition 8 (status 1) as compensate."""
+    model = turning_member(members[name])
+    res = _ff_case(model, triangle(model, 3.0, seconds=0.3), tmp_path / "triangle")
+    assert np.any(res.status & 2) and np.any(res.status & 1)
+    r, options = member_reference(model, "measured-like")
+    res = _ff_case(model, r, tmp_path / "measured", **options,
+                   reference_model=hc.smoothing_model(21, model.dt))
+    assert np.any(res.status & 2)
 
 
 @needs_cc
 @pytest.mark.parametrize("name", ["gduhem", "mduhem"])
 def test_cli_export_of_a_member(name, members, tmp_path, capsys):
-    """``hystid export model.json --c DIR`` for a saved gduhem or mduhem model: the files, the
-    notes on what is left out, and the step of the loaded model."""
+    """``hystid export model.json --c DIR`` for a saved gduhem or mduhem model: the files (the
+    compensator in them), the note on what is left out, and the step of the loaded model."""
     from hystid.export import C_FILES
     from hystid.modelfile import load_model
 
@@ -522,7 +598,7 @@ def test_cli_export_of_a_member(name, members, tmp_path, capsys):
     assert main(["export", str(model_file), "--c", str(tmp_path / "out")]) == 0
     out, err = capsys.readouterr()
     assert out.startswith("wrote ")
-    assert "note: no feed-forward compensator" in err
+    assert "note: no feed-forward compensator" not in err
     assert ("note: no on-line identifier" in err) == (name == "mduhem")
     texts = {f: (tmp_path / "out" / f).read_text() for f in C_FILES}
     model = load_model(model_file)

@@ -165,15 +165,16 @@ def test_gduhem_member_and_what_it_is_refused_by():
     with pytest.raises(ValueError, match="preview: the generalised Duhem block .* without "
                                          "look-ahead"):
         compensate(model, model.simulate(u, check=False).y, u_limits=(-1.0, 11.0), preview=30)
-    # the C export writes the model's step and its on-line identifier, not the block's inverse
-    # (tests/test_export.py runs them against Python)
+    # the C export writes the model's step, the block's inverse and its on-line identifier
+    # (tests/test_export.py runs them against Python); a look-ahead asked for is refused
     notes: list[str] = []
-    head = c_sources(model, notes=notes)["hystid_model.h"]
+    texts = c_sources(model, notes=notes, compensator={"u_limits": (-1.0, 11.0)})
+    head = texts["hystid_model.h"]
     assert "#define HYSTID_DUHEM_GENERALISED 1" in head
-    assert "#define HYSTID_NO_FF 1" in head and "HYSTID_NO_RPEM" not in head
-    assert len(notes) == 1 and "no feed-forward compensator" in notes[0]
-    with pytest.raises(ValueError, match="generalised Duhem block's inverse .* not exported"):
-        c_sources(model, compensator={"u_limits": (-1.0, 11.0)})
+    assert "HYSTID_NO_FF" not in head and "HYSTID_NO_RPEM" not in head and not notes
+    assert "hx_gd_inverse_step" in texts["hystid_model.c"]
+    with pytest.raises(ValueError, match="preview: the generalised Duhem block .* without"):
+        c_sources(model, compensator={"u_limits": (-1.0, 11.0), "preview": 30})
     with pytest.raises(ValueError, match="eria.*plain Duhem"):
         identify(Record(u, model.simulate(u, check=False).y, 30_000.0), method="eria",
                  structure=FULL)

@@ -31,10 +31,12 @@ What each function is:
   generalised one). The start-up solve of :class:`~hystid.identify.online.OnlineIdentifier`
   (a batch fit) is not part of the export.
 
-The placed model is written for the Duhem sandwich (the paper's block and the generalised one:
-``f_order``, ``g_order``, ``directional``), the Prandtl-Ishlinskii sandwiches and the multi-Duhem
-sandwich; the compensator for those whose inverse the C step has (the plain Duhem block's, the
-PI operator's and the central line), the on-line identifier for the Duhem sandwiches.
+The placed model and the compensator are written for the Duhem sandwich (the paper's block and
+the generalised one: ``f_order``, ``g_order``, ``directional``), the Prandtl-Ishlinskii
+sandwiches and the multi-Duhem sandwich: the plain Duhem block's inverse with its reversal
+planner, the PI operator's exact inverse, the generalised block's and the parallel Duhem
+operators' per-sample inverses without look-ahead (:mod:`hystid.compensate.member_inverse`) and
+the central line; the on-line identifier for the Duhem sandwiches.
 """
 
 from __future__ import annotations
@@ -47,8 +49,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..kernels import offsets
 from ..model import DuhemSandwich
-from ._c_ff import FF_CHAIN, FF_PLANNER
+from ._c_ff import FF_GDUHEM, FF_MDUHEM, FF_MEMBER, FF_PLANNER, ff_chain
 from ._c_model import DUHEM_STEP, GDUHEM_STEP, MDUHEM_STEP, MODEL_COMMON, PI_STEP, SHAPE_TERMS
 from ._c_rpem import GDUHEM_RPEM_STEP, RPEM_STEP
 from .rpem import rpem_start
@@ -242,14 +245,13 @@ def _ff_part(
     ispec, fpar = chain.ispec, chain.fpar
     kind = int(ispec[comp._KIND])
     names = {comp.KIND_DUHEM: "Duhem", comp.KIND_PI: "Prandtl-Ishlinskii",
-             comp.KIND_LINEAR: "central-line"}
+             comp.KIND_LINEAR: "central-line",
+             comp.KIND_GDUHEM: "generalised Duhem block's per-sample",
+             comp.KIND_MDUHEM: "multi-Duhem sandwich's per-sample"}
     if kind not in names:
-        member = {comp.KIND_GDUHEM: "the generalised Duhem block's inverse (gduhem)",
-                  comp.KIND_MDUHEM: "the multi-Duhem sandwich's inverse (mduhem)"}.get(
-                      kind, f"compensator kind {kind}")
-        raise ValueError(f"{member} is not exported to C (the C step has the plain Duhem, "
-                         "Prandtl-Ishlinskii and central-line inverses: the central line is "
-                         "exported with the compensator option compensation='linear')")
+        raise ValueError(f"compensator kind {kind} is not exported to C (the C step has the "
+                         "Duhem (plain and generalised), multi-Duhem, Prandtl-Ishlinskii and "
+                         "central-line inverses)")
     rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX])) + model.u_rest
     P = int(ispec[comp._P])
     M = bool(plan.m_num.size)
@@ -335,10 +337,25 @@ def _ff_part(
     if kind == comp.KIND_PI:
         arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi, r_inv=chain.r_inv,
                       mu_inv=chain.mu_inv)
+    member = ""
+    if kind == comp.KIND_GDUHEM:  # the chain's theta, read by the model part's hx_shape_terms
+        theta, layout = fpar[comp._NF:], ispec[comp._NI:]
+        # hx_shape_terms reads theta at the HX_I_* indices of the model's layout
+        if not np.array_equal(layout, model.structure.layout):  # pragma: no cover
+            raise ValueError("the compensator's generalised Duhem block is not the model's")
+        i_f0 = int(offsets(layout)[2])
+        src += _define("HX_FF_GD_F0", float(theta[i_f0]) if i_f0 >= 0 else 0.0)
+        arrays.update(theta=theta)
+        member = FF_MEMBER + FF_GDUHEM
+    elif kind == comp.KIND_MDUHEM:  # the operators' rates, f1_j and g0_j, HX_FF_NPI of each
+        m = int(ispec[comp._NPI])
+        h = fpar[comp._NF:]
+        arrays.update(md_rates=h[:m], md_f1=h[m:2 * m], md_g0=h[2 * m:3 * m])
+        member = FF_MEMBER + FF_MDUHEM
     src += "".join(_array(f"hx_ff_{k}", v) for k, v in arrays.items())
     if kind == comp.KIND_DUHEM:
         src += FF_PLANNER
-    return head, src + FF_CHAIN
+    return head, src + member + ff_chain(kind)
 
 
 def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
@@ -485,12 +502,16 @@ def c_sources(
     header = (banner + "#ifndef HYSTID_MODEL_H\n#define HYSTID_MODEL_H\n\n" + mhead + fhead
               + rhead
               + "\n#endif /* HYSTID_MODEL_H */\n")
-    # an unused static function is an error: sgn for the Duhem parts, min and max for the PI
-    # parts and the Duhem reversal planner (the multi-Duhem step needs neither)
-    cut = MODEL_COMMON.index("static double hx_max")
+    # an unused static function is an error: sgn for the Duhem parts and the members'
+    # inverses, min and max for the PI parts and the Duhem reversal planner, min for the
+    # members' inverses and max for the multi-Duhem one (the multi-Duhem step needs none)
+    cut, cut2 = (MODEL_COMMON.index(f"static double hx_{f}") for f in ("max", "min"))
     pi = isinstance(model, PISandwich)
-    helpers = (MODEL_COMMON[:cut] if duhem else "") \
-        + (MODEL_COMMON[cut:] if pi or "static double hx_plan_memo" in fsrc else "")
+    planner = "static double hx_plan_memo" in fsrc
+    member = "static int hx_affine_step" in fsrc
+    helpers = (MODEL_COMMON[:cut] if duhem or member else "") \
+        + (MODEL_COMMON[cut:cut2] if pi or planner or "hx_md_inverse_step" in fsrc else "") \
+        + (MODEL_COMMON[cut2:] if pi or planner or member else "")
     source_text = (banner + '#include <math.h>\n\n#include "hystid_model.h"\n' + helpers
                    + "\n/* ---- the placed model */\n" + msrc
                    + ("\n/* ---- the feed-forward compensator */\n" + fsrc if fsrc else "")
