@@ -4,7 +4,9 @@ For each held-out input (the 50 Hz triangle and the 50 Hz sine), train on ``prbn
 ``<input>_1`` with ``<input>_2`` as its repeat (the floor), default options; then the final model
 (:func:`hystid.diagnose.final_model.final_model`): the nominal model, the nominal model with the
 accepted effects and the family's members scored alike (each record zeroed on its rest output).
-The diagnosis' time is given as a ratio to its own nominal fit's (one process). The same as
+The diagnosis' time is given as a ratio to its own nominal fit's (one process); ``--breakdown``
+prints where it goes (each progress line of the diagnosis and the final model with the seconds
+until the next one, also as a multiple of the nominal fit). The same as
 
     hystid diagnose prbn_1.csv --val tri50_1.csv --repeat tri50_2.csv --out DIR
 
@@ -43,7 +45,9 @@ def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS) -> di
     -------
     dict
         Per held-out input: accepted effects, the diagnosis' own figures, the final model's
-        candidates and choice, the floor, and the seconds (diagnosis, nominal fit, final model).
+        candidates and choice, the floor, the seconds (diagnosis, nominal fit, final model) and
+        the ``timeline``: ``[seconds from the start, progress line]`` of the diagnosis and the
+        final model.
     """
     if not STAGE_A.exists():
         return {"error": f"{STAGE_A} is absent"}
@@ -52,20 +56,28 @@ def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS) -> di
     for name in ("tri50",) if quick else ("tri50", "sine50"):
         val = load_record(STAGE_A / f"{name}_1.csv")
         rep = load_record(STAGE_A / f"{name}_2.csv")
+        timeline: list[list] = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t0 = time.perf_counter()
-            res = diagnose(train, [val], repeats=[rep], progress=False)
+
+            def note(message: str, t0: float = t0, timeline: list = timeline) -> None:
+                timeline.append([time.perf_counter() - t0, message])
+
+            res = diagnose(train, [val], repeats=[rep], progress=note)
             t1 = time.perf_counter()
-            final = final_model(res, train, [val], members=members)
+            note("final model: the members identified, every candidate scored")
+            final = final_model(res, train, [val], members=members, progress=note)
             t2 = time.perf_counter()
+            note("end")
         rows.append({"val": val.name, "accepted": list(res.accepted),
                      "diagnosis": {"nominal": res.nominal["rms_val"],
                                    "final": res.final["rms_val"],
                                    "gap_closed": res.final["gap_closed"]},
                      "final_model": final.to_dict(), "floor": final.floor,
                      "seconds": {"diagnosis": t1 - t0, "final_model": t2 - t1,
-                                 "nominal_fit": res.settings.get("nominal_seconds")}})
+                                 "nominal_fit": res.settings.get("nominal_seconds")},
+                     "timeline": timeline})
     return {"train": train.name, "cases": rows}
 
 
@@ -101,6 +113,30 @@ def render(payload: dict) -> str:
     return "\n".join(out).rstrip()
 
 
+def breakdown(payload: dict) -> str:
+    """Where the time of each case goes: every progress line with the seconds until the next.
+
+    Parameters
+    ----------
+    payload : dict
+        From :func:`measure`.
+
+    Returns
+    -------
+    str
+        Per case, lines ``seconds  x nominal  progress line`` (the nominal fit's own share is
+        the time up to the line that reports the nominal model refitted).
+    """
+    out = []
+    for case in payload.get("cases", []):
+        nominal = case["seconds"]["nominal_fit"] or float("nan")
+        out.append(f"{case['val']}: nominal fit {nominal:.2f} s")
+        steps = case.get("timeline", [])
+        for (t, message), (t_next, _) in zip(steps[:-1], steps[1:], strict=True):
+            out.append(f"  {t_next - t:6.2f} s {(t_next - t) / nominal:5.2f}x  {message[:90]}")
+    return "\n".join(out)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -108,9 +144,13 @@ def main() -> None:
     parser.add_argument("--members", default=",".join(FINAL_MEMBERS),
                         help="members tried as the hysteresis itself, comma-separated (default "
                         f"{','.join(FINAL_MEMBERS)}; the README block is of the default)")
+    parser.add_argument("--breakdown", action="store_true",
+                        help="print where the time goes (each progress line with its seconds)")
     args = parser.parse_args()
     members = tuple(m.strip() for m in args.members.split(",") if m.strip())
     payload = measure(args.quick, members)
+    if args.breakdown:
+        print(breakdown(payload), end="\n\n")
     print(render(payload))
     name = "stage_a_diagnosis" if members == FINAL_MEMBERS else "stage_a_diagnosis_members"
     print(f"\nwritten {write_json(name, payload)}")

@@ -276,6 +276,9 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     inside it; with every effect off (``phi`` zero) this kernel is that step on ``U``, which
     ``tests/test_step_once.py`` checks against :func:`hystid.kernels.simulate_into` to 1e-12.
     Only the plain Duhem sandwich's layout is read (:func:`hystid.validate.check_plain_duhem`).
+    The input's delay and rate limit, the first creep lag, the parallel mode and the drift are
+    skipped while their parameters are zero (they would add exact zeros; a refit simulates
+    thousands of times with most effects off).
     """
     n1a, n1b, n2a, n2b, q1, q2 = layout[0], layout[1], layout[2], layout[3], layout[4], layout[5]
     i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
@@ -320,7 +323,11 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     # delay: ud(k) = (1 - frac) u(k - nd) + frac u(k - nd - 1)
     nd = int(np.floor(phi[7]))
     frac = phi[7] - nd
+    plain_input = nd == 0 and frac == 0.0 and not inv_rate_u > 0.0
     for k in range(U.shape[0]):
+        if plain_input:  # (1 - 0) u(k) + 0 u(k - 1), no limit: the input itself
+            UD[k] = U[k]
+            continue
         i0 = k - nd
         i1 = k - nd - 1
         a0 = U[i0] if i0 >= 0 else U[0]
@@ -334,6 +341,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
             elif step_u < -lim_u:
                 UD[k] = UD[k - 1] - lim_u
     lim = 1.0 / (inv_rate / dt) if inv_rate > 0.0 else 0.0
+    drifts = d1 != 0.0 or d2 != 0.0 or d3 != 0.0
     for k in range(start, U.shape[0]):
         # eq. (1) on the delayed input, b10 = 1
         w1 = UD[k - q1]
@@ -359,8 +367,12 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         f = f0 * sgn(w1p) + f1 * (1.0 + e_f * s + e_fu * su) * w1p * (1.0 + cubic * w1p * w1p)
         W2[k] = w2p + alpha_k * (f - w2p) * abs(dw1) + g_k * dw1
         # creep of the actuator: one lag, a second lag, a logarithmic bank
-        C[k] = C[k - 1] + lam * (kappa * W2[k] - C[k - 1])
-        v = W2[k] + C[k]
+        if kappa != 0.0:
+            C[k] = C[k - 1] + lam * (kappa * W2[k] - C[k - 1])
+            v = W2[k] + C[k]
+        else:  # no first lag: C stays at its start, zero
+            C[k] = 0.0
+            v = W2[k]
         if kappa2 != 0.0:
             c2 += lam2 * (kappa2 * W2[k] - c2)
             v += c2
@@ -377,8 +389,12 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
             y -= theta[i_a2 + i - 1] * YL[k - i]
         YL[k] = y
         # extra modes, in parallel with L2 and in series after it
-        M[k] = p1 * M[k - 1] + p2 * M[k - 2] + bm * V[k]
-        out = YL[k] + M[k]
+        if bm != 0.0:
+            M[k] = p1 * M[k - 1] + p2 * M[k - 2] + bm * V[k]
+            out = YL[k] + M[k]
+        else:  # no parallel mode: M stays at its start, zero
+            M[k] = 0.0
+            out = YL[k]
         if g_ser != 0.0:
             ys = p1 * ys1 + p2 * ys2 + (1.0 - p1 - p2) * YL[k]
             ys2 = ys1
@@ -388,8 +404,10 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
             x = (out - y_c) / y_s
             out += y_s * x * x * (c2o + c3o * x)
         # drift, t from the start of the record, and the sensor offset
-        t = (k - start) * dt
-        Y[k] = out + t * (d1 + t * (d2 + t * d3)) + y_off
+        if drifts:
+            t = (k - start) * dt
+            out += t * (d1 + t * (d2 + t * d3))
+        Y[k] = out + y_off
 
 
 class _Workspace:

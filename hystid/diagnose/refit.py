@@ -16,8 +16,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
+from numba import njit
 from scipy.optimize import least_squares
 
 from ..identify.offline import _Reparam
@@ -86,6 +88,15 @@ class FitData:
         return self._ws[P]
 
 
+@lru_cache(maxsize=64)
+def _static_indices(structure) -> tuple[tuple[int, ...], ...]:
+    """Indices into theta of b1, a1, b2 and a2 (a refit asks for them at every simulation)."""
+    names = structure.names
+    return tuple(tuple(names.index(f"{p}{j}") for j in range(1, n + 1))
+                 for p, n in (("b1", structure.n1b), ("a1", structure.n1a),
+                              ("b2", structure.n2b), ("a2", structure.n2a)))
+
+
 def initial_state(
     model: DuhemSandwich, level: float | None, u0: float, P: int
 ) -> InitialCondition | None:
@@ -109,12 +120,12 @@ def initial_state(
     """
     if level is None:
         return None
-    th = model.params
-    s = model.structure
-    num1 = 1.0 + sum(th[f"b1{j}"] for j in range(1, s.n1b + 1))
-    den1 = 1.0 + sum(th[f"a1{i}"] for i in range(1, s.n1a + 1))
-    num2 = 1.0 + sum(th[f"b2{j}"] for j in range(1, s.n2b + 1))
-    den2 = 1.0 + sum(th[f"a2{i}"] for i in range(1, s.n2a + 1))
+    th = model.theta
+    ib1, ia1, ib2, ia2 = _static_indices(model.structure)
+    num1 = 1.0 + sum(float(th[i]) for i in ib1)
+    den1 = 1.0 + sum(float(th[i]) for i in ia1)
+    num2 = 1.0 + sum(float(th[i]) for i in ib2)
+    den2 = 1.0 + sum(float(th[i]) for i in ia2)
     w1 = u0 * num1 / den1
     w2 = level * den2 / num2
     return InitialCondition(u=np.full(P, u0), w1=np.full(P, w1), w2=np.full(P, w2),
@@ -171,12 +182,32 @@ def duhem_margin(theta: np.ndarray, structure, phi: np.ndarray, w1: np.ndarray) 
     float
         The margin; ``inf`` when ``w1`` is not finite.
     """
-    if len(w1) < 2 or not np.all(np.isfinite(w1)):
+    peak = _level_step_peak(np.asarray(w1, float), float(phi[14]))
+    if not np.isfinite(peak):
         return float("inf")
     alpha = theta[structure.names.index("alpha")]
-    dw = np.abs(np.diff(w1))
-    level = 1.0 + phi[14] * w1[:-1]
-    return float(alpha * (1.0 + abs(phi[8]) + abs(phi[27])) * np.max(np.abs(level) * dw))
+    return float(alpha * (1.0 + abs(phi[8]) + abs(phi[27])) * peak)
+
+
+@njit(cache=True)
+def _level_step_peak(w1, l_a):
+    """``max_k |1 + l_a w1(k-1)| |w1(k) - w1(k-1)|`` (inf when ``w1`` has a non-finite entry or
+    fewer than two): :func:`duhem_margin`'s maximum in one pass, without temporaries (a refit
+    asks for it at every simulation)."""
+    n = w1.shape[0]
+    if n < 2:
+        return np.inf
+    for k in range(n):
+        if not np.isfinite(w1[k]):
+            return np.inf
+    peak = 0.0
+    for k in range(1, n):
+        v = abs(1.0 + l_a * w1[k - 1]) * abs(w1[k] - w1[k - 1])
+        if v != v:
+            return v  # a NaN level: NaN, as numpy's maximum gives
+        if v > peak:
+            peak = v
+    return peak
 
 
 #: A fitted parameter within this share of its range's width from a bound is at the bound.
@@ -382,7 +413,8 @@ class Parametrisation:
             Nominal parameters and effect vector.
         """
         if self.ntheta:
-            theta = self.reparam.to_theta(np.asarray(z[: self.ntheta], float))[0]
+            theta = self.reparam.to_theta(np.asarray(z[: self.ntheta], float),
+                                          jacobian=False)[0]
         else:
             theta = self.theta_fixed.copy()
         phi = np.zeros(N_SLOTS) if base_phi is None else np.array(base_phi, float)

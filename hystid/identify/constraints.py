@@ -27,13 +27,16 @@ K_MAX = 1.0 - 1e-6
 ALPHA_MIN = 1e-9
 
 
-def reflection_to_poly(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def reflection_to_poly(k: np.ndarray, jacobian: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray | None]:
     """Step-up recursion: coefficients ``c_1..c_n`` and their Jacobian ``dc/dk`` (n x n).
 
     Parameters
     ----------
     k : ndarray
         Reflection coefficients.
+    jacobian : bool
+        Whether to form ``dc/dk`` (None in its place otherwise; ``c`` is the same).
 
     Returns
     -------
@@ -43,15 +46,17 @@ def reflection_to_poly(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     k = np.asarray(k, dtype=float)
     n = len(k)
     c = np.zeros(0)
-    dc = np.zeros((0, n))
+    dc = np.zeros((0, n)) if jacobian else None
     for m in range(n):
         # c^(m+1)_i = c^(m)_i + k_m c^(m)_(m+1-i), i = 1..m;  c^(m+1)_(m+1) = k_m
-        rev, drev = c[::-1], dc[::-1]
+        rev = c[::-1]
         new = np.append(c + k[m] * rev, k[m])
-        dnew = np.vstack([dc + k[m] * drev, np.zeros((1, n))])
-        dnew[:m, m] += rev
-        dnew[m, m] = 1.0
-        c, dc = new, dnew
+        if dc is not None:
+            dnew = np.vstack([dc + k[m] * dc[::-1], np.zeros((1, n))])
+            dnew[:m, m] += rev
+            dnew[m, m] = 1.0
+            dc = dnew
+        c = new
     return c, dc
 
 
@@ -129,22 +134,30 @@ class Reflections:
             z[i] = max(z[i], ALPHA_MIN)
         return z
 
-    def to_theta(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def to_theta(self, z: np.ndarray, jacobian: bool = True
+                 ) -> tuple[np.ndarray, np.ndarray | None]:
         """Parameters of ``z`` and the Jacobian ``d theta / d z``.
 
         Parameters
         ----------
         z : ndarray
             Search coordinates.
+        jacobian : bool
+            Whether to form the Jacobian (None in its place otherwise; ``theta`` is the same,
+            for a caller that evaluates many ``z`` and needs the values alone).
 
         Returns
         -------
         theta : ndarray
             Parameter vector.
-        dtheta : ndarray
+        dtheta : ndarray or None
             ``n x n`` Jacobian (block diagonal: identity outside the groups).
         """
         theta = np.array(z, float)
+        if not jacobian:
+            for g in self.groups:
+                theta[g] = reflection_to_poly(z[g], jacobian=False)[0]
+            return theta, None
         dtheta = np.eye(self.n)
         for g in self.groups:
             theta[g], dtheta[np.ix_(g, g)] = reflection_to_poly(z[g])
