@@ -102,3 +102,18 @@ def test_a_model_with_effects_survives_its_file(tmp_path):
         (tmp_path / "bad.json").write_text(json.dumps(doc))
         with pytest.raises(ModelFileError, match=message):
             load_model(tmp_path / "bad.json")
+
+
+def test_the_summary_ends_in_one_final_figure_the_model_file_s():
+    """One 'final' line: the model written to model.json and its held-out RMS as the final
+    table scores it (the rounds' own figure is labelled as theirs)."""
+    from hystid.diagnose.final_model import FinalModel
+
+    rows = [{"candidate": "nominal", "what": "", "rms": [0.112], "mean_rms": 0.112,
+             "gap_closed": 0.0},
+            {"candidate": "pi-stage", "what": "", "rms": [0.0252], "mean_rms": 0.0252,
+             "gap_closed": 0.797}]
+    lines = FinalModel(rows, "pi-stage", None, 0.003, "verdict").summary_lines("um")
+    finals = [line for line in lines if line.startswith("final:")]
+    assert finals == [lines[-1]]
+    assert "pi-stage" in finals[0] and "0.0252 um" in finals[0] and "80 %" in finals[0]

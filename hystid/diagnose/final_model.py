@@ -110,6 +110,12 @@ class FinalModel:
                    f"({self.floor:.4g} {unit})")
             lines.append(f"  {r['candidate']:<28} {r['mean_rms']:.4g} {unit}, {how}{mark}")
         lines.append(self.verdict)
+        chosen = next(r for r in self.rows if r["candidate"] == self.chosen)
+        gap = ("" if at_floor else
+               f", {100 * chosen['gap_closed']:.0f} % of the gap to the floor closed")
+        lines.append(f"final: model.json holds {self.chosen}: held-out RMS "
+                     f"{chosen['mean_rms']:.4g} {unit} against the nominal model's "
+                     f"{nominal:.4g} {unit}{gap} (scored as the table above)")
         return lines
 
 

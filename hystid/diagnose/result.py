@@ -351,8 +351,8 @@ def summary_text(result: DiagnosisResult) -> str:
                     lines.append(f"    at a bound of its range (widened): "
                                  f"{'; '.join(e.at_bound)} -- the form does not fit the data "
                                  "well; it may stand in for something else")
-        lines.append(f"final: held-out RMS {result.nominal['rms_val']:.4g} -> "
-                     f"{result.final['rms_val']:.4g}{unit} "
+        lines.append(f"with every accepted effect (the rounds' scoring): held-out RMS "
+                     f"{result.nominal['rms_val']:.4g} -> {result.final['rms_val']:.4g}{unit} "
                      f"({_pct(result.final['gap_closed'])} of the gap to the {floor['kind']} "
                      "floor closed)")
     else:
