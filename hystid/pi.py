@@ -283,34 +283,6 @@ class PISandwich(UnitGainSandwich):
         w1 = (x0 or InitialCondition()).window("w1", 1)[0]
         return np.maximum(w1 - self.thresholds, np.minimum(w1 + self.thresholds, 0.0))
 
-    def rest_state(self, u0: float, steps: int = 400) -> InitialCondition:
-        """The past of a stage brought slowly from its rest to input ``u0`` and held there.
-
-        L1 and L2 sit at their steady state; the plays at the states of a monotone move from
-        the rest to the steady ``w1`` (:meth:`operator_state` reads them back from the returned
-        ``w1``). A record that rests at another level than the model's rest starts settled,
-        not with the step from one level to the other.
-
-        Parameters
-        ----------
-        u0 : float
-            Input level held before the record starts.
-        steps : int
-            Unused (a monotone move of a play ends where it ends); kept for the members'
-            common signature.
-
-        Returns
-        -------
-        InitialCondition
-            Relative to the model's rest (see :meth:`simulate`).
-        """
-        P = self.structure.history + 1
-        v = float(u0) - self.u_rest
-        w1 = v * float(np.sum(self.num1) / (1.0 + np.sum(self.a1)))
-        p = self.operator_state(InitialCondition(w1=np.full(P, w1)))
-        w2 = float(np.dot(self.mu, p))
-        return InitialCondition(*(np.full(P, x) for x in (v, w1, w2, w2 * self._l2_gain())))
-
     def _h_state(self, x0: InitialCondition, **state: Any) -> np.ndarray:
         unknown = set(state) - {"p0"}
         if unknown:

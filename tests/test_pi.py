@@ -487,33 +487,3 @@ def test_pi_recursion_does_not_depend_on_the_units(offset_records):
                                atol=1e-3 * np.max(np.abs(e_v[seen])))
     assert kv.lam * in_um**2 == pytest.approx(v.lam, rel=1e-3)
     assert kv.e * in_um == pytest.approx(v.e, rel=1e-3, abs=1e-6)
-
-
-def test_rest_state_starts_a_record_held_at_another_level_settled():
-    # A record that rests at another level than the model's rest: without a rest state the PI
-    # sandwich started with the step from one level to the other (a transient through L2's slow
-    # pole at the start of the record: 2.2 um RMS over the first 100 samples of a 200 Hz
-    # stage-B look-alike); brought slowly to the level it sits there.
-    from hystid.identify.members import member
-
-    rng = np.random.default_rng(4)
-    s = member("pi-stage").structure
-    r = np.linspace(0.0, 1.5, s.n_operators)
-    theta = np.r_[rng.uniform(0.02, 0.1, s.n_operators), -2.5, 2.09, -0.585, 0.3, 0.1]
-    model = PISandwich(theta, r, s, fs=200.0, u_rest=0.5, offset=-100.0)
-    assert model.is_stable()
-    for level in (-1.2, 0.0, 2.7):
-        x0 = model.rest_state(level)
-        y = model.simulate(np.full(300, level), x0, check=False).y
-        assert np.ptp(y) < 1e-9 * max(1.0, abs(y[0])), level
-        w1 = (level - model.u_rest) * np.sum(model.num1) / (1.0 + np.sum(model.a1))
-        p = np.maximum(w1 - r, np.minimum(w1 + r, 0.0))
-        assert y[0] == pytest.approx(-100.0 + np.dot(model.mu, p) * model._l2_gain(), abs=1e-9)
-    # python-control continues from the same past
-    u = np.r_[np.full(50, 2.7), 2.7 - np.linspace(0, 3, 150)]
-    x0 = model.rest_state(2.7)
-    sysc = model.to_control()
-    t = np.arange(len(u)) / model.fs
-    resp = ct.input_output_response(sysc, t, u, X0=model.control_state(x0))
-    np.testing.assert_allclose(resp.outputs[0], model.simulate(u, x0, check=False).y,
-                               rtol=0, atol=1e-9)
