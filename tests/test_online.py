@@ -242,8 +242,10 @@ def test_persistent_start_up_mismatch_is_a_warning_never_converged(monkeypatch):
     from hystid.identify import online
 
     monkeypatch.setattr(online, "fit_output_error", _fit_landing_in(10**9))
-    res = OnlineIdentifier().fit(stage_record(0.15, seed=4))
-    assert {c["samples"] for c in res.info["start_up"]["checks"]} == {400, 1_000, 3_000}
+    rec = stage_record(0.15, seed=4)
+    res = OnlineIdentifier().fit(rec)
+    # every window tried, the last cut to the record (4 500 samples, under the default 10 000)
+    assert {c["samples"] for c in res.info["start_up"]["checks"]} == {400, 1_000, 3_000, rec.n}
     assert not any(c["passed"] for c in res.info["start_up"]["checks"])
     assert res.converged_at is None
     assert any("wrong basin" in w for w in res.info["warnings"])

@@ -128,16 +128,16 @@ STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "st
 def test_duhem_online_stays_admissible_on_measured_stage_a():
     # The recursion checked condition (8) on the current sample's |dw1| only: on prbn_1 it ended
     # at alpha max|dw1| = 6.4 on its own record and ran away on prbn_2 (held-out RMS 2e16 um;
-    # 117-131 nm on the others). With alpha capped below 2 / (largest |dw1| seen), measured:
-    # 81 / 72 / 70 / 75 / 75 nm against the batch fit's 39 / 75 / 72 / 78 / 77 nm (prbn_2 is
-    # 2.05x the batch fit and above the linear model's 55 nm: the member misses issue 21's
-    # 1.25x there; the default on-line choice, pi-stage, meets it).
+    # 117-131 nm on the others). With alpha capped below 2 / (largest |dw1| seen): 70-81 nm,
+    # but from a start-up solve on 3 000 samples in a wrong basin (prbn_2 2.05x the batch
+    # fit). With a last start-up window of 10 000 samples (every check fails on a measured
+    # stage: its error is far above the sensor noise) it lands where the batch fit does:
+    # 40 / 75 / 72 / 78 / 77 nm against 39 / 75 / 72 / 78 / 77 nm (at most 1.02x).
     train = load_record(STAGE_A / "prbn_1.csv")
     held = [load_record(STAGE_A / f"{n}.csv")
             for n in ("prbn_2", "sine50_1", "sine50_2", "tri50_1", "tri50_2")]
-    _, batch, linear = _fit(train, held, model="duhem")
+    _, batch, _ = _fit(train, held, model="duhem")
     res, online, _ = _fit(train, held, model="duhem", method="online")
     for rec in [train, *held]:
         assert not [w for w in res.model.admissibility(rec.u) if "condition (8)" in w], rec.name
-    assert np.all(np.isfinite(online)) and np.all(online < 2.5 * batch), (online, batch)
-    assert np.count_nonzero(online <= RATIO * batch) >= 4, (online, batch)
+    assert np.all(online <= RATIO * batch), (online, batch)
