@@ -20,7 +20,7 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
-from scipy.linalg import qr
+from scipy.linalg.lapack import dgeqrf
 from scipy.optimize import least_squares
 
 from ..identify.offline import _Reparam
@@ -186,15 +186,17 @@ def simulate_fit_data_sens(
     ntc : int
         Leading columns that are the nominal parameters (their count, or 0).
     sens : list of ndarray, optional
-        The five sensitivity arrays of a previous call with as many columns, reused.
+        The five sensitivity arrays of a previous call with as many columns, reused (the last,
+        ``SY``, may be a view into a caller's matrix).
 
     Returns
     -------
     tuple
         ``w1``, ``y`` (views, as :func:`simulate_fit_data`'s) and the sensitivity arrays
-        ``[S1, S2, SV, SYL, SY]`` of the extended signals (the record's samples from row ``P``
-        on, ``P`` the history): ``SY[P:]`` is ``d y / d (theta, free slots)``. The past's
-        rows hold the level rule's dependence on ``theta`` and the sensor offset.
+        ``[S1, S2, SV, SYL, SY]``: the first four of the extended signals (the record's
+        samples from row ``P`` on, ``P`` the history; the past's rows hold the level rule's
+        dependence on ``theta`` and the sensor offset), ``SY`` of the record's samples:
+        ``d y / d (theta, free slots)``.
     """
     P = max(model.structure.history, 2)
     ws = data.workspace(P)
@@ -204,10 +206,10 @@ def simulate_fit_data_sens(
         ws.U[:P] = x0.u
         ws.past = {"w1": x0.w1, "w2": x0.w2, "y": x0.y}
     ncol = ntc + int(np.count_nonzero(cols >= 0))
-    if sens is None or sens[0].shape != (len(ws.U), ncol):
-        sens = [np.zeros((len(ws.U), ncol)) for _ in range(5)]
+    if sens is None or sens[0].shape != (len(ws.U), ncol) or sens[4].shape != (ws.n, ncol):
+        sens = [np.zeros((len(ws.U), ncol)) for _ in range(4)] + [np.zeros((ws.n, ncol))]
     S1, S2, SV, SYL, SY = sens
-    for S in sens:
+    for S in sens[:4]:
         S[:P] = 0.0
     if level is not None:
         th = model.theta
@@ -607,45 +609,86 @@ class _Problem:
         self.calls = 0
         self.cols, self.ntc = par.columns()
         self.sens: list[np.ndarray] | None = None
+        self._A: np.ndarray | None = None
         self._last: dict = {}
+        n = len(data.u)
+        kept = np.zeros(n, bool)
+        kept[data.weight] = True
+        # samples out of the cost: zero rows of the folded matrix
+        self._out = None if kept.all() else np.flatnonzero(~kept)
+        if profile is not None:
+            self._profile = np.zeros((n, profile.shape[1]))
+            self._profile[kept] = profile
 
     def evaluate(self, z: np.ndarray) -> dict:
-        """Residuals (barrier last) and their Jacobian in ``z`` at ``z``, from one simulation
-        with sensitivities; cached for the last ``z``.
+        """One simulation with sensitivities at ``z`` (cached for the last ``z``).
 
-        The barrier's row is its derivative at the sample where condition (8)'s margin
-        peaks (zero while the margin is below :data:`MARGIN_LIMIT`).
+        Fills the matrix ``A`` (Fortran order): a row per sample of the record, the output's
+        sensitivities in the sensitivity columns then the residual (rows out of the cost
+        zero), and a last row for the barrier (its derivative at the sample where condition
+        (8)'s margin peaks, zero while the margin is below :data:`MARGIN_LIMIT`). ``D``
+        (:meth:`Parametrisation.chain`) maps the sensitivity columns to ``z``.
         """
         if "z" in self._last and np.array_equal(self._last["z"], z):
             return self._last
         theta, phi = self.values(z)
         self.work.theta = theta
         self.calls += 1
-        m, nz = len(self.y), len(z)
-        P = max(self.work.structure.history, 2)
+        n = len(self.data.u)
+        ncol = self.ntc + len(self.par.slots)
+        if self._A is None:
+            self._A = np.zeros((n + 1, ncol + 1), order="F")
+            rows = len(self.data.workspace(max(self.work.structure.history, 2)).U)
+            self.sens = [np.zeros((rows, ncol)) for _ in range(4)] + [self._A[:n, :ncol]]
+        A = self._A
         with np.errstate(over="ignore", invalid="ignore"):
-            w1, yhat, self.sens = simulate_fit_data_sens(self.work, phi, self.data, self.cols,
-                                                         self.ntc, self.sens)
-            r = yhat[self.data.weight] - self.y
-            S1, SY = self.sens[0], self.sens[4]
-            D = self.par.chain(z)
-            J = np.empty((m + 1, nz))
-            J[:m] = SY[P:][self.data.weight] @ D
-        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J[:m]))):
-            J[:] = 0.0
-            self._last = {"z": z.copy(), "r": np.full(m + 1, 1e6), "J": J, "blown": True}
-            return self._last
-        if self.profile is not None:
-            r = r - self.profile @ (self.profile.T @ r)
-            J[:m] -= self.profile @ (self.profile.T @ J[:m])
-        margin = duhem_margin(theta, self.par.structure, phi, w1)
+            w1, yhat, _ = simulate_fit_data_sens(self.work, phi, self.data, self.cols,
+                                                 self.ntc, self.sens)
+            A[:n, ncol] = yhat - self.data.y
+            if self._out is not None:
+                A[self._out] = 0.0
+            r = A[:n, ncol]
+            finite = bool(np.all(np.isfinite(r)))
+            if finite and self.profile is not None:
+                P_ = self._profile
+                A[:n] -= P_ @ (P_.T @ A[:n])
+            margin = duhem_margin(theta, self.par.structure, phi, w1) if finite else np.inf
         over = max(0.0, margin - MARGIN_LIMIT) if np.isfinite(margin) else 1e3
-        J[m] = 0.0
+        A[n] = 0.0
+        A[n, ncol] = self.barrier * over
         if over > 0.0 and np.isfinite(margin):
-            J[m] = self.barrier * (self._margin_gradient(theta, phi, w1, S1[P - 1:]) @ D)
-        self._last = {"z": z.copy(), "r": np.append(r, self.barrier * over), "J": J,
-                      "blown": False}
+            P = max(self.work.structure.history, 2)
+            A[n, :ncol] = self.barrier * self._margin_gradient(theta, phi, w1,
+                                                               self.sens[0][P - 1:])
+        self._last = {"z": z.copy(), "blown": not finite, "D": self.par.chain(z),
+                      "r": (np.full(len(self.y) + 1, 1e6) if not finite else
+                            np.append(r[self.data.weight], A[n, ncol]))}
         return self._last
+
+    def tall(self, z: np.ndarray) -> np.ndarray:
+        """The Jacobian of the residuals (barrier last) in ``z``.
+
+        Parameters
+        ----------
+        z : ndarray
+            Search coordinates.
+
+        Returns
+        -------
+        ndarray
+            ``len(residuals) x len(z)``.
+        """
+        if self._last.get("spent") and np.array_equal(self._last["z"], z):
+            self._last = {}
+        ev = self.evaluate(z)
+        if "J" not in ev:
+            n, ncol = len(self.data.u), self._A.shape[1] - 1
+            if ev["blown"]:
+                ev["J"] = np.zeros((len(ev["r"]), len(z)))
+            else:
+                rows = np.r_[np.arange(n)[self.data.weight], n]
+                ev["J"] = self._A[rows, :ncol] @ ev["D"]
+        return ev["J"]
 
     def _margin_gradient(self, theta, phi, w1, S1) -> np.ndarray:
         """Gradient of :func:`duhem_margin` in the sensitivity columns (``S1``: rows of
@@ -676,20 +719,24 @@ class _Problem:
     def folded(self, z: np.ndarray) -> dict:
         """The rows ``[J | r]`` reduced to their QR triangle ``[R | c; 0 | rho]``: the
         residuals ``[c, rho]`` and the Jacobian ``[R; 0]`` have the full problem's cost,
-        gradient and Gauss-Newton matrix (:class:`hystid.identify.offline._OutputError`)."""
+        gradient and Gauss-Newton matrix (:class:`hystid.identify.offline._OutputError`).
+        The sensitivity columns are reduced, then mapped to ``z`` (``J = S D`` folds to
+        ``R_S D``)."""
         ev = self.evaluate(z)
         if "tri" not in ev:
             nz = len(z)
+            tri = np.zeros((nz + 1, nz + 1))
             if ev["blown"]:
-                tri = np.zeros((nz + 1, nz + 1))
                 tri[nz, nz] = 1e6 * np.sqrt(len(ev["r"]))
             else:
-                A = np.empty((len(ev["r"]), nz + 1), order="F")
-                A[:, :nz] = ev["J"]
-                A[:, nz] = ev["r"]
-                R = qr(A, mode="r", overwrite_a=True, check_finite=False)[0]
-                tri = np.zeros((nz + 1, nz + 1))
-                tri[: R.shape[0]] = R[: nz + 1]
+                qr_, _, _, info = dgeqrf(self._A, overwrite_a=1)
+                ev["spent"] = True
+                R = np.triu(qr_[: nz + 1])
+                tri[:, :nz] = R[:, :nz] @ ev["D"]
+                tri[:, nz] = R[:, nz]
+                if info != 0 or not np.all(np.isfinite(tri)):
+                    tri[:] = 0.0
+                    tri[nz, nz] = 1e6 * np.sqrt(len(ev["r"]))
             ev["tri"] = tri
         return ev
 
@@ -706,8 +753,8 @@ class _Problem:
         return self.evaluate(z)["r"].copy()
 
     def jac(self, z: np.ndarray, *_) -> np.ndarray:
-        """Jacobian from :meth:`evaluate`."""
-        return self.evaluate(z)["J"].copy()
+        """Jacobian from :meth:`tall`."""
+        return self.tall(z).copy()
 
     def mean_cost(self, z: np.ndarray) -> float:
         """Mean squared residual at ``z``, the barrier left out."""

@@ -59,10 +59,12 @@ def augmented_sens_into(theta, layout, phi, cols, ntc, U, UD, W1, W2, V, C, YL, 
     """Simulate the augmented sandwich and its output sensitivities from index ``start`` on.
 
     The signal arrays are those of :func:`~hystid.diagnose.effects.augmented_into` (called
-    first, with the same arguments). ``S1, S2, SV, SYL, SY`` (rows as the signal arrays,
-    ``ntc + number of free slots`` columns) are the sensitivities of ``w1``, ``w2``, ``v``,
-    L2's output and ``y``; their rows before ``start`` are the past's (zero for a past that
-    does not depend on the parameters) and are read, never written.
+    first, with the same arguments). ``S1, S2, SV, SYL`` (rows as the signal arrays,
+    ``ntc + number of free slots`` columns) are the sensitivities of ``w1``, ``w2``, ``v`` and
+    L2's output; their rows before ``start`` are the past's (zero for a past that does not
+    depend on the parameters) and are read, never written. ``SY`` receives those of ``y``
+    from ``start`` on, at row ``k - start`` (any memory layout: a refit has it written into
+    the matrix it factorises).
 
     Parameters
     ----------
@@ -74,8 +76,10 @@ def augmented_sens_into(theta, layout, phi, cols, ntc, U, UD, W1, W2, V, C, YL, 
         Number of leading columns that are ``theta`` (its length, or 0).
     U, UD, W1, W2, V, C, YL, M, Y : ndarray
         The extended signal arrays.
-    S1, S2, SV, SYL, SY : ndarray
+    S1, S2, SV, SYL : ndarray
         Sensitivity arrays, shape ``(len(U), ncol)``.
+    SY : ndarray
+        Output sensitivities, shape ``(len(U) - start, ncol)``.
     start : int
         First index simulated.
     dt : float
@@ -313,9 +317,9 @@ def augmented_sens_into(theta, layout, phi, cols, ntc, U, UD, W1, W2, V, C, YL, 
                 sout[cols[24]] += y_s * x * x * x
         # -------------------------------------------------------- drift and offset
         for p in range(ncol):
-            SY[k, p] = sout[p]
+            SY[k - start, p] = sout[p]
         t = (k - start) * dt
-        _add(SY, k, d1c, t)
-        _add(SY, k, d2c, t * t)
-        _add(SY, k, cols[21], t * t * t)
-        _add(SY, k, cols[12], 1.0)
+        _add(SY, k - start, d1c, t)
+        _add(SY, k - start, d2c, t * t)
+        _add(SY, k - start, cols[21], t * t * t)
+        _add(SY, k - start, cols[12], 1.0)
