@@ -4,9 +4,12 @@ The nominal parameters are searched in the coordinates of the off-line Duhem fit
 (:class:`hystid.identify.offline._Reparam`: reflection coefficients of L1 and L2, so every
 iterate is stable and minimum phase, Assumption 1, and ``alpha > 0``); each effect parameter in
 a transformed coordinate with bounds (a log scale for time constants and frequencies). The
-solver is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds) with a
-forward-difference Jacobian over the compiled augmented kernel
-(:func:`hystid.diagnose.effects.augmented_into`), one simulation per parameter. A refit runs in
+solver is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds). Each
+evaluation is one simulation of the compiled augmented kernel with its exact sensitivities
+(:func:`hystid.diagnose.sensitivities.augmented_sens_into`); the rows ``[J | r]`` are reduced to
+their QR triangle, so the solver works on a square problem with the full one's cost, gradient
+and Gauss-Newton matrix (:data:`JACOBIAN`; forward differences, one simulation per parameter,
+remain available for comparison). A refit runs in
 two stages: the effect's own parameters with the nominal ones held (a few simulations per step),
 then all of them together from there. Condition (8) is kept by a barrier residual: past
 ``alpha |dw1| = 1.9`` the cost rises steeply.
@@ -565,7 +568,8 @@ class RefitResult:
     message : str
         Solver message or the reason of the failure.
     nfev : int
-        Residual evaluations (Jacobian columns counted).
+        Simulations (a simulation with sensitivities counts one; with forward differences
+        each Jacobian column counts one).
     margin : float
         ``alpha |dw1|`` of condition (8) at the solution.
     at_bound : list of str
