@@ -30,9 +30,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["as_layout", "duhem_w2", "is_plain", "jacobian_block", "l2_output", "l2_output_sens",
-           "offsets", "shape_offsets", "shape_terms", "simulate_into", "sensitivities_into", "step",
-           "step_sens", "step_sens_row"]
+__all__ = ["as_layout", "duhem_sens_row", "duhem_w2", "is_plain", "jacobian_block", "l1_sens_row",
+           "l2_output", "l2_output_sens", "l2_sens_row", "offsets", "shape_offsets", "shape_terms",
+           "simulate_into", "sensitivities_into", "step", "step_sens", "step_sens_row"]
 
 
 @njit(cache=True)
@@ -169,7 +169,6 @@ def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
 def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
     """:func:`step_sens` with the sensitivities of sample ``k`` at row ``ks`` of ``S1, S2, SY``
     (the rows before ``ks`` hold those of the samples before ``k``)."""
-    n1a, n1b, n2a, n2b, q1, q2 = layout[0], layout[1], layout[2], layout[3], layout[4], layout[5]
     i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
     npar = theta.shape[0]
     step(theta, layout, U, W1, W2, Y, k)
@@ -181,16 +180,7 @@ def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
     w2p = W2[k - 1]
     dw1 = W1[k] - w1p
     G = f0 * sgn(w1p) + f1 * w1p - w2p
-    for p in range(npar):
-        # L1
-        s1 = 0.0
-        for i in range(1, n1a + 1):
-            s1 -= theta[i_a1 + i - 1] * S1[ks - i, p]
-        S1[ks, p] = s1
-    for j in range(1, n1b + 1):
-        S1[ks, i_b1 + j - 1] += U[k - q1 - j]
-    for i in range(1, n1a + 1):
-        S1[ks, i_a1 + i - 1] -= W1[k - i]
+    l1_sens_row(theta, layout, U, W1, S1, k, ks, npar, True)
     sd = sgn(dw1)
     absd = abs(dw1)
     if is_plain(layout):
@@ -205,17 +195,73 @@ def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
         S2[ks, i_g0] += dw1
     else:
         _shape_sens(theta, layout, S1, S2, ks, w1p, W2[k - 1], dw1)
-    for p in range(npar):
+    l2_sens_row(theta, layout, W2, Y, S2, SY, k, ks, npar, True)
+
+
+@njit(cache=True, inline="always")
+def l1_sens_row(theta, layout, U, W1, S1, k, ks, ncol, direct):
+    """Row ``ks`` of ``S1``, the sensitivities of eq. (1)'s ``w1(k)``, from the rows before it.
+
+    Columns ``0 .. ncol-1`` are propagated through L1's denominator; with ``direct`` the first
+    columns are those of ``theta`` and receive eq. (1)'s own terms (``U`` may be any input L1
+    is driven by: the augmented sandwich's delayed input). Terms of parameters acting on the
+    input are the caller's to add.
+    """
+    n1a, n1b, q1 = layout[0], layout[1], layout[4]
+    i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
+    for p in range(ncol):
+        s1 = 0.0
+        for i in range(1, n1a + 1):
+            s1 -= theta[i_a1 + i - 1] * S1[ks - i, p]
+        S1[ks, p] = s1
+    if direct:
+        for j in range(1, n1b + 1):
+            S1[ks, i_b1 + j - 1] += U[k - q1 - j]
+        for i in range(1, n1a + 1):
+            S1[ks, i_a1 + i - 1] -= W1[k - i]
+
+
+@njit(cache=True, inline="always")
+def l2_sens_row(theta, layout, W2, Y, S2, SY, k, ks, ncol, direct):
+    """Row ``ks`` of ``SY``, the sensitivities of eq. (2)'s ``y(k)``, from those of its input.
+
+    ``W2, S2`` are L2's input and its sensitivities (the augmented sandwich drives L2 with
+    ``w2`` plus creep); columns as in :func:`l1_sens_row`.
+    """
+    n2a, n2b, q2 = layout[2], layout[3], layout[5]
+    i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
+    for p in range(ncol):
         sy = S2[ks - q2, p]
         for j in range(1, n2b + 1):
             sy += theta[i_b2 + j - 1] * S2[ks - q2 - j, p]
         for i in range(1, n2a + 1):
             sy -= theta[i_a2 + i - 1] * SY[ks - i, p]
         SY[ks, p] = sy
-    for j in range(1, n2b + 1):
-        SY[ks, i_b2 + j - 1] += W2[k - q2 - j]
-    for i in range(1, n2a + 1):
-        SY[ks, i_a2 + i - 1] -= Y[k - i]
+    if direct:
+        for j in range(1, n2b + 1):
+            SY[ks, i_b2 + j - 1] += W2[k - q2 - j]
+        for i in range(1, n2a + 1):
+            SY[ks, i_a2 + i - 1] -= Y[k - i]
+
+
+@njit(cache=True, inline="always")
+def duhem_sens_row(S1, S2, ks, ncol, A, E, G, dF, dA, dG, absd, sd, dw1):
+    """Row ``ks`` of ``S2`` propagated through a generalised eq. (7) step.
+
+    For ``w2(k) = w2(k-1) + A E |dw1| + G dw1`` with ``E = F(w1(k-1)) - w2(k-1)`` and the
+    coefficients ``A, G`` depending on ``w1(k-1)`` (derivatives ``dA, dG``; ``dF`` that of
+    ``F``), the sensitivities of columns ``0 .. ncol-1`` from those of ``w1`` (rows ``ks``
+    and ``ks - 1`` of ``S1``) and ``w2(k-1)``. The terms of the parameters in ``A, F, G``
+    themselves are the caller's to add.
+    """
+    for p in range(ncol):
+        s1p = S1[ks - 1, p]
+        ddw1 = S1[ks, p] - s1p
+        dE = dF * s1p - S2[ks - 1, p]
+        S2[ks, p] = (S2[ks - 1, p] + A * (dE * absd + E * sd * ddw1) + G * ddw1
+                     + dG * s1p * dw1)
+        if dA != 0.0:
+            S2[ks, p] += dA * s1p * E * absd
 
 
 @njit(cache=True)
@@ -229,11 +275,7 @@ def _shape_sens(theta, layout, S1, S2, ks, w1p, w2p, dw1):
     A, F, G, dF, dG = shape_terms(theta, layout, w1p, sd)
     f0 = theta[i_f0] if i_f0 >= 0 else 0.0
     E = f0 * sgn(w1p) + F - w2p
-    for p in range(npar):
-        ddw1 = S1[ks, p] - S1[ks - 1, p]
-        dE = dF * S1[ks - 1, p] - S2[ks - 1, p]
-        S2[ks, p] = (S2[ks - 1, p] + A * (dE * absd + E * sd * ddw1) + G * ddw1
-                     + dG * S1[ks - 1, p] * dw1)
+    duhem_sens_row(S1, S2, ks, npar, A, E, G, dF, 0.0, dG, absd, sd, dw1)
     rate = 1.0 + theta[i_ad] * sd if i_ad >= 0 else 1.0
     S2[ks, i_alpha] += rate * E * absd
     S2[ks, i_f1] += A * w1p * absd

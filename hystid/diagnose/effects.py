@@ -423,7 +423,10 @@ class _Workspace:
         self.past = {k: x0.window(k, P) for k in ("w1", "w2", "y")}
         self.arrays = [np.zeros(P + n) for _ in range(8)]
 
-    def run(self, theta, layout, phi, dt) -> tuple[np.ndarray, ...]:
+    def run(self, theta, layout, phi, dt, sens=None) -> tuple[np.ndarray, ...]:
+        """Simulate; with ``sens = (cols, ntc, arrays)`` the sensitivities too
+        (:func:`hystid.diagnose.sensitivities.augmented_sens_into`, whose past rows the
+        caller sets)."""
         check_plain_duhem(layout, _OPTION)
         UD, W1, W2, V, C, YL, M, Y = self.arrays
         P = self.P
@@ -434,7 +437,14 @@ class _Workspace:
         Y[:P] = self.past["y"]
         C[:P] = 0.0
         M[:P] = 0.0
-        augmented_into(theta, layout, phi, self.U, UD, W1, W2, V, C, YL, M, Y, P, dt)
+        if sens is None:
+            augmented_into(theta, layout, phi, self.U, UD, W1, W2, V, C, YL, M, Y, P, dt)
+        else:
+            from .sensitivities import augmented_sens_into
+
+            cols, ntc, (S1, S2, SV, SYL, SY) = sens
+            augmented_sens_into(theta, layout, phi, cols, ntc, self.U, UD, W1, W2, V, C, YL, M,
+                                Y, S1, S2, SV, SYL, SY, P, dt)
         return W1[P:], W2[P:], Y[P:]
 
 

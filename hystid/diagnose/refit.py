@@ -4,9 +4,12 @@ The nominal parameters are searched in the coordinates of the off-line Duhem fit
 (:class:`hystid.identify.offline._Reparam`: reflection coefficients of L1 and L2, so every
 iterate is stable and minimum phase, Assumption 1, and ``alpha > 0``); each effect parameter in
 a transformed coordinate with bounds (a log scale for time constants and frequencies). The
-solver is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds) with a
-forward-difference Jacobian over the compiled augmented kernel
-(:func:`hystid.diagnose.effects.augmented_into`), one simulation per parameter. A refit runs in
+solver is :func:`scipy.optimize.least_squares` (trust-region reflective, bounds). Each
+evaluation is one simulation of the compiled augmented kernel with its exact sensitivities
+(:func:`hystid.diagnose.sensitivities.augmented_sens_into`); the rows ``[J | r]`` are reduced to
+their QR triangle, so the solver works on a square problem with the full one's cost, gradient
+and Gauss-Newton matrix (:data:`JACOBIAN`; forward differences, one simulation per parameter,
+remain available for comparison). A refit runs in
 two stages: the effect's own parameters with the nominal ones held (a few simulations per step),
 then all of them together from there. Condition (8) is kept by a barrier residual: past
 ``alpha |dw1| = 1.9`` the cost rises steeply.
@@ -20,11 +23,13 @@ from functools import lru_cache
 
 import numpy as np
 from numba import njit
+from scipy.linalg.lapack import dgeqrf
 from scipy.optimize import least_squares
 
 from ..identify.offline import _Reparam
 from ..model import DuhemSandwich, InitialCondition
 from .effects import EFFECTS, FIXED_SLOTS, LOG_STEP, MAX_DELAY, N_LOG, N_SLOTS, _Workspace
+from .sensitivities import sensitivity_columns
 
 __all__ = [
     "MARGIN_LIMIT",
@@ -36,6 +41,7 @@ __all__ = [
     "initial_state",
     "refit",
     "simulate_fit_data",
+    "simulate_fit_data_sens",
 ]
 
 #: Condition (8) asks ``alpha |dw1| < 2``; the refits are held below this value.
@@ -161,6 +167,70 @@ def simulate_fit_data(
         ws.U[:P] = x0.u
         ws.past = {"w1": x0.w1, "w2": x0.w2, "y": x0.y}
     return ws.run(model.theta, model.structure.layout, phi, model.dt)
+
+
+def simulate_fit_data_sens(
+    model: DuhemSandwich, phi: np.ndarray, data: FitData, cols: np.ndarray, ntc: int,
+    sens: list[np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """:func:`simulate_fit_data` with the output's sensitivities (one compiled pass).
+
+    Parameters
+    ----------
+    model : DuhemSandwich
+        Nominal model.
+    phi : ndarray
+        The effect vector.
+    data : FitData
+        The record and its initial-state rule.
+    cols : ndarray of int
+        Column of each effect slot, -1 for a held one
+        (:func:`hystid.diagnose.sensitivities.sensitivity_columns`).
+    ntc : int
+        Leading columns that are the nominal parameters (their count, or 0).
+    sens : list of ndarray, optional
+        The five sensitivity arrays of a previous call with as many columns, reused (the last,
+        ``SY``, may be a view into a caller's matrix).
+
+    Returns
+    -------
+    tuple
+        ``w1``, ``y`` (views, as :func:`simulate_fit_data`'s) and the sensitivity arrays
+        ``[S1, S2, SV, SYL, SY]``: the first four of the extended signals (the record's
+        samples from row ``P`` on, ``P`` the history; the past's rows hold the level rule's
+        dependence on ``theta`` and the sensor offset), ``SY`` of the record's samples:
+        ``d y / d (theta, free slots)``.
+    """
+    P = max(model.structure.history, 2)
+    ws = data.workspace(P)
+    level = None if data.level is None else data.level - phi[12]
+    x0 = initial_state(model, level, float(data.u[0]), P)
+    if x0 is not None:
+        ws.U[:P] = x0.u
+        ws.past = {"w1": x0.w1, "w2": x0.w2, "y": x0.y}
+    ncol = ntc + int(np.count_nonzero(cols >= 0))
+    if sens is None or sens[0].shape != (len(ws.U), ncol) or sens[4].shape != (ws.n, ncol):
+        sens = [np.zeros((len(ws.U), ncol)) for _ in range(4)] + [np.zeros((ws.n, ncol))]
+    S1, S2, SV, SYL, SY = sens
+    for S in sens[:4]:
+        S[:P] = 0.0
+    if level is not None:
+        th = model.theta
+        ib1, ia1, ib2, ia2 = (list(i) for i in _static_indices(model.structure))
+        num1, den1 = 1.0 + float(np.sum(th[ib1])), 1.0 + float(np.sum(th[ia1]))
+        num2, den2 = 1.0 + float(np.sum(th[ib2])), 1.0 + float(np.sum(th[ia2]))
+        u0 = float(data.u[0])
+        if ntc:
+            S1[:P, ib1] = u0 / den1
+            S1[:P, ia1] = -u0 * num1 / den1**2
+            S2[:P, ia2] = level / num2
+            S2[:P, ib2] = -level * den2 / num2**2
+        if cols[12] >= 0:
+            S2[:P, cols[12]] = -den2 / num2
+            SYL[:P, cols[12]] = -1.0
+        SV[:P] = S2[:P]
+    ws.run(model.theta, model.structure.layout, phi, model.dt, sens=(cols, ntc, sens))
+    return ws.arrays[1][P:], ws.arrays[7][P:], sens
 
 
 def duhem_margin(theta: np.ndarray, structure, phi: np.ndarray, w1: np.ndarray) -> float:
@@ -302,6 +372,51 @@ class Parametrisation:
         if slot in (14, 20):
             return float(z / self.w1_scale)
         return float(z)
+
+    def _dinv(self, slot: int, z: float) -> float:
+        """``d _inv(slot, z) / dz``."""
+        if slot in (1, 5, 6, 16, 18):
+            return float(np.exp(z))
+        if slot in (10, 22):
+            return float(np.exp(z) / (self.fs * self.step_scale))
+        if slot == 11:
+            return 1.0 / self.w1_scale**2
+        if slot in (14, 20):
+            return 1.0 / self.w1_scale
+        return 1.0
+
+    def columns(self) -> tuple[np.ndarray, int]:
+        """The sensitivity columns of :func:`simulate_fit_data_sens` for these coordinates.
+
+        Returns
+        -------
+        tuple
+            ``(cols, ntc)``: the column of each effect slot (-1 when held) and the number of
+            leading columns that are the nominal parameters.
+        """
+        return sensitivity_columns(self.slots, self.ntheta), self.ntheta
+
+    def chain(self, z: np.ndarray) -> np.ndarray:
+        """``d (theta, free slots) / dz``: the sensitivity columns' map to ``z``.
+
+        Parameters
+        ----------
+        z : ndarray
+            Search coordinates.
+
+        Returns
+        -------
+        ndarray
+            Square, ``len(z)`` on a side (theta's columns first when free).
+        """
+        D = np.zeros((self.n, self.n))
+        if self.ntheta:
+            D[: self.ntheta, : self.ntheta] = self.reparam.to_theta(
+                np.asarray(z[: self.ntheta], float))[1]
+        for i, s in enumerate(self.slots):
+            j = self.ntheta + i
+            D[j, j] = self._dinv(s, z[j])
+        return D
 
     def _bounds(self, slot: int) -> tuple[float, float]:
         T = self.duration
@@ -453,7 +568,8 @@ class RefitResult:
     message : str
         Solver message or the reason of the failure.
     nfev : int
-        Residual evaluations (Jacobian columns counted).
+        Simulations (a simulation with sensitivities counts one; with forward differences
+        each Jacobian column counts one).
     margin : float
         ``alpha |dw1|`` of condition (8) at the solution.
     at_bound : list of str
@@ -474,9 +590,18 @@ class RefitResult:
     widen: float = 1.0
 
 
+#: How a refit's Jacobian is formed: ``"folded"`` (compiled sensitivities, the rows ``[J | r]``
+#: reduced to their QR triangle, so the solver works on a square problem, as
+#: :class:`hystid.identify.offline._OutputError` does), ``"sensitivities"`` (the same
+#: Jacobian, the tall problem given to the solver) or ``"2-point"`` (forward differences, one
+#: simulation per parameter). For measurements; the diagnosis uses the default.
+JACOBIAN = "folded"
+
+
 class _Problem:
     """Residual of one refit: the simulated train output less the measured one, with the
-    condition-(8) barrier appended; counts its simulations."""
+    condition-(8) barrier appended; counts its simulations (a simulation with sensitivities
+    counts one)."""
 
     def __init__(self, model: DuhemSandwich, data: FitData, par: Parametrisation,
                  base_phi: np.ndarray | None, profile: np.ndarray | None = None) -> None:
@@ -486,6 +611,160 @@ class _Problem:
         scale = float(np.std(self.y)) or 1.0
         self.barrier = scale * np.sqrt(len(self.y))
         self.calls = 0
+        self.cols, self.ntc = par.columns()
+        self.sens: list[np.ndarray] | None = None
+        self._A: np.ndarray | None = None
+        self._last: dict = {}
+        n = len(data.u)
+        kept = np.zeros(n, bool)
+        kept[data.weight] = True
+        # samples out of the cost: zero rows of the folded matrix
+        self._out = None if kept.all() else np.flatnonzero(~kept)
+        if profile is not None:
+            self._profile = np.zeros((n, profile.shape[1]))
+            self._profile[kept] = profile
+
+    def evaluate(self, z: np.ndarray) -> dict:
+        """One simulation with sensitivities at ``z`` (cached for the last ``z``).
+
+        Fills the matrix ``A`` (Fortran order): a row per sample of the record, the output's
+        sensitivities in the sensitivity columns then the residual (rows out of the cost
+        zero), and a last row for the barrier (its derivative at the sample where condition
+        (8)'s margin peaks, zero while the margin is below :data:`MARGIN_LIMIT`). ``D``
+        (:meth:`Parametrisation.chain`) maps the sensitivity columns to ``z``.
+        """
+        if "z" in self._last and np.array_equal(self._last["z"], z):
+            return self._last
+        theta, phi = self.values(z)
+        self.work.theta = theta
+        self.calls += 1
+        n = len(self.data.u)
+        ncol = self.ntc + len(self.par.slots)
+        if self._A is None:
+            self._A = np.zeros((n + 1, ncol + 1), order="F")
+            rows = len(self.data.workspace(max(self.work.structure.history, 2)).U)
+            self.sens = [np.zeros((rows, ncol)) for _ in range(4)] + [self._A[:n, :ncol]]
+        A = self._A
+        with np.errstate(over="ignore", invalid="ignore"):
+            w1, yhat, _ = simulate_fit_data_sens(self.work, phi, self.data, self.cols,
+                                                 self.ntc, self.sens)
+            A[:n, ncol] = yhat - self.data.y
+            if self._out is not None:
+                A[self._out] = 0.0
+            r = A[:n, ncol]
+            finite = bool(np.all(np.isfinite(r)))
+            if finite and self.profile is not None:
+                P_ = self._profile
+                A[:n] -= P_ @ (P_.T @ A[:n])
+            margin = duhem_margin(theta, self.par.structure, phi, w1) if finite else np.inf
+        over = max(0.0, margin - MARGIN_LIMIT) if np.isfinite(margin) else 1e3
+        A[n] = 0.0
+        A[n, ncol] = self.barrier * over
+        if over > 0.0 and np.isfinite(margin):
+            P = max(self.work.structure.history, 2)
+            A[n, :ncol] = self.barrier * self._margin_gradient(theta, phi, w1,
+                                                               self.sens[0][P - 1:])
+        self._last = {"z": z.copy(), "blown": not finite, "D": self.par.chain(z),
+                      "r": (np.full(len(self.y) + 1, 1e6) if not finite else
+                            np.append(r[self.data.weight], A[n, ncol]))}
+        return self._last
+
+    def tall(self, z: np.ndarray) -> np.ndarray:
+        """The Jacobian of the residuals (barrier last) in ``z``.
+
+        Parameters
+        ----------
+        z : ndarray
+            Search coordinates.
+
+        Returns
+        -------
+        ndarray
+            ``len(residuals) x len(z)``.
+        """
+        if self._last.get("spent") and np.array_equal(self._last["z"], z):
+            self._last = {}
+        ev = self.evaluate(z)
+        if "J" not in ev:
+            n, ncol = len(self.data.u), self._A.shape[1] - 1
+            if ev["blown"]:
+                ev["J"] = np.zeros((len(ev["r"]), len(z)))
+            else:
+                rows = np.r_[np.arange(n)[self.data.weight], n]
+                ev["J"] = self._A[rows, :ncol] @ ev["D"]
+        return ev["J"]
+
+    def _margin_gradient(self, theta, phi, w1, S1) -> np.ndarray:
+        """Gradient of :func:`duhem_margin` in the sensitivity columns (``S1``: rows of
+        ``w1(k-1)`` .. , the first the sample before ``w1[0]``), at its peak sample."""
+        w1 = np.asarray(w1, float)
+        l_a = float(phi[14])
+        lev = 1.0 + l_a * w1[:-1]
+        dw = np.diff(w1)
+        k = int(np.argmax(np.abs(lev) * np.abs(dw))) + 1  # the peak: w1[k] - w1[k-1]
+        peak = abs(lev[k - 1]) * abs(dw[k - 1])
+        a = self.par.ialpha
+        alpha = theta[a]
+        asym = 1.0 + abs(phi[8]) + abs(phi[27])
+        dpeak = (np.sign(lev[k - 1]) * l_a * S1[k] * abs(dw[k - 1])
+                 + abs(lev[k - 1]) * np.sign(dw[k - 1]) * (S1[k + 1] - S1[k]))
+        g = alpha * asym * dpeak
+        if self.ntc:
+            g[a] += asym * peak
+        c = self.cols
+        if c[14] >= 0:
+            g[c[14]] += alpha * asym * np.sign(lev[k - 1]) * w1[k - 1] * abs(dw[k - 1])
+        if c[8] >= 0:
+            g[c[8]] += alpha * np.sign(phi[8]) * peak
+        if c[27] >= 0:
+            g[c[27]] += alpha * np.sign(phi[27]) * peak
+        return g
+
+    def folded(self, z: np.ndarray) -> dict:
+        """The rows ``[J | r]`` reduced to their QR triangle ``[R | c; 0 | rho]``: the
+        residuals ``[c, rho]`` and the Jacobian ``[R; 0]`` have the full problem's cost,
+        gradient and Gauss-Newton matrix (:class:`hystid.identify.offline._OutputError`).
+        The sensitivity columns are reduced, then mapped to ``z`` (``J = S D`` folds to
+        ``R_S D``)."""
+        ev = self.evaluate(z)
+        if "tri" not in ev:
+            nz = len(z)
+            tri = np.zeros((nz + 1, nz + 1))
+            if ev["blown"]:
+                tri[nz, nz] = 1e6 * np.sqrt(len(ev["r"]))
+            else:
+                qr_, _, _, info = dgeqrf(self._A, overwrite_a=1)
+                ev["spent"] = True
+                R = np.triu(qr_[: nz + 1])
+                tri[:, :nz] = R[:, :nz] @ ev["D"]
+                tri[:, nz] = R[:, nz]
+                if info != 0 or not np.all(np.isfinite(tri)):
+                    tri[:] = 0.0
+                    tri[nz, nz] = 1e6 * np.sqrt(len(ev["r"]))
+            ev["tri"] = tri
+        return ev
+
+    def folded_fun(self, z: np.ndarray) -> np.ndarray:
+        """Folded residuals (see :meth:`folded`)."""
+        return self.folded(z)["tri"][:, -1].copy()
+
+    def folded_jac(self, z: np.ndarray, *_) -> np.ndarray:
+        """Folded Jacobian (see :meth:`folded`)."""
+        return self.folded(z)["tri"][:, :-1].copy()
+
+    def fun(self, z: np.ndarray) -> np.ndarray:
+        """Residuals from :meth:`evaluate`."""
+        return self.evaluate(z)["r"].copy()
+
+    def jac(self, z: np.ndarray, *_) -> np.ndarray:
+        """Jacobian from :meth:`tall`."""
+        return self.tall(z).copy()
+
+    def mean_cost(self, z: np.ndarray) -> float:
+        """Mean squared residual at ``z``, the barrier left out."""
+        r = self(z)[:-1] if not ("z" in self._last and np.array_equal(self._last["z"], z)) \
+            else self._last["r"][:-1]
+        return float(np.mean(r**2))
 
     def values(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.par.to_values(z, self.base_phi)
@@ -518,9 +797,14 @@ def _solve(problem: _Problem, z0: np.ndarray, max_nfev: int):
     # a dense trust-region step takes an SVD of the tall Jacobian per iteration: far more than
     # the simulations cost here; LSMR on the few columns does not (it needs two or more)
     solver = "lsmr" if len(z0) > 1 else "exact"
-    return least_squares(problem, z0, bounds=(lo, hi), method="trf", jac="2-point",
-                         tr_solver=solver, x_scale="jac", ftol=1e-8, xtol=1e-8, gtol=1e-10,
-                         max_nfev=max_nfev)
+    opts = dict(bounds=(lo, hi), method="trf", x_scale="jac", ftol=1e-8, xtol=1e-8,
+                gtol=1e-10, max_nfev=max_nfev)
+    if JACOBIAN == "folded":
+        return least_squares(problem.folded_fun, z0, jac=problem.folded_jac, tr_solver="exact",
+                             **opts)
+    if JACOBIAN == "sensitivities":
+        return least_squares(problem.fun, z0, jac=problem.jac, tr_solver=solver, **opts)
+    return least_squares(problem, z0, jac="2-point", tr_solver=solver, **opts)
 
 
 def _judge(problem: _Problem, z: np.ndarray, message: str) -> RefitResult:
@@ -622,7 +906,7 @@ def refit(
                 continue
             finally:
                 calls += problem.calls
-            found.append((float(np.mean(sol.fun[:-1] ** 2)), par_e.to_values(sol.x, phi0)[1]))
+            found.append((problem.mean_cost(sol.x), par_e.to_values(sol.x, phi0)[1]))
         if not found:
             return RefitResult(model.theta.copy(), np.array(starts[0], float), np.inf, False,
                                "; ".join(messages) or "every start failed", calls)
