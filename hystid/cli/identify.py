@@ -439,7 +439,9 @@ def _identify(args: argparse.Namespace) -> int:
         v = report["validation"]
         if v is not None:
             print(f"\nvalidation ({report['validated_on']}): error {v['err_min']:.4g} .. "
-                  f"{v['err_max']:.4g} {yu}, RMS {v['rms']:.4g} {yu}, fit {v['fit_percent']:.2f} %")
+                  f"{v['err_max']:.4g} {yu}, RMS {v['rms']:.4g} {yu}, fit {v['fit_percent']:.2f} %"
+                  + (f" (the first {v['skip']} samples left out, the paper's transient; the "
+                     "held-out table below scores them)" if v.get("skip") else ""))
         b = report["baselines"]
         for row in b["rows"]:
             model_rms = "diverged" if row["model"] is None else f"{row['model']:.4g}"
