@@ -260,7 +260,8 @@ def run_placed(record: Record, make: Callable[[Record], Any],
     model = result.model
     model.u_rest, model.offset = prep.u_rest + model.u_rest, y_ref + model.offset
     model.envelope, model.units = prep.envelope, dict(record.units)
-    placed = place_after_run(model, record, prep)
+    # the paper's ERIA is kept as published: its model is not placed beyond its own offset
+    placed = None if result.method == "eria" else place_after_run(model, record, prep)
     if placed is not None:
         result.info["placement"] = placed
     problems = (model.admissibility(record.u) if hasattr(model, "admissibility")
