@@ -4,7 +4,7 @@ ranges (not the physical ones) widen."""
 import numpy as np
 
 from hystid.diagnose.effects import EFFECTS
-from hystid.diagnose.refit import PHYSICAL_BOUNDS, Parametrisation
+from hystid.diagnose.parametrisation import PHYSICAL_BOUNDS, Parametrisation
 from hystid.reference import reference_model
 
 

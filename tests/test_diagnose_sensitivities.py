@@ -12,7 +12,8 @@ import pytest
 
 from hystid.diagnose import refit as refit_mod
 from hystid.diagnose.effects import EFFECT_NAMES, EFFECTS
-from hystid.diagnose.refit import FitData, Parametrisation, _Problem, refit, simulate_fit_data
+from hystid.diagnose.parametrisation import Parametrisation
+from hystid.diagnose.refit import FitData, _Problem, refit, simulate_fit_data
 from hystid.identify.offline import fit_output_error
 from hystid.model import Structure
 from hystid.testing.measured import stage_a_like

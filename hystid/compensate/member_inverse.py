@@ -53,7 +53,7 @@ as :func:`hystid.kernels.step` writes it), the parallel operators their rates, `
 ``g0_j`` (the forward step as :func:`hystid.mduhem_kernels.mduhem_step` writes it), so that the
 compensator's internal model follows ``model.simulate`` to the last bit. The C export writes
 the same functions with the same operations in the same order (``FF_MEMBER``, ``FF_GDUHEM`` and
-``FF_MDUHEM`` of :mod:`hystid.export._c_ff`): a change here is a change there
+``FF_MDUHEM`` of :mod:`hystid.export._c_ff_members`): a change here is a change there
 (``tests/test_export.py`` compares them sample by sample).
 """
 

@@ -423,10 +423,9 @@ class _Workspace:
         self.past = {k: x0.window(k, P) for k in ("w1", "w2", "y")}
         self.arrays = [np.zeros(P + n) for _ in range(8)]
 
-    def run(self, theta, layout, phi, dt, sens=None) -> tuple[np.ndarray, ...]:
-        """Simulate; with ``sens = (cols, ntc, arrays)`` the sensitivities too
-        (:func:`hystid.diagnose.sensitivities.augmented_sens_into`, whose past rows the
-        caller sets)."""
+    def start(self, layout) -> list[np.ndarray]:
+        """The arrays with their past rows set (the input past is in :attr:`U`), ready for
+        :func:`augmented_into` or :func:`hystid.diagnose.sensitivities.augmented_sens_into`."""
         check_plain_duhem(layout, _OPTION)
         UD, W1, W2, V, C, YL, M, Y = self.arrays
         P = self.P
@@ -437,14 +436,13 @@ class _Workspace:
         Y[:P] = self.past["y"]
         C[:P] = 0.0
         M[:P] = 0.0
-        if sens is None:
-            augmented_into(theta, layout, phi, self.U, UD, W1, W2, V, C, YL, M, Y, P, dt)
-        else:
-            from .sensitivities import augmented_sens_into
+        return self.arrays
 
-            cols, ntc, (S1, S2, SV, SYL, SY) = sens
-            augmented_sens_into(theta, layout, phi, cols, ntc, self.U, UD, W1, W2, V, C, YL, M,
-                                Y, S1, S2, SV, SYL, SY, P, dt)
+    def run(self, theta, layout, phi, dt) -> tuple[np.ndarray, ...]:
+        """Simulate: ``w1``, ``w2`` and ``y`` after the past rows."""
+        UD, W1, W2, V, C, YL, M, Y = self.start(layout)
+        P = self.P
+        augmented_into(theta, layout, phi, self.U, UD, W1, W2, V, C, YL, M, Y, P, dt)
         return W1[P:], W2[P:], Y[P:]
 
 

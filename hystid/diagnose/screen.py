@@ -29,7 +29,8 @@ from scipy import stats
 from ..model import DuhemSandwich
 from .correlation import correlation
 from .effects import EFFECTS, MAX_DELAY, N_SLOTS
-from .refit import FitData, Parametrisation, simulate_fit_data
+from .parametrisation import Parametrisation
+from .refit import FitData, simulate_fit_data
 
 __all__ = [
     "MIN_SEPARATION",

@@ -51,7 +51,8 @@ import numpy as np
 
 from ..kernels import offsets
 from ..model import DuhemSandwich
-from ._c_ff import FF_GDUHEM, FF_MDUHEM, FF_MEMBER, FF_PLANNER, ff_chain
+from ._c_ff import FF_PLANNER
+from ._c_ff_members import FF_GDUHEM, FF_MDUHEM, FF_MEMBER, ff_chain
 from ._c_model import DUHEM_STEP, GDUHEM_STEP, MDUHEM_STEP, MODEL_COMMON, PI_STEP, SHAPE_TERMS
 from ._c_rpem import GDUHEM_RPEM_STEP, RPEM_STEP
 from .rpem import rpem_start
