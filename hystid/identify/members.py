@@ -251,30 +251,22 @@ def _say(progress: Any, message: str) -> None:
         say(message)
 
 
-def _split(record: Record, holdout: float) -> tuple[int, int]:
-    """First held-out sample and end of the scored span (a wrapped last sample left out)."""
+def _split(record: Record, holdout: float) -> tuple[int, int, np.ndarray]:
+    """First held-out sample, end of the scored span (a wrapped last sample left out) and
+    which of samples ``k..stop-1`` the choice scores: those the record's preparation keeps (an
+    output burst or spike there is left out, as the fits leave it out)."""
     from .prepare import prepare, rest_level
 
     _, at_rest, n_lead = rest_level(record.u)
     n_lead = n_lead if at_rest else 0
-    stop = prepare(record).fitted.stop
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        prep = prepare(record)
+    stop = prep.fitted.stop
     k = n_lead + int(round((1.0 - holdout) * (stop - n_lead)))
-    return k, stop
-
-
-def _scored_tail(record: Record, k: int, stop: int) -> np.ndarray:
-    """Which of samples ``k..stop-1`` the choice scores: those the whole record's preparation
-    keeps (an output burst or spike there is left out, as the fits leave it out)."""
-    from .prepare import prepare
-
-    keep = np.ones(stop - k, bool)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            weight = np.asarray(prepare(record).weight, bool)[k:stop]
-    except ValueError:
-        return keep
-    return weight if np.count_nonzero(weight) >= 0.5 * len(keep) else keep
+    weight = np.asarray(prep.weight, bool)[k:stop]
+    scored = weight if np.count_nonzero(weight) >= 0.5 * len(weight) else np.ones_like(weight)
+    return k, stop, scored
 
 
 def _heldout_rms(model: Any, record: Record, k: int, stop: int, scored: np.ndarray) -> float:
@@ -335,9 +327,8 @@ def select_member(
     members = [member(c) for c in candidates]
     if not members:
         raise ValueError("candidates: expected at least one member")
-    k, stop = _split(record, holdout)
+    k, stop, scored = _split(record, holdout)
     head = record[:k]
-    scored = _scored_tail(record, k, stop)
     rows, fits = [], {}
     for m in members:
         t0 = time.perf_counter()
