@@ -68,7 +68,7 @@ def _peak_rss_bytes() -> int:
 def _fit(case: str, record) -> None:
     from hystid.identify import identify
 
-    identify(record, method=case)
+    identify(record, method=case, model="duhem")
 
 
 def measure_case(case: str, n: int) -> dict:

@@ -59,7 +59,7 @@ def _methods(quick: bool) -> list[tuple[str, str, str, callable]]:
     """(model, key, label, identify(record) -> result) in table order."""
     rows = [
         ("duhem", "online", "on-line (RPEM, warm start)",
-         lambda rec: identify(rec, method="online")),
+         lambda rec: identify(rec, method="online", model="duhem")),
         ("pi", "recursive", "recursive (output error, warm start)",
          lambda rec: identify_pi(rec, method="recursive")),
         ("pi", "paper-key-term", "paper-like: key-term, P0=1e6, theta0=1e-3, rho=(k+1)^-9/13",
@@ -71,7 +71,7 @@ def _methods(quick: bool) -> list[tuple[str, str, str, callable]]:
     if not quick:
         rows += [
             ("duhem", "batch", "off-line output error (reference)",
-             lambda rec: identify(rec, method="batch")),
+             lambda rec: identify(rec, method="batch", model="duhem")),
             ("pi", "batch", "off-line output error (reference)",
              lambda rec: identify_pi(rec, method="batch")),
         ]

@@ -218,13 +218,13 @@ def run_case(case: dict, source: str, strength: str, seed: int, **settings) -> d
 
 def budget(seconds: float = 1.5) -> dict:
     """45 000 + 45 000 samples diagnosed with all candidates, as a ratio to the nominal
-    identification alone (``identify(train, "batch")``, which the diagnosis runs first, on
-    the same train record, same process)."""
+    identification alone (``identify(train, "batch", model="duhem")``, which the diagnosis runs
+    first, on the same train record, same process)."""
     n = int(round(seconds * FS))
     case = make_in_form("creep", 1, 7, n)
     diagnose(case["train"][:6000], [case["val"][:6000]], progress=False)  # compile first
     t0 = time.perf_counter()
-    identify(case["train"], "batch")
+    identify(case["train"], "batch", model="duhem")
     t_fit = time.perf_counter() - t0
     t0 = time.perf_counter()
     res = diagnose(case["train"], [case["val"]], progress=False)
@@ -552,7 +552,7 @@ def render_budget(payload: dict) -> str:
         return "(not measured: run without `--no-budget`)"
     return (f"{b['samples']} + {b['held_out_samples']} samples with all candidates: "
             f"{b['seconds']:.1f} s, **{b['ratio_to_nominal_fit']:.1f}x** the nominal "
-            f"identification alone (`identify(train, \"batch\")`, "
+            f"identification alone (`identify(train, \"batch\", model=\"duhem\")`, "
             f"{b['nominal_fit_seconds']:.2f} s, same process; goal <= 3x); accepted: "
             f"{', '.join(b['accepted']) or 'none'}.")
 

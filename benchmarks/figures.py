@@ -112,7 +112,7 @@ def _identify(record, method: str, **settings):
             return identify_pi(record, method="recursive", **settings)
         if method == "auto":
             return identify(record, model="auto", **settings)
-        return identify(record, method=method, **settings)
+        return identify(record, method=method, **{"model": "duhem", **settings})
 
 
 def fit_and_compare(train, held: Sequence, method: str, **settings) -> tuple:

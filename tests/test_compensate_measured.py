@@ -201,7 +201,7 @@ def test_pi_sandwich_is_compensated_through_the_same_interface():
 def look_alike():
     train = stage_a_like("prbn", seconds=1.0, rest_seconds=0.5, seed=0)
     held = stage_a_like("sine50", seconds=1.0, rest_seconds=0.5, seed=1)
-    return train, held, _quiet(identify, train).model
+    return train, held, _quiet(identify, train, model="duhem").model
 
 
 def test_command_for_a_simulated_displacement_is_near_the_applied_voltage(look_alike):
@@ -220,7 +220,7 @@ def test_command_for_a_simulated_displacement_is_near_the_applied_voltage(look_a
 
 def test_an_online_identified_model_is_compensated_alike(look_alike):
     train, held, batch = look_alike
-    online = _quiet(identify, train, method="online").model
+    online = _quiet(identify, train, method="online", model="duhem").model
     assert (online.u_rest, online.envelope) == (batch.u_rest, batch.envelope)
     smoother = hc.smoothing_model(21, online.dt)
     inv = hc.compensate(online, held.y, reference_model=smoother, warn=False)
@@ -230,7 +230,7 @@ def test_an_online_identified_model_is_compensated_alike(look_alike):
 
 def test_units_follow_the_record(look_alike):
     train, held, model = look_alike
-    kv = _quiet(identify, with_units(train, u="kV", y="nm")).model
+    kv = _quiet(identify, with_units(train, u="kV", y="nm"), model="duhem").model
     held_nm = with_units(held, u="kV", y="nm")
     volts = hc.compensate(model, held.y, warn=False)
     kilovolts = hc.compensate(kv, held_nm.y, warn=False)
@@ -317,7 +317,7 @@ def test_cli_bad_model_is_one_line_and_exit_2(capsys, tmp_path):
 # --------------------------------------------------------------------------- measured stage A
 @pytest.fixture(scope="module")
 def stage_a():
-    return _quiet(identify, load_record(STAGE_A / "prbn_1.csv")).model
+    return _quiet(identify, load_record(STAGE_A / "prbn_1.csv"), model="duhem").model
 
 
 @needs_stage_a

@@ -152,7 +152,7 @@ def stage_a_model() -> DuhemSandwich:
     rec = load_record(path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return identify(rec).model
+        return identify(rec, model="duhem").model
 
 
 def excitation(model, n: int) -> np.ndarray:

@@ -246,8 +246,9 @@ def test_long_records_are_refused_before_the_fit(tmp_path, capsys, monkeypatch, 
 
 
 # --------------------------------------------------------------------------- input offset
-@pytest.mark.parametrize("method", ["batch", "online"])
-def test_an_input_offset_does_not_change_the_predictions(method):
+@pytest.mark.parametrize("method,model", [("batch", "duhem"), ("online", "duhem"),
+                                          ("batch", None)])
+def test_an_input_offset_does_not_change_the_predictions(method, model):
     train = reference_record(0.1, seed=3, noise=1e-3)
     val = reference_record(0.1, seed=4, noise=1e-3)
     predictions = []
@@ -255,7 +256,7 @@ def test_an_input_offset_does_not_change_the_predictions(method):
         rec = Record(train.u + shift, train.y, train.fs, train.units, train.name)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            result = identify(rec, method=method)
+            result = identify(rec, method=method, model=model)
         assert not any("rest" in w for w in result.info.get("warnings", []))
         assert result.model.u_rest == pytest.approx(shift)
         predictions.append(result.model.simulate(val.u + shift).y)
@@ -394,7 +395,7 @@ def test_output_burst_and_drift_are_warned_about():
     assert output_is_drift(rec.t, rec.y) == []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        result = identify(Record(rec.u, drift, rec.fs), method="online")
+        result = identify(Record(rec.u, drift, rec.fs), method="online", model="duhem")
     assert any("straight line in time" in w for w in result.info["warnings"])
 
 

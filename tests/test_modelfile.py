@@ -70,7 +70,7 @@ def test_identified_duhem_sandwich_round_trips_bit_for_bit(record, tmp_path):
     from hystid.identify import identify
 
     rec, path = record
-    result = identify(rec, method="batch")
+    result = identify(rec, method="batch", model="duhem")
     other = as_measured(seed=1)
     loaded = _round_trip(result.model, tmp_path / "duhem.json", other.u)
     assert loaded.params == result.model.params

@@ -173,7 +173,7 @@ def test_identify_entry_point_for_each_recursive_method():
     for method in ("eria", "online"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            res = identify(rec, method=method)
+            res = identify(rec, method=method, model="duhem")
         assert res.method == method and res.history.shape == (rec.n, 6)
         assert np.all(np.isfinite(res.history))
 

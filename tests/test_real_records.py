@@ -48,7 +48,7 @@ def test_default_identify_beats_both_baselines_on_held_out_record(suite, case):
 
 
 def test_sensor_offset_is_estimated(suite):
-    result = identify(suite["offset"])
+    result = identify(suite["offset"], model="duhem")
     assert result.model.offset == pytest.approx(-0.7, abs=5e-3)
 
 
@@ -68,8 +68,8 @@ def test_identified_output_does_not_depend_on_units(suite, u_unit, y_unit):
     ku = float(np.median(other.u[base.u != 0] / base.u[base.u != 0]))
     ky = float(np.median(other.y[base.y != 0] / base.y[base.y != 0]))
     held = suite["offset/heldout"]
-    y1 = identify(base).model.simulate(held.u).y
-    y2 = identify(other).model.simulate(held.u * ku).y / ky
+    y1 = identify(base, model="duhem").model.simulate(held.u).y
+    y2 = identify(other, model="duhem").model.simulate(held.u * ku).y / ky
     assert np.max(np.abs(y2 - y1)) <= 1e-6 * np.max(np.abs(y1))
 
 
@@ -79,7 +79,7 @@ def test_outliers_do_not_wreck_the_fit(suite):
     y[1234] = 1e12
     y[3000:3100] += 1000.0  # a +1000 um burst
     dirty = Record(clean.u, y, clean.fs, clean.units, "with outliers")
-    a, b = identify(clean).model, identify(dirty).model
+    a, b = identify(clean, model="duhem").model, identify(dirty, model="duhem").model
     assert np.max(np.abs(b.theta - a.theta) / np.abs(a.theta)) < 0.05
     assert b.offset == pytest.approx(a.offset, abs=1e-3)
 
@@ -109,7 +109,7 @@ def test_output_equal_to_input_is_refused(suite):
 
 
 def test_simulating_outside_the_envelope_warns(suite):
-    model = identify(suite["offset"]).model
+    model = identify(suite["offset"], model="duhem").model
     assert model.envelope is not None
     assert model.envelope_bound() < 2.0  # admissible over its own training envelope
     with pytest.warns(AdmissibilityWarning, match="outside the identified range"):

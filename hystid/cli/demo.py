@@ -100,7 +100,7 @@ def _demo(args: argparse.Namespace) -> None:
         settings = {} if method == "batch" else {"progress": progress}
         with warnings.catch_warnings():  # ERIA's restarts are counted in the table instead
             warnings.simplefilter("ignore", RuntimeWarning)
-            result = identify(train, method=method, **settings)
+            result = identify(train, method=method, model="duhem", **settings)
         elapsed = time.perf_counter() - t0
         yhat = result.model.simulate(val.u).y
         v = validate(val.y, yhat, val.fs)

@@ -180,11 +180,13 @@ def _model_arg(args: argparse.Namespace) -> str:
     """The ``--model`` of ``identify``: as given, else ``auto`` for a batch or on-line fit that
     no other option ties to the Duhem sandwich (``--structure``, ``--history``, ``--method eria``
     or ``ekf``)."""
+    from ..identify import default_model
+
     model = getattr(args, "model", None)
     if model is None:
-        tied = (getattr(args, "structure", None) is not None
-                or args.method in ("eria", "ekf") or getattr(args, "history", None))
-        model = "duhem" if tied else "auto"
+        model = default_model(args.method or "batch", getattr(args, "structure", None))
+        if getattr(args, "history", None):  # the parameter history is the Duhem one's
+            model = "duhem"
         args.model = model
     return model
 

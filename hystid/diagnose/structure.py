@@ -84,7 +84,7 @@ def identify_nominal(tr: FitData, structure: Structure | None) -> DuhemSandwich:
         The identified model, named ``nominal sandwich``.
     """
     rec = Record(tr.u, tr.y, tr.fs, name="train")
-    model = identify(rec, "batch", structure).model
+    model = identify(rec, "batch", structure, model="duhem").model
     model.name = "nominal sandwich"
     return model
 

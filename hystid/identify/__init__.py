@@ -14,8 +14,8 @@ from ..records import Record
 from .offline import fit_output_error
 from .result import IdentificationResult, converged_at
 
-__all__ = ["METHODS", "IdentificationResult", "converged_at", "fit_output_error", "identify",
-           "min_samples", "place_after_run"]
+__all__ = ["AUTO_SETTINGS", "METHODS", "IdentificationResult", "converged_at", "default_model",
+           "fit_output_error", "identify", "min_samples", "place_after_run"]
 
 METHODS = ("batch", "eria", "online", "ekf")
 SAMPLES_PER_PARAMETER = 10
@@ -55,7 +55,7 @@ def identify(
     method: str = "batch",
     structure: Structure | str | None = None,
     *,
-    model: str = "duhem",
+    model: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     **settings: Any,
 ) -> IdentificationResult:
@@ -72,13 +72,16 @@ def identify(
         Model structure; the paper's experimental one by default; ``"auto"`` chooses orders
         and delays on held-out error (:func:`~hystid.identify.structure.select_structure`,
         its table in ``result.info["structure_selection"]``).
-    model : str
+    model : str, optional
         The member of the model family (:data:`hystid.identify.members.MEMBERS`): ``"duhem"``
-        (default), ``"gduhem"``, ``"pi"``, ``"pi-stage"``, ``"mduhem"`` (batch only), or
-        ``"auto"`` to choose between
+        (the paper's sandwich), ``"gduhem"``, ``"pi"``, ``"pi-stage"``, ``"mduhem"`` (batch
+        only), or ``"auto"`` to choose between
         :data:`~hystid.identify.members.AUTO_CANDIDATES` on data held out inside the record
-        (:func:`~hystid.identify.members.select_member`; batch only, its table in
-        ``result.info["member_selection"]``). ``structure`` applies to the Duhem sandwich.
+        (:func:`~hystid.identify.members.select_member`, its table in
+        ``result.info["member_selection"]``; for ``method="online"`` the member is chosen on
+        the record's head and identified on-line over the whole record). ``structure``
+        applies to the Duhem sandwich. By default (None) ``"auto"``, as ``hystid identify``
+        chooses, unless the call is tied to the Duhem sandwich (:func:`default_model`).
     progress : callable, optional
         Called as ``progress(k, n)`` while a long run goes on.
     **settings
@@ -106,6 +109,8 @@ def identify(
     from .prepare import without_input_glitches
 
     record, mended = without_input_glitches(record)
+    model, notes = _resolved_model(record, method, structure, model, settings)
+    mended = notes + mended
     if model != "duhem":
         result = _identify_member(record, method, structure, model, progress, settings)
     else:
@@ -113,6 +118,55 @@ def identify(
     if mended:
         result.info["warnings"] = mended + list(result.info.get("warnings", []))
     return result
+
+
+#: Settings every member's fit takes, so that ``model="auto"`` can pass them to each candidate.
+AUTO_SETTINGS = frozenset({"offset", "skip"})
+
+
+def default_model(method: str, structure: Any = None,
+                  settings: dict[str, Any] | None = None) -> str:
+    """The member :func:`identify` fits when no ``model`` is given.
+
+    ``"auto"`` (the member chosen on data held out inside the record, as ``hystid identify``
+    chooses by default), unless the call is tied to the Duhem sandwich: a ``structure`` given,
+    a method only the Duhem sandwich has (``"eria"``, ``"ekf"``), or settings of the Duhem
+    estimators (``theta0``, ``P0``, ``n_start``..., anything beyond :data:`AUTO_SETTINGS`).
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`METHODS`.
+    structure : Structure or "auto", optional
+        The structure asked for.
+    settings : dict, optional
+        The estimator's settings asked for.
+
+    Returns
+    -------
+    str
+        ``"auto"`` or ``"duhem"``.
+    """
+    tied = (structure is not None or method in ("eria", "ekf")
+            or bool(set(settings or {}) - AUTO_SETTINGS))
+    return "duhem" if tied else "auto"
+
+
+def _resolved_model(record: Record, method: str, structure: Any, model: str | None,
+                    settings: dict[str, Any]) -> tuple[str, list[str]]:
+    """The member to fit: ``model`` as given, else :func:`default_model`, which falls back to
+    the Duhem sandwich (and says so) on a record too short to choose a member on."""
+    if model is not None:
+        return model, []
+    model = default_model(method, structure, settings)
+    if model == "auto":
+        from .members import choice_shortfall
+
+        short = choice_shortfall(record[:_online_choice_head(record)] if method == "online"
+                                 else record)
+        if short is not None:
+            return "duhem", [f"{short}: the Duhem sandwich is fitted without a choice"]
+    return model, []
 
 
 def _identify_duhem(record: Record, method: str, structure: Any,
@@ -177,17 +231,24 @@ def _identify_member(record: Record, method: str, structure: Any, model: str,
 ONLINE_CHOICE_SHARE = 0.5
 
 
+def _online_choice_head(record: Record) -> int:
+    """Samples ``0..k-1`` on which ``model="auto", method="online"`` chooses the member: the
+    leading rest and :data:`ONLINE_CHOICE_SHARE` of the rest of the record."""
+    from .prepare import rest_level
+
+    _, at_rest, n_lead = rest_level(record.u)
+    lead = n_lead if at_rest else 0
+    return lead + int(round(ONLINE_CHOICE_SHARE * (record.n - lead)))
+
+
 def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
                  settings: dict) -> IdentificationResult:
     """``model="auto"`` on-line: the member chosen on the head of the record (batch fits, as
     :func:`~hystid.identify.members.select_member` chooses), then identified on-line over
     the whole record (a stage is identified on a first stretch of data before the loop runs)."""
     from .members import member, select_member
-    from .prepare import rest_level
 
-    _, at_rest, n_lead = rest_level(record.u)
-    lead = n_lead if at_rest else 0
-    k = lead + int(round(ONLINE_CHOICE_SHARE * (record.n - lead)))
+    k = _online_choice_head(record)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the head's fits are only compared
         choice = select_member(record[:k], progress=progress)

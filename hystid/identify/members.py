@@ -41,7 +41,7 @@ from ..pi import PIStructure
 from ..records import Record
 from .result import IdentificationResult
 
-__all__ = ["AUTO_CANDIDATES", "MEMBERS", "Member", "member", "select_member"]
+__all__ = ["AUTO_CANDIDATES", "MEMBERS", "Member", "choice_shortfall", "member", "select_member"]
 
 
 @dataclass(frozen=True)
@@ -269,6 +269,42 @@ def _split(record: Record, holdout: float) -> tuple[int, int, np.ndarray]:
     return k, stop, scored
 
 
+def choice_shortfall(record: Record, candidates: Sequence[str] = AUTO_CANDIDATES,
+                     holdout: float = HOLDOUT) -> str | None:
+    """Why ``record`` is too short for :func:`select_member` to choose, or None.
+
+    The choice fits every candidate on the head of the excitation (all but its last
+    ``holdout``), which must hold ten samples per parameter of the richest candidate.
+
+    Parameters
+    ----------
+    record : Record
+        The record to choose on.
+    candidates : sequence of str
+        Names in :data:`MEMBERS`.
+    holdout : float
+        Share of the excitation held out.
+
+    Returns
+    -------
+    str or None
+        The reason, with the figures, or None when the record is long enough.
+    """
+    from . import SAMPLES_PER_PARAMETER
+    from .prepare import rest_level
+
+    _, at_rest, n_lead = rest_level(record.u)
+    excited = record.n - (n_lead if at_rest else 0)
+    richest = max(member(c).n_params for c in candidates)
+    need = SAMPLES_PER_PARAMETER * richest
+    head = int(round((1.0 - holdout) * excited))
+    if head >= need:
+        return None
+    return (f"record {record.name!r}: {excited} samples of excitation leave {head} to fit the "
+            f"candidates on, held out the last {holdout:.0%} (expected at least {need}: ten "
+            f"per parameter of the richest candidate, {richest})")
+
+
 def _heldout_rms(model: Any, record: Record, k: int, stop: int, scored: np.ndarray) -> float:
     from ..baselines import simulate_from_rest
 
@@ -327,6 +363,9 @@ def select_member(
     members = [member(c) for c in candidates]
     if not members:
         raise ValueError("candidates: expected at least one member")
+    short = choice_shortfall(record, candidates, holdout)
+    if short is not None:
+        raise ValueError(f"{short}; a model can be fitted without the choice (model='duhem')")
     k, stop, scored = _split(record, holdout)
     head = record[:k]
     rows, fits = [], {}
