@@ -14,13 +14,14 @@ the ``pi-stage`` member identified on a simulated stage A (``hystid.testing``; L
 outside the unit circle: its anti-causal inverse runs as a FIR every sample). Goal: one million
 samples per second for every step. Beside the goal, the Duhem compensator on the same scan with
 limits wide enough never to saturate (every sample follows the plan), and with a preview of
-3 000 samples (where shifting the step's reference lines costs more than the planner). Also
-the model step of the ``gduhem`` member (the generalised Duhem block: cubic curve, quadratic
-slope) and of the ``mduhem`` member (six Duhem operators in parallel), identified on a simulated
-stage A and run on the paper's excitation scaled into their input envelope (the gduhem member's
-on-line identifier step is timed too), and their compensators (the per-sample inverses without
-look-ahead of ``hystid.compensate.member_inverse``) on the same kind of triangle scan as the
-others, within the limits the model's envelope sets.
+3 000 samples (the step's lines of the preview's length are rings: a longer preview adds no shift
+per sample, only what the planner looks at). Also the model step of the ``gduhem`` member (the
+generalised Duhem block: cubic curve, quadratic slope) and of the ``mduhem`` member (six Duhem
+operators in parallel), identified on a simulated stage A and run on the paper's excitation
+scaled into their input envelope (the gduhem member's on-line identifier step is timed too), and
+their compensators (the per-sample inverses without look-ahead of
+``hystid.compensate.member_inverse``) on the same kind of triangle scan as the others, within
+the limits the model's envelope sets.
 
 Usage: OPENBLAS_NUM_THREADS=1 python benchmarks/bench_export.py [--quick] [--samples N]
            [--out FILE.json]

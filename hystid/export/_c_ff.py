@@ -8,9 +8,12 @@ inverse_run`), the chain of :mod:`hystid.compensate.compensator` (``_push_refere
 :mod:`hystid.export._c_ff_members`.
 
 The chain state is the flat vector of the Python compensator (``[x_M | y_M line | w2d line |
-past u | past w1 | hysteresis state]``) at the offsets the generator defines (``HX_FF_*``
-macros, ``hx_ff_*`` arrays, from the ``ispec``/``fpar`` arrays of the Python chain); with L2
-inverted ahead of the chain its reference lines hold ``w2d``.
+past u | past w1 | hysteresis state]``) without its reference lines, at the offsets the
+generator defines (``HX_FF_*`` macros, ``hx_ff_*`` arrays, from the ``ispec``/``fpar`` arrays
+of the Python chain). With L2 inverted ahead of the chain (``x_M`` empty), the ``w2d`` line is a
+ring of its own, written twice so that the planner's window is in order in memory, and the
+``y_M`` line is not kept (the desired output comes from a ring of its own); the lines of the
+preview's length cost O(1) a sample, not a shift over the preview.
 """
 
 from __future__ import annotations
@@ -505,19 +508,16 @@ static double hx_lti_push(double *xl, int nn, double *yl, int nd, const double *
     return acc;
 }
 
-static void hx_ff_push_reference(double *x, double r)
+/* _push_reference of the chain (L2 inverted ahead, no reference model in the chain): w2d into
+   its line, a ring written twice so that the last HYSTID_FF_W_LINE values are in order at
+   wl[wpos + 1 .. wpos + HYSTID_FF_W_LINE], the oldest first (no shift over the preview). The
+   chain's y_M line is not kept: the desired output comes from ydl. */
+static void hx_ff_push_reference(hystid_ff_state *s, double r)
 {
-    double w2;
-    int i;
-    for (i = 0; i < HX_FF_LY - 1; i++) {
-        x[HX_FF_OFF_Y + i] = x[HX_FF_OFF_Y + i + 1];
-    }
-    x[HX_FF_OFF_Y + HX_FF_LY - 1] = r;
-    w2 = r / HX_FF_K2;
-    for (i = 0; i < HX_FF_LW - 1; i++) {
-        x[HX_FF_OFF_W + i] = x[HX_FF_OFF_W + i + 1];
-    }
-    x[HX_FF_OFF_W + HX_FF_LW - 1] = w2;
+    double w2 = r / HX_FF_K2;
+    s->wpos = s->wpos + 1 < HYSTID_FF_W_LINE ? s->wpos + 1 : 0;
+    s->wl[s->wpos] = w2;
+    s->wl[s->wpos + HYSTID_FF_W_LINE] = w2;
 }
 
 void hystid_ff_init(hystid_ff_state *s)
@@ -526,9 +526,10 @@ void hystid_ff_init(hystid_ff_state *s)
     for (i = 0; i < HX_FF_NX; i++) {
         s->x[i] = 0.0;
     }
-    for (i = HX_FF_OFF_Y; i < HX_FF_OFF_U; i++) {
-        s->x[i] = HX_FF_REST; /* the reference lines settled at the rest */
+    for (i = 0; i < 2 * HYSTID_FF_W_LINE; i++) {
+        s->wl[i] = HX_FF_REST; /* the reference line settled at the rest */
     }
+    s->wpos = HYSTID_FF_W_LINE - 1;
 #if HX_FF_KIND == 0
     s->x[HX_FF_OFF_H] = HX_FF_REST; /* the Duhem state remembered at rest */
     hx_planner_init(&s->plan);
@@ -558,6 +559,7 @@ void hystid_ff_init(hystid_ff_state *s)
     for (i = 0; i < HYSTID_FF_YD_LINE; i++) {
         s->ydl[i] = 0.0;
     }
+    s->ypos = HYSTID_FF_YD_LINE - 1;
     s->y_rest = HX_FF_Y_REST;
     s->n = 0;
     s->u = HYSTID_FF_REST_COMMAND;
@@ -568,6 +570,7 @@ void hystid_ff_init(hystid_ff_state *s)
 double hystid_ff_step(hystid_ff_state *s, double r)
 {
     double *x = s->x;
+    const double *win;
     double dev, ym, v, w, w2d, w1p, w1c, u, w1;
     long k;
     int i, j, status = 0;
@@ -592,10 +595,9 @@ double hystid_ff_step(hystid_ff_state *s, double r)
 #else
     ym = dev;
 #endif
-    for (i = 0; i < HYSTID_FF_YD_LINE - 1; i++) {
-        s->ydl[i] = s->ydl[i + 1];
-    }
-    s->ydl[HYSTID_FF_YD_LINE - 1] = ym;
+    /* ydl: a ring, the newest at ypos, the oldest after it */
+    s->ypos = s->ypos + 1 < HYSTID_FF_YD_LINE ? s->ypos + 1 : 0;
+    s->ydl[s->ypos] = ym;
     /* L2's stable inverse: its delay read ahead, the causal part, the anti-causal FIR */
     k -= HX_FF_L2_DELAY;
     if (k < 0) {
@@ -643,19 +645,19 @@ double hystid_ff_step(hystid_ff_state *s, double r)
 #endif
     w2d = w + HX_FF_REST;
     /* the chain: hysteresis inverse, L1 inverse, internal model */
-    hx_ff_push_reference(x, w2d);
+    hx_ff_push_reference(s, w2d);
     if (k < HX_FF_ADVANCE) {
         return s->u; /* priming: the chain reads w2d HX_FF_ADVANCE samples ahead */
     }
-    s->yd = s->ydl[0] + s->y_rest;
+    s->yd = s->ydl[s->ypos + 1 < HYSTID_FF_YD_LINE ? s->ypos + 1 : 0] + s->y_rest;
+    win = &s->wl[s->wpos + HYSTID_FF_W_LINE - HX_FF_P]; /* w2d(k+q1) .. w2d(k+q1+P) */
     w1p = x[HX_FF_OFF_W1 + HX_FF_H1 - 1];
     (void)w1p; /* the Duhem block's state only */
 #if HX_FF_KIND == 0
     {
         int far = 0;
-        double d = hx_plan_memo(&x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P], HX_FF_P + 1, w1p,
-                                x[HX_FF_OFF_H], HX_FF_ALPHA, HX_FF_F0, HX_FF_F1, HX_FF_G0,
-                                HX_FF_BOUND, &s->plan, &status, &far);
+        double d = hx_plan_memo(win, HX_FF_P + 1, w1p, x[HX_FF_OFF_H], HX_FF_ALPHA, HX_FF_F0,
+                                HX_FF_F1, HX_FF_G0, HX_FF_BOUND, &s->plan, &status, &far);
         if (far) {
             status |= 8;
         }
@@ -663,7 +665,7 @@ double hystid_ff_step(hystid_ff_state *s, double r)
     }
 #elif HX_FF_KIND == 1
     {
-        double w2c = x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P];
+        double w2c = win[0];
         tail = 0.0;
         for (i = HX_FF_NPI - 1; i >= 0; i--) {
             pinv[i] = tail;
@@ -681,7 +683,7 @@ double hystid_ff_step(hystid_ff_state *s, double r)
         }
     }
 #else
-    w1c = x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P] / HX_FF_KH;
+    w1c = win[0] / HX_FF_KH;
 #endif
     /* L1^-1 (eq. 1 solved for u(k)) */
     u = w1c;

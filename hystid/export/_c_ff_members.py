@@ -184,7 +184,7 @@ static void hx_md_forward(double *p, double w1, double w1p)
 
 # where ff_chain puts the members' branches into FF_CHAIN (before these lines)
 _AT_INIT = "#endif\n    for (i = 0; i < HYSTID_FF_M_NX; i++) {\n"
-_AT_INVERSE = "#else\n    w1c = x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P] / HX_FF_KH;\n#endif\n"
+_AT_INVERSE = "#else\n    w1c = win[0] / HX_FF_KH;\n#endif\n"
 _AT_FORWARD = "#endif\n    for (i = 0; i < HX_FF_H1 - 1; i++) {\n"
 
 _MEMBER_BRANCHES = {
@@ -193,8 +193,8 @@ _MEMBER_BRANCHES = {
         "    s->x[HX_FF_OFF_H] = HX_FF_REST; /* the generalised block's state at rest */\n",
         "#elif HX_FF_KIND == 4\n"
         "    {\n"
-        "        double d = hx_gd_inverse_step(x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P], w1p,\n"
-        "                                      x[HX_FF_OFF_H], HX_FF_BOUND, &status);\n"
+        "        double d = hx_gd_inverse_step(win[0], w1p, x[HX_FF_OFF_H], HX_FF_BOUND,\n"
+        "                                      &status);\n"
         "        w1c = w1p + d;\n"
         "    }\n",
         "#elif HX_FF_KIND == 4\n"
@@ -204,8 +204,8 @@ _MEMBER_BRANCHES = {
         "",
         "#elif HX_FF_KIND == 5\n"
         "    {\n"
-        "        double d = hx_md_inverse_step(x[HX_FF_OFF_W + HX_FF_LW - 1 - HX_FF_P], w1p,\n"
-        "                                      &x[HX_FF_OFF_H], HX_FF_BOUND, &status);\n"
+        "        double d = hx_md_inverse_step(win[0], w1p, &x[HX_FF_OFF_H], HX_FF_BOUND,\n"
+        "                                      &status);\n"
         "        w1c = w1p + d;\n"
         "    }\n",
         "#elif HX_FF_KIND == 5\n"

@@ -255,6 +255,9 @@ def _ff_part(
                          "central-line inverses)")
     rest = min(max(0.0, float(fpar[comp._UMIN])), float(fpar[comp._UMAX])) + model.u_rest
     P = int(ispec[comp._P])
+    if int(ispec[comp._NM]) or int(ispec[comp._L2MODE]) or int(ispec[comp._Q2]):
+        raise ValueError("the compensator chain must have L2 left out (it is inverted ahead)")
+    lines = int(ispec[comp._OFF_U])  # x_M (empty), the y_M and w2d lines
     M = bool(plan.m_num.size)
     ns = int(l2.A.shape[0])
     where = "the first reference sample" if plan.anchor == "reference" else \
@@ -283,7 +286,8 @@ def _ff_part(
             f"the command for r(n - HYSTID_FF_DELAY). */\n"
             + _define("HYSTID_FF_DELAY", plan.preview) + _define("HYSTID_FF_PREVIEW", P)
             + _define("HYSTID_FF_SETTLE", max(l2.settle, 1))
-            + _define("HYSTID_FF_NX", int(ispec[comp._NX]))
+            + _define("HYSTID_FF_NX", int(ispec[comp._NX]) - lines)
+            + _define("HYSTID_FF_W_LINE", P + 1)
             + _define("HYSTID_FF_M_NX", max(plan.m_num.size, 1))
             + _define("HYSTID_FF_M_NY", max(plan.m_den.size - 1, 1))
             + _define("HYSTID_FF_L2_NX", l2.num.size)
@@ -296,7 +300,10 @@ def _ff_part(
             + _define("HYSTID_FF_REST_COMMAND", rest)
             + (planner if kind == comp.KIND_DUHEM else "")
             + "typedef struct hystid_ff_state {\n"
-            "    double x[HYSTID_FF_NX]; /* the Python chain's state vector */\n"
+            "    double x[HYSTID_FF_NX]; /* the Python chain's state after its reference "
+            "lines */\n"
+            "    double wl[2 * HYSTID_FF_W_LINE]; /* its w2d line: a ring written twice */\n"
+            "    int wpos;\n"
             + ("    hystid_ff_planner plan; /* the reversal planner's memo */\n"
                if kind == comp.KIND_DUHEM else "")
             + (
@@ -305,7 +312,9 @@ def _ff_part(
             "    double fl[2 * HYSTID_FF_L2_NF]; /* L2^-1, anti-causal part */\n"
             "    int slot;\n"
             "    double xs[HYSTID_FF_L2_NS], corr[HYSTID_FF_SETTLE]; /* pre-actuation made up */\n"
-            "    double ydl[HYSTID_FF_YD_LINE]; /* desired output, aligned with the command */\n"
+            "    double ydl[HYSTID_FF_YD_LINE]; /* desired output, aligned with the command (a "
+            "ring) */\n"
+            "    int ypos;\n"
             "    double y_rest;\n    long n;\n    double u, yd;\n    int status;\n"
             "} hystid_ff_state;\n\n"
             "void hystid_ff_init(hystid_ff_state *s);\n"
@@ -317,11 +326,13 @@ def _ff_part(
             "saturated, 8 turning the hysteresis round) */\n"
             "double hystid_ff_desired(const hystid_ff_state *s);\n"
             "int hystid_ff_status(const hystid_ff_state *s);\n"))
-    names_i = ("KIND", "N1A", "N1B", "Q1", "N2A", "N2B", "Q2", "NM", "L2MODE", "P", "LY", "LW",
-               "NPI", "OFF_M", "OFF_Y", "OFF_W", "OFF_U", "OFF_W1", "OFF_H", "NX", "H1", "Q")
-    src = "".join(_define(f"HX_FF_{n}", int(ispec[getattr(comp, f"_{n}")])) for n in names_i)
-    if int(ispec[comp._NM]) or int(ispec[comp._L2MODE]) or int(ispec[comp._Q2]):
-        raise ValueError("the compensator chain must have L2 left out (it is inverted ahead)")
+    # the C state x is the chain's vector without its leading part ([x_M | y_M line | w2d
+    # line], x_M empty): w2d's line is a ring of its own, the y_M line is not read in C
+    names_i = ("KIND", "N1A", "N1B", "Q1", "N2A", "N2B", "Q2", "NM", "L2MODE", "P", "NPI",
+               "OFF_U", "OFF_W1", "OFF_H", "NX", "H1", "Q")
+    shifted = ("OFF_U", "OFF_W1", "OFF_H", "NX")
+    src = "".join(_define(f"HX_FF_{n}", int(ispec[getattr(comp, f"_{n}")])
+                          - (lines if n in shifted else 0)) for n in names_i)
     fnames = ("ALPHA", "F0", "F1", "G0", "BOUND", "UMIN", "UMAX", "B1LEAD", "B2LEAD", "K2", "KH")
     src += "".join(_define(f"HX_FF_{n}", float(fpar[getattr(comp, f"_{n}")])) for n in fnames)
     src += "".join(_define(f"HX_FF_{k}", v) for k, v in (
