@@ -238,6 +238,28 @@ def test_failed_start_up_check_solves_again_on_more_samples(monkeypatch):
     assert rel_err(res.model.theta)[0] < 0.02
 
 
+def test_retry_solves_start_as_the_batch_fit_and_from_the_best_so_far(monkeypatch):
+    # A retry used to replace theta0 by the best solution so far: a basin fitted to a window
+    # too short was the only start besides the data-driven ones (on the measured piezo those
+    # polish into solutions that run away across its input step; the retries gave nothing).
+    from hystid.identify import online
+
+    calls = []
+    land = _fit_landing_in(1_000)
+
+    def spy(record, structure, theta0, **kw):
+        calls.append((record.n, theta0, kw.get("starts") or {}))
+        return land(record, structure, theta0, **kw)
+
+    monkeypatch.setattr(online, "fit_output_error", spy)
+    OnlineIdentifier(theta0=0.02).fit(stage_record(0.05, seed=4))
+    assert [n for n, _, _ in calls[:2]] == [400, 1_000]
+    assert all(np.isscalar(t0) and t0 == 0.02 for _, t0, _ in calls)  # theta0 in every solve
+    assert calls[0][2] == {}
+    wrong = DuhemSandwich(WRONG_BASIN, Structure()).theta
+    assert np.allclose(calls[1][2]["best so far"], wrong)  # and the start-up's solution
+
+
 def test_persistent_start_up_mismatch_is_a_warning_never_converged(monkeypatch):
     from hystid.identify import online
 

@@ -149,3 +149,27 @@ def test_duhem_online_stays_admissible_on_measured_stage_a():
     for rec in [train, *held]:
         assert not [w for w in res.model.admissibility(rec.u) if "condition (8)" in w], rec.name
     assert np.all(online <= RATIO * batch), (online, batch)
+
+
+PIEZO = (Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+         / "piezo_sine_150V_1Hz" / "hysteresis_v_150_1hz.csv")
+
+
+@pytest.mark.skipif(not PIEZO.exists(), reason=f"measured piezo record not found: {PIEZO} "
+                    "(../shared/data beside the checkout)")
+def test_duhem_online_within_ratio_of_batch_on_measured_piezo():
+    # +-150 V, 1 Hz, 5 kHz: a step of 87 V out of rest, then 2.7 periods to identify on (the
+    # first 60 %), 4 held out. The start-up windows (400 / 1 000 / 3 000 samples: 0.08-0.6 of
+    # a period) land in poor basins, and the retries were started from the best of them
+    # instead of theta0; their data-driven starts polish into solutions that run away across
+    # the step (left out of the cost), which are refused: 0.474 um against the batch fit's
+    # 0.0715. Retried from theta0 and the data-driven starts as the batch fit is, the best so
+    # far as one more start: 0.0777 um (1.09x), the solve on 10 000 samples from theta0.
+    rec = load_record(PIEZO, columns={"t": 1, "u": 3, "y": 2})
+    k = int(round(0.6 * rec.n))
+    train, held = rec[:k], [(rec, k)]
+    _, batch, linear = _fit(train, held, model="duhem")
+    res, online, _ = _fit(train, held, model="duhem", method="online")
+    assert np.all(np.isfinite(online)) and res.info["n_recoveries"] == 0  # never diverged
+    assert np.all(online <= RATIO * batch), (online, batch)
+    assert np.all(online < 0.2 * linear), (online, linear)

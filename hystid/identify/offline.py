@@ -497,21 +497,23 @@ class _OutputError:
 
 
 def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndarray,
-            linear_init: bool) -> dict[str, np.ndarray]:
+            linear_init: bool, more: dict | None = None) -> dict[str, np.ndarray]:
     """Data-driven starts on the normalised record, ``[theta_n, y0_n]`` each.
 
     ``theta0`` (the paper's 0.01 for every parameter, in normalised units when a scalar, in
-    record units when a vector or dict), and from the linear sandwich's ARX fit with an offset
-    (:func:`linear_start`): the linear model itself (``f1 = g0``) and loops opened around it
-    (``g0`` a half and a fifth of the gain, ``alpha`` 1 and 5, a level at which the normalised
-    loop is about as wide as the signals).
+    record units when a vector or dict), the ``more`` starts given (record units), and from
+    the linear sandwich's ARX fit with an offset (:func:`linear_start`): the linear model
+    itself (``f1 = g0``) and loops opened around it (``g0`` a half and a fifth of the gain,
+    ``alpha`` 1 and 5, a level at which the normalised loop is about as wide as the signals).
     """
     starts = {}
-    if np.isscalar(theta0):
-        starts["theta0"] = np.r_[initial_theta(structure, theta0), 0.0]
-    else:
-        phys = initial_theta(structure, theta0)
-        starts["theta0"] = np.r_[to_normalised(phys, structure, prep.u_scale, prep.y_scale), 0.0]
+    for label, start in {"theta0": theta0, **(more or {})}.items():
+        if np.isscalar(start):
+            starts[label] = np.r_[initial_theta(structure, start), 0.0]
+        else:
+            phys = initial_theta(structure, start)
+            starts[label] = np.r_[to_normalised(phys, structure, prep.u_scale, prep.y_scale),
+                                  0.0]
     if not linear_init:
         return starts
     fill = np.where(prep.weight, prep.yn, np.nan)
@@ -547,6 +549,7 @@ def fit_output_error(
     tol: float = 1e-12,
     name: str = "identified stage",
     say: Callable[[str], None] | None = None,
+    starts: dict[str, np.ndarray] | None = None,
 ) -> IdentificationResult:
     """Identify the sandwich off-line by output-error least squares.
 
@@ -586,6 +589,9 @@ def fit_output_error(
     say : callable, optional
         Called with a progress line as each start is screened and each of the two best is
         polished (a fit of a long record runs for minutes).
+    starts : dict of str to ndarray, optional
+        Further starts by label, parameter vectors in record units (a previous solution: the
+        on-line identifier's start-up solve on a longer window), screened with the others.
 
     Returns
     -------
@@ -602,7 +608,7 @@ def fit_output_error(
     x0n = _normalise_past(x0, prep) if x0 is not None else InitialCondition()
     problem = _OutputError(prep, structure, x0n, offset and x0 is None, admissible,
                            fit_state=x0 is None)
-    starts = _starts(prep, structure, theta0, linear_init)
+    starts = _starts(prep, structure, theta0, linear_init, more=starts)
     screened, say = [], say or (lambda line: None)
     for i, (label, start) in enumerate(starts.items()):
         say(f"batch fit of {record.n} samples: start {i + 1} of {len(starts)} ({label})")

@@ -30,9 +30,10 @@ white residual is noise, a smooth one is a misfit) and beat a linear model of th
 the running estimate, once ``start_retries`` samples (1 000 and 3 000 by default) have come,
 most of which the start-up solve never saw -- a window can be fitted to its noise by a wrong
 solution when it does not excite the stage enough. When such a check fails the problem is
-solved again on all the samples so far (from the best solution so far and the data-driven
-starts) and the recursion restarts from the better of the two. A mismatch that persists to the
-last window is a warning in ``info["warnings"]``, and ``converged_at`` is then never reported.
+solved again on all the samples so far (from theta0 and the data-driven starts, as the batch
+fit starts, and from the best solution so far) and the recursion restarts from the better of
+the two. A mismatch that persists to the last window is a warning in ``info["warnings"]``, and
+``converged_at`` is then never reported.
 
 Divergence watch: the short-term residual RMS is compared with its long-term level; when it
 exceeds ``diverge_ratio`` times that level for ``diverge_hold`` samples the estimate is declared
@@ -447,7 +448,9 @@ class OnlineIdentifier(RecursiveIdentifier):
 
     def _solve(self, n: int) -> tuple[DuhemSandwich, str]:
         """Output-error solve on the first ``n`` samples (the batch fit's preparation, rest
-        level, offset and starts), from theta0 or, on a retry, the best solution so far."""
+        level, offset and starts: theta0 and the data-driven ones), on a retry from the best
+        solution so far too (besides those starts, not instead of theta0: a solution that fit a
+        shorter window may sit in a basin that the longer window shows to be wrong)."""
         u, y, ok = self._window(n)
         if not ok.any():
             raise ValueError("online: every output sample of the start-up window is non-finite")
@@ -458,13 +461,13 @@ class OnlineIdentifier(RecursiveIdentifier):
         shift_u = self.u_rest or 0.0
         shift_y = self.offset or 0.0
         rec = Record(u - shift_u, y - shift_y, self.fs, name="start-up window")
-        start = self.theta0
+        more = {}
         if self._tried:
-            start = min(self._tried, key=lambda t: t[0].rms)[1].theta
+            more["best so far"] = min(self._tried, key=lambda t: t[0].rms)[1].theta
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            fit = fit_output_error(rec, self.structure, start, offset=self.offset is None,
-                                   max_nfev=100)
+            fit = fit_output_error(rec, self.structure, self.theta0, offset=self.offset is None,
+                                   max_nfev=100, starts=more)
         m = fit.model
         model = DuhemSandwich(m.theta, self.structure, fs=self.fs, u_rest=m.u_rest + shift_u,
                               offset=m.offset + shift_y)
