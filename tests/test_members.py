@@ -181,9 +181,10 @@ def test_rest_zero_reads_the_record_s_own_rest_output():
 @pytest.mark.skipif(not STAGE_A.exists(), reason=f"measured stage A not found at {STAGE_A} "
                     "(../shared/data beside the checkout)")
 def test_on_measured_stage_a_the_default_choice_wins_by_far():
-    """Identified on prbn_1 with the defaults (``identify(train)``: model="auto"), run free on the other five records: well below
-    the linear model and under 50 nm everywhere (benchmarks/bench_stage_a.py has the table
-    with the NARX; today's figures are 25-30 nm against 42-70 nm for the NARX)."""
+    """Identified on prbn_1 with the defaults (``identify(train)``: model="auto"), run free
+    on the other five records: well below the linear model and under 50 nm everywhere
+    (benchmarks/bench_stage_a.py has the table with the NARX; today's figures are 25-30 nm
+    against 42-70 nm for the NARX)."""
     recs = {p.stem: load_record(p) for p in sorted(STAGE_A.glob("*.csv"))}
     train = recs.pop("prbn_1")
     with warnings.catch_warnings():
