@@ -1,6 +1,7 @@
 """The measured piezo record diagnosed with default options, as ``hystid diagnose`` does it.
 
-Identify on the first 60 %, hold out the last 40 %, all candidate forms, the default time
+Identify on the record's rest and the first 60 % of its excitation, hold out the last 40 %
+(``--holdout``, a share of the excitation), all candidate forms, the default time
 budget (as long as the nominal identification took: on a slower or loaded machine fewer
 further forms are refitted). Skipped with a message when ``../shared/data`` is absent.
 

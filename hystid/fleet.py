@@ -294,8 +294,10 @@ def _split(train, vals, settings: dict[str, Any]):
     holdout = float(settings.get("holdout", 0.4))
     if not 0 < holdout < 1:
         raise ValueError(f"holdout: expected a fraction in (0, 1), got {holdout}")
-    k = int(round((1 - holdout) * train.n))
-    return train[:k], [(train, k)], f"last {100 * holdout:.0f} %"
+    from .identify.prepare import held_out_from
+
+    k = held_out_from(train.u, holdout)
+    return train[:k], [(train, k)], f"last {100 * holdout:.0f} % of the excitation"
 
 
 def _identify_row(train, vals, settings: dict[str, Any]) -> dict[str, Any]:

@@ -323,3 +323,26 @@ def test_validation_line_scores_a_record_not_at_rest_as_the_held_out_table(tmp_p
     held = report["baselines"]["rows"][0]["model"]
     assert report["validation"]["rms"] == pytest.approx(held, rel=1e-9)
     assert "from sample" in report["validated_on"] and "burn-in" in text
+
+
+def test_without_val_the_held_out_end_is_a_share_of_the_excitation(tmp_path, capsys):
+    # A stage-A look-alike rests 1 s before 1 s of excitation. Holding out 40 % of all its
+    # samples fitted the model on the rest and a fifth of the excitation (and held out an
+    # input range the fit never saw); 40 % of the excitation is held out instead.
+    from hystid.identify.prepare import held_out_from, rest_level
+    from hystid.testing import stage_a_like
+
+    rec = stage_a_like("prbn", seconds=1.0, rest_seconds=1.0, seed=0)
+    lead = rest_level(rec.u)[2]
+    k = held_out_from(rec.u, 0.4)
+    assert lead > 0.4 * rec.n and k == lead + round(0.6 * (rec.n - lead))
+    moving = np.sin(np.arange(rec.n) / 30.0)  # no leading rest: a share of all samples
+    assert held_out_from(moving, 0.4) == round(0.6 * rec.n)
+    rec.save(tmp_path / "a.csv")
+    out = tmp_path / "rep"
+    code, _, progress = run(["identify", tmp_path / "a.csv", "--out", out, "--model", "duhem"],
+                            capsys)
+    assert code == 0 and f": {k} samples at" in progress
+    report = json.loads((out / "report.json").read_text())
+    row = report["baselines"]["rows"][0]
+    assert row["model"] < 0.5 * min(row["static_line"], row["linear"])

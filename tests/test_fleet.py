@@ -91,7 +91,7 @@ def test_table_is_the_in_process_comparison_and_a_broken_record_is_isolated(
         assert bool(ok.loc[case, "beats_baselines"]) == row["beats"]
         assert ok.loc[case, "samples"] == train.n and ok.loc[case, "fs"] == train.fs
     # without a held-out record the end of the record is held out
-    assert ok.loc["stage_b", "held_out"] == "last 40 %"
+    assert ok.loc["stage_b", "held_out"] == "last 40 % of the excitation"
     assert ok.loc["stage_b", "samples"] == round(0.6 * 600)
     assert np.isfinite(ok[["rms_model", "rms_static_line", "rms_linear", "param_alpha"]]
                        .to_numpy(float)).all()

@@ -83,7 +83,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         f"{','.join(FAMILIES)}: {','.join(DEFAULT_EFFECTS)});"
                         " a named candidate that the records cannot show is an error")
     parser.add_argument("--holdout", type=fraction, default=0.4,
-                        help="share of TRAIN held out when no --val is given (default 0.4)")
+                        help="share of TRAIN's excitation (after its leading rest) held out at "
+                        "its end when no --val is given (default 0.4)")
     parser.add_argument("--crop", default=None, metavar="START:STOP",
                         help="keep only this time span of every record, in seconds")
     parser.add_argument("--u-scale", type=positive_arg(float), default=1.0, metavar="K",

@@ -75,7 +75,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("record", type=file_arg, help="record file")
     p.add_argument("--fs", type=positive_arg(float), help="sampling rate in Hz (if no t column)")
     p.add_argument("--val", type=file_arg,
-                   help="validation record (default: the last --holdout share of the record)")
+                   help="validation record (default: the last --holdout share of the record's "
+                   "excitation)")
     p.add_argument("--columns", type=columns_arg, metavar="t=1,u=3,y=2",
                    help="where t, u and y are in the files (names or 0-based positions)")
     p.add_argument("--units", type=units_arg, metavar="u=V,y=um", help=UNITS_HELP)
@@ -99,8 +100,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                    help="seconds at the start simulated but left out of the fit (default: none "
                    "for a record that starts at rest, else until the input has swept its range)")
     p.add_argument("--holdout", type=_holdout_fraction, default=0.4, metavar="F",
-                   help="without --val, the share of the record held out at its end for "
-                   "validation (default 0.4; 0 validates on the record itself)")
+                   help="without --val, the share of the record's excitation (after its "
+                   "leading rest) held out at its end for validation (default 0.4; 0 "
+                   "validates on the record itself)")
     p.add_argument("--repeat", type=file_arg, nargs="+", default=None, metavar="REC",
                    help="records of the same input as the validation record: their "
                    "repeat-to-repeat RMS is the floor no deterministic model can beat")
@@ -262,15 +264,18 @@ def _split_for_validation(rec: Record, val: Record | None,
                           args: argparse.Namespace) -> tuple[Record, Record, int | None]:
     """The identification record, the validation target and the first sample to score.
 
-    Without ``--val`` the end of the record is held out (``--holdout``) and the whole record is
-    simulated, so the held-out part starts from the model's own state.
+    Without ``--val`` the end of the record is held out (``--holdout``, a share of the
+    excitation after the leading rest: :func:`~hystid.identify.prepare.held_out_from`) and the
+    whole record is simulated, so the held-out part starts from the model's own state.
     """
     if val is not None:
         return rec, val, None
     share = getattr(args, "holdout", 0.0) or 0.0
     if share == 0.0:
         return rec, rec, 0
-    k = int(round((1.0 - share) * rec.n))
+    from ..identify.prepare import held_out_from
+
+    k = held_out_from(rec.u, share)
     if k < 2 or rec.n - k < 2:
         raise CommandError(f"--holdout {share:g}: record {rec.name!r} is too short to hold out "
                            "a part of it")

@@ -126,8 +126,9 @@ def diagnose(
     train : Record
         Record to identify on (it starts at rest unless ``initial='level'``).
     val : Record or sequence of Record, optional
-        Held-out records. Without them the last ``holdout`` share of ``train`` is held out (the
-        model runs through the whole record; only the head is fitted).
+        Held-out records. Without them the last ``holdout`` share of ``train``'s excitation
+        (after its leading rest, :func:`~hystid.identify.prepare.held_out_from`) is held out
+        (the model runs through the whole record; only the head is fitted).
     model : DuhemSandwich or IdentificationResult, optional
         The model to diagnose; identified on ``train`` by :func:`hystid.identify.identify`
         (batch: sensor offset and rest level estimated) when omitted. It is then refitted
@@ -143,7 +144,7 @@ def diagnose(
         then the repeatability (:func:`hystid.baselines.repeat_floor`) when it is above the
         sensor noise.
     holdout : float
-        Share of ``train`` held out when no ``val`` is given.
+        Share of ``train``'s excitation held out when no ``val`` is given.
     alpha : float
         Family-wise level of the held-out test in each round (Bonferroni over the candidates
         refitted in that round).

@@ -178,7 +178,9 @@ def final_model(
     if vals:
         fit_on, held = train, [(v, 0) for v in vals]
     else:
-        k = int(round((1.0 - holdout) * train.n))
+        from ..identify.prepare import held_out_from
+
+        k = held_out_from(train.u, holdout)
         fit_on, held = train[:k], [(train, k)]
     candidates: list[tuple[str, str, Any]] = [("nominal", "the nominal model", result.model)]
     if result.accepted:

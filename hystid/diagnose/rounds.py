@@ -16,7 +16,7 @@ import numpy as np
 
 from ..baselines import repeat_floor
 from ..errors import DiagnosisError
-from ..identify.prepare import prepare
+from ..identify.prepare import held_out_from, prepare
 from ..model import DuhemSandwich
 from ..records import Record
 from .effects import EFFECT_NAMES, EFFECTS, FAMILIES, effect_dict, family_of
@@ -106,6 +106,13 @@ def _check_inputs(train: Record, vals: list[Record], holdout: float, transient: 
                 f"val[{i}] {v.name!r}: in u={v.units.get('u')}, y={v.units.get('y')} but the "
                 f"train record in u={train.units.get('u')}, y={train.units.get('y')} (expected "
                 "records in one set of units)")
+    for label, rec in [("train", train)] + [(f"val[{i}]", v) for i, v in enumerate(vals)]:
+        if np.ptp(rec.u) == 0:
+            raise DiagnosisError(f"{label} {rec.name!r}: the input is constant; nothing excites "
+                                 "the stage (expected a varying input)")
+        if np.ptp(rec.y) == 0:
+            raise DiagnosisError(f"{label} {rec.name!r}: the output is constant (expected a "
+                                 "measured response)")
     if vals:
         if train.n < MIN_TRAIN_SAMPLES:
             raise DiagnosisError(
@@ -120,19 +127,13 @@ def _check_inputs(train: Record, vals: list[Record], holdout: float, transient: 
     else:
         if not 0.05 <= holdout <= 0.8:
             raise DiagnosisError(f"holdout: expected a fraction in [0.05, 0.8], got {holdout}")
-        k = int(round((1 - holdout) * train.n))
+        k = held_out_from(train.u, holdout)
         if k < MIN_TRAIN_SAMPLES or train.n - k < MIN_VAL_SAMPLES:
             raise DiagnosisError(
                 f"train {train.name!r}: {train.n} samples is too short to hold out "
-                f"{100 * holdout:.0f} % (expected at least {MIN_TRAIN_SAMPLES} train and "
-                f"{MIN_VAL_SAMPLES} held-out samples)")
-    for label, rec in [("train", train)] + [(f"val[{i}]", v) for i, v in enumerate(vals)]:
-        if np.ptp(rec.u) == 0:
-            raise DiagnosisError(f"{label} {rec.name!r}: the input is constant; nothing excites "
-                                 "the stage (expected a varying input)")
-        if np.ptp(rec.y) == 0:
-            raise DiagnosisError(f"{label} {rec.name!r}: the output is constant (expected a "
-                                 "measured response)")
+                f"{100 * holdout:.0f} % of its excitation ({k} train and {train.n - k} held-out "
+                f"samples; expected at least {MIN_TRAIN_SAMPLES} train and {MIN_VAL_SAMPLES} "
+                "held-out samples)")
 
 
 # --------------------------------------------------------------------------- stages
@@ -189,11 +190,11 @@ def _split(train: Record, vals: list[Record], holdout: float, transient: float, 
         vds = [FitData(v.u - u_rest, v.y, fs, level(v, f"val[{i}]"), slice(skip, None))
                for i, v in enumerate(vals)]
         return tr, vds, [skip / fs] * len(vds), "held-out records"
-    k = int(round((1 - holdout) * train.n))
+    k = held_out_from(train.u, holdout)
     lev = level(train, "train")
     tr = FitData(train.u[:k] - u_rest, train.y[:k], fs, lev, slice(skip_tr, None))
     vds = [FitData(train.u - u_rest, train.y, fs, lev, slice(k, None))]
-    return tr, vds, [k / fs], f"last {100 * holdout:.0f} % of the train record"
+    return tr, vds, [k / fs], f"last {100 * holdout:.0f} % of the train record's excitation"
 
 
 @dataclass

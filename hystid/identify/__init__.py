@@ -234,11 +234,9 @@ ONLINE_CHOICE_SHARE = 0.5
 def _online_choice_head(record: Record) -> int:
     """Samples ``0..k-1`` on which ``model="auto", method="online"`` chooses the member: the
     leading rest and :data:`ONLINE_CHOICE_SHARE` of the rest of the record."""
-    from .prepare import rest_level
+    from .prepare import held_out_from
 
-    _, at_rest, n_lead = rest_level(record.u)
-    lead = n_lead if at_rest else 0
-    return lead + int(round(ONLINE_CHOICE_SHARE * (record.n - lead)))
+    return held_out_from(record.u, 1.0 - ONLINE_CHOICE_SHARE)
 
 
 def _online_auto(record: Record, progress: Callable[[int, int], None] | None,

@@ -255,15 +255,13 @@ def _split(record: Record, holdout: float) -> tuple[int, int, np.ndarray]:
     """First held-out sample, end of the scored span (a wrapped last sample left out) and
     which of samples ``k..stop-1`` the choice scores: those the record's preparation keeps (an
     output burst or spike there is left out, as the fits leave it out)."""
-    from .prepare import prepare, rest_level
+    from .prepare import held_out_from, prepare
 
-    _, at_rest, n_lead = rest_level(record.u)
-    n_lead = n_lead if at_rest else 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         prep = prepare(record)
     stop = prep.fitted.stop
-    k = n_lead + int(round((1.0 - holdout) * (stop - n_lead)))
+    k = held_out_from(record.u, holdout, stop)
     weight = np.asarray(prep.weight, bool)[k:stop]
     scored = weight if np.count_nonzero(weight) >= 0.5 * len(weight) else np.ones_like(weight)
     return k, stop, scored
@@ -291,13 +289,13 @@ def choice_shortfall(record: Record, candidates: Sequence[str] = AUTO_CANDIDATES
         The reason, with the figures, or None when the record is long enough.
     """
     from . import SAMPLES_PER_PARAMETER
-    from .prepare import rest_level
+    from .prepare import held_out_from
 
-    _, at_rest, n_lead = rest_level(record.u)
-    excited = record.n - (n_lead if at_rest else 0)
+    lead = held_out_from(record.u, 1.0)  # the leading rest: all the excitation held out
+    excited = record.n - lead
     richest = max(member(c).n_params for c in candidates)
     need = SAMPLES_PER_PARAMETER * richest
-    head = int(round((1.0 - holdout) * excited))
+    head = held_out_from(record.u, holdout) - lead
     if head >= need:
         return None
     return (f"record {record.name!r}: {excited} samples of excitation leave {head} to fit the "

@@ -38,7 +38,8 @@ from ..records import Record
 from ..records_checks import burst_spans, record_warnings
 
 __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "check_excitation",
-           "input_glitches", "prepare", "rest_level", "scales", "without_input_glitches"]
+           "held_out_from", "input_glitches", "prepare", "rest_level", "scales",
+           "without_input_glitches"]
 
 #: Samples of a leading constant segment needed to call a record "at rest".
 REST_SAMPLES = 10
@@ -190,6 +191,35 @@ def rest_level(u: np.ndarray) -> tuple[float, bool, int]:
     at_end = min(float(u[0] - np.min(u)), float(np.max(u) - u[0])) <= 1e-9 * span
     return (float(np.median(u[:max(n_lead, 1)])), n_lead >= REST_SAMPLES or from_zero or at_end,
             n_lead)
+
+
+def held_out_from(u: np.ndarray, share: float, stop: int | None = None) -> int:
+    """First sample of the held-out end when ``share`` of a record's excitation is held out.
+
+    The leading rest (:func:`rest_level`) stays in the identification part; ``share`` of the
+    samples after it, up to ``stop``, is held out. A record resting for a second before one
+    second of excitation, with ``share=0.4``, is fitted on its rest and 60 % of its excitation
+    (not on its rest and a fifth of its excitation, as a share of all its samples would give).
+
+    Parameters
+    ----------
+    u : ndarray
+        Input samples.
+    share : float
+        Share of the excitation held out, in [0, 1].
+    stop : int, optional
+        End of the samples shared out (the record's length by default).
+
+    Returns
+    -------
+    int
+        ``k``: samples ``0..k-1`` identify, ``k..stop-1`` are held out.
+    """
+    _, at_rest, n_lead = rest_level(u)
+    lead = n_lead if at_rest else 0
+    stop = len(u) if stop is None else stop
+    lead = min(lead, stop)
+    return lead + int(round((1.0 - share) * (stop - lead)))
 
 
 def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, float]:

@@ -52,7 +52,8 @@ def select_structure(
     candidates : dict of str to Structure, optional
         :data:`CANDIDATES` by default.
     holdout : float
-        Share of the record held out at its end.
+        Share of the record's excitation held out at its end
+        (:func:`~hystid.identify.prepare.held_out_from`).
     max_nfev : int
         Evaluations of each candidate's polish.
 
@@ -67,7 +68,9 @@ def select_structure(
     from .offline import fit_output_error
 
     candidates = candidates or CANDIDATES
-    split = int(round((1.0 - holdout) * record.n))
+    from .prepare import held_out_from
+
+    split = held_out_from(record.u, holdout)
     head = record[:split]
     table = []
     for label, structure in candidates.items():
