@@ -38,7 +38,8 @@ the two. A mismatch that persists to the last window is a warning in ``info["war
 Divergence watch: the short-term residual RMS is compared with its long-term level; when it
 exceeds ``diverge_ratio`` times that level for ``diverge_hold`` samples the estimate is declared
 diverging, a warning is issued and the identifier restarts from the last estimate that had a
-low residual, with ``P`` reset.
+low residual, with ``P`` reset. A supervisor (:mod:`~hystid.identify.online_supervisor`)
+rolls the recursion back to the last validated estimate when it diverges or wanders.
 
 State: every array of the recursion lives in one preallocated buffer (signal windows as linear
 ring buffers of ``window + block`` samples that slide back when full), so :meth:`update` is one
@@ -60,6 +61,7 @@ from ..records import Record
 from ._recursive import RecursiveIdentifier
 from .base import as_sample
 from .offline import fit_output_error
+from .online_supervisor import Supervisor
 from .prepare import IdentificationDataError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -234,6 +236,9 @@ class OnlineIdentifier(RecursiveIdentifier):
         times the long-term RMS for ``diverge_hold`` samples.
     epsilon : float
         Stop index for ``converged_at`` (1e-4).
+    supervise : bool
+        Roll the recursion back to the last validated estimate when it diverges or wanders
+        (:mod:`~hystid.identify.online_supervisor`).
     history : {"decimated", "full", "none"}
         Parameter history kept by :meth:`fit`: by default at most ``history_rows`` rows (every
         m-th sample), so that a long run stays small.
@@ -259,7 +264,8 @@ class OnlineIdentifier(RecursiveIdentifier):
     """
 
     method = "online"
-    divergence_reason = "the residual diverged (short-term RMS above diverge_ratio x long-term)"
+    divergence_reason = ("the residual diverged (short-term RMS above diverge_ratio x "
+                         "long-term, or far above the last validated estimate's)")
     n_diagnostics = len(DIAGNOSTICS)
 
     def __init__(
@@ -280,6 +286,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         diverge_ratio: float = 20.0,
         diverge_hold: int = 200,
         epsilon: float = 1e-4,
+        supervise: bool = True,
         history: str = "decimated",
         history_rows: int = 100_000,
         block: int = 4_096,
@@ -314,6 +321,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         self.diverge_ratio = float(diverge_ratio)
         self.diverge_hold = int(diverge_hold)
         self.block = int(block)
+        self.supervise = bool(supervise)
         super().__init__(structure, fs, theta0, epsilon, history, history_rows)
 
     # ----------------------------------------------------------------- state
@@ -360,6 +368,7 @@ class OnlineIdentifier(RecursiveIdentifier):
         self._u_first: float | None = None
         self._rest_u = self._rest_y = np.zeros(0)
         self._candidate: DuhemSandwich | None = None
+        self._supervisor = Supervisor(self.diverge_ratio) if self.supervise else None
 
     _VIEWS = ("_est", "P", "_est_good", "_P_good", "_scal", "_sett", "_diag", "_windows",
               "_theta_view")
@@ -566,6 +575,9 @@ class OnlineIdentifier(RecursiveIdentifier):
         self.start_info = {"rms_residual": sigma, "start": last.start, "samples": n,
                            "checks": [asdict(c) for c in self.start_checks]}
         self._running = True
+        if self._supervisor is not None:  # the start is the first validated estimate
+            self._supervisor.floor = 1e-9 * max(float(np.std(y[ok])), 1e-300)
+            self._supervisor.reset(self, k + self.n_start)
 
     def _collect(self, u: np.ndarray, y: np.ndarray, history: np.ndarray,
                  diagnostics: np.ndarray) -> int:
@@ -642,21 +654,30 @@ class OnlineIdentifier(RecursiveIdentifier):
         done = 0
         if not self._running:
             done = self._collect(u, y, history, diagnostics)
+        sup = self._supervisor  # supervises once the start-up checks are over
         while done < len(u):
             stop = len(u)
             if self._verify_at is not None:  # keep buffering until the next check
-                stop = min(len(u), done + self._verify_at - self._filled)
+                stop = min(stop, done + self._verify_at - self._filled)
                 a = self._filled
                 self._start_u[a:a + stop - done] = u[done:stop]
                 self._start_y[a:a + stop - done] = y[done:stop]
                 self._filled += stop - done
+            elif sup is not None:
+                stop = min(stop, done + sup.room)
             rpem_run(self._buf, self._ints, np.ascontiguousarray(u[done:stop], float),
                      np.ascontiguousarray(y[done:stop], float), history[done:stop],
                      diagnostics[done:stop])
+            if (sup is not None and self._verify_at is None
+                    and sup.feed(self, u[done:stop], y[done:stop], diagnostics[done:stop, 0],
+                                 self.k + stop)):
+                history[stop - 1] = self.theta
+            elif self._verify_at is not None and self._filled == self._verify_at:
+                self._verify(self._filled, self.k + stop)
+                history[stop - 1] = self.theta
+                if sup is not None and self._verify_at is None:  # the estimate that passed
+                    sup.reset(self, self.k + stop + self.n_start)
             done = stop
-            if self._verify_at is not None and self._filled == self._verify_at:
-                self._verify(self._filled, self.k + done)
-                history[done - 1] = self.theta
         self._n_rec_seen = self.n_recoveries
 
     def update(self, u_k: float, y_k: float) -> np.ndarray:
@@ -678,6 +699,8 @@ class OnlineIdentifier(RecursiveIdentifier):
                 and isinstance(y_k, float) and u_k - u_k == 0.0):  # the real-time path
             n_rec = rpem_one(self._buf, self._ints, u_k, y_k)
             self.k += 1
+            if self._supervisor is not None:  # a rollback is a recovery
+                n_rec += self._supervisor.feed_one(self, u_k, y_k, self._diag[0], self.k)
             if y_k - y_k != 0.0:
                 self.n_skipped += 1
             if n_rec != self._n_rec_seen:
@@ -753,6 +776,13 @@ class OnlineIdentifier(RecursiveIdentifier):
                          "start_up": self.start_info, "u_rest": self.u_rest_,
                          "offset": self.offset_estimate})
         res.info["warnings"] = list(self.start_warnings)
+        sup = self._supervisor
+        if sup is not None:
+            res.info["supervisor"] = sup.info()
+            if sup.n_rollbacks:
+                res.info["warnings"].append(
+                    f"online: the recursion was rolled back to the last validated estimate "
+                    f"{sup.n_rollbacks} time(s), first {sup.first_reason}")
         if self.start_warnings or not self._running:
             res.converged_at = None
         return res
@@ -765,4 +795,5 @@ class OnlineIdentifier(RecursiveIdentifier):
                 "offset": self.offset, "memory": self.memory, "lambda0": self.lambda0,
                 "lambda_time": self.lambda_time, "clip": self.clip,
                 "trace_max": self.trace_max, "diverge_ratio": self.diverge_ratio,
-                "diverge_hold": self.diverge_hold, "block": self.block}
+                "diverge_hold": self.diverge_hold, "block": self.block,
+                "supervise": self.supervise}
