@@ -9,7 +9,9 @@ where a multi-threaded BLAS gains nothing and, on a machine whose cores are busy
 two orders of magnitude (a 20 000 x 27 QR: 15 ms on one thread, 1.7 s on two threads competing
 with other work). Imported before numpy, hystid therefore asks BLAS for one thread, unless the
 user's environment already says otherwise (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``,
-``MKL_NUM_THREADS``). ``hystid`` on the command line always imports it first.
+``MKL_NUM_THREADS``). ``hystid`` on the command line always imports it first. Imported after
+numpy, its fitting entry points limit BLAS to one thread while they run
+(:func:`hystid.blas.one_blas_thread`).
 """
 
 import os as _os

@@ -346,3 +346,15 @@ def test_without_val_the_held_out_end_is_a_share_of_the_excitation(tmp_path, cap
     report = json.loads((out / "report.json").read_text())
     row = report["baselines"]["rows"][0]
     assert row["model"] < 0.5 * min(row["static_line"], row["linear"])
+
+
+def test_a_record_too_short_to_choose_on_gets_the_duhem_sandwich_on_the_command_line_too(
+        tmp_path, capsys):
+    from hystid.testing import stage_a_like
+
+    stage_a_like("prbn", seconds=0.05, rest_seconds=0.005, seed=3).save(tmp_path / "s.csv")
+    code, text, err = run(["identify", tmp_path / "s.csv"], capsys)
+    assert code == 0 and "the Duhem sandwich is fitted without a choice" in err
+    assert "alpha" in text
+    code, _, err = run(["identify", tmp_path / "s.csv", "--model", "auto"], capsys)
+    assert code == 2 and "--model duhem" in err.splitlines()[-1]

@@ -189,7 +189,7 @@ def _model_arg(args: argparse.Namespace) -> str:
         model = default_model(args.method or "batch", getattr(args, "structure", None))
         if getattr(args, "history", None):  # the parameter history is the Duhem one's
             model = "duhem"
-        args.model = model
+        args.model, args.model_defaulted = model, True
     return model
 
 
@@ -256,8 +256,11 @@ def _identify_record(rec: Record, args: argparse.Namespace, progress: Progress,
             progress.say(f"fitting the {_model_arg(args)} member (batch, one line when done)")
         if getattr(args, "skip", None) is not None:
             settings["skip"] = int(round(args.skip * rec.fs))
-    return identify(rec, method=method, structure=structure, model=_model_arg(args),
-                    **settings)
+    # a defaulted choice is left to identify(), which fits the Duhem sandwich (and says so) on a
+    # record too short to choose a member on
+    defaulted = getattr(args, "model_defaulted", False) and _model_arg(args) == "auto"
+    return identify(rec, method=method, structure=structure,
+                    model=None if defaulted else _model_arg(args), **settings)
 
 
 def _split_for_validation(rec: Record, val: Record | None,

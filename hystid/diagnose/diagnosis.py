@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from ..blas import one_blas_thread
 from ..identify.result import IdentificationResult
 from ..metrics import gap_closed
 from ..model import DuhemSandwich, Structure
@@ -95,6 +96,7 @@ MAX_ROUNDS = 20
 BUDGET_FACTOR = 0.5
 
 
+@one_blas_thread
 def diagnose(
     train: Record,
     val: Record | Sequence[Record] | None = None,

@@ -9,6 +9,7 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
+from ..blas import one_blas_thread
 from ..model import Structure
 from ..records import Record
 from .offline import fit_output_error
@@ -50,6 +51,7 @@ def min_samples(method: str, structure: Structure | None = None, **settings: Any
     return need
 
 
+@one_blas_thread
 def identify(
     record: Record,
     method: str = "batch",

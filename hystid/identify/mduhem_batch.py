@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..blas import one_blas_thread
 from ..mduhem import MultiDuhemSandwich, MultiDuhemStructure
 from ..operating import Envelope
 from ..records import Record
@@ -342,6 +343,7 @@ def _scale(theta: np.ndarray, structure: MultiDuhemStructure, factor: float) -> 
     return out
 
 
+@one_blas_thread
 def fit_mduhem_output_error(
     record: Record,
     structure: MultiDuhemStructure | None = None,

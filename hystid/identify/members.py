@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from ..blas import one_blas_thread
 from ..mduhem import MultiDuhemStructure
 from ..model import Structure
 from ..pi import PIStructure
@@ -312,6 +313,7 @@ def _heldout_rms(model: Any, record: Record, k: int, stop: int, scored: np.ndarr
     return rms if np.isfinite(rms) else float("inf")
 
 
+@one_blas_thread
 def select_member(
     record: Record,
     candidates: Sequence[str] = AUTO_CANDIDATES,
@@ -363,7 +365,8 @@ def select_member(
         raise ValueError("candidates: expected at least one member")
     short = choice_shortfall(record, candidates, holdout)
     if short is not None:
-        raise ValueError(f"{short}; a model can be fitted without the choice (model='duhem')")
+        raise ValueError(f"{short}; a member can be fitted without the choice (model='duhem', "
+                         "hystid identify --model duhem)")
     k, stop, scored = _split(record, holdout)
     head = record[:k]
     rows, fits = [], {}

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.linalg import qr
 from scipy.optimize import least_squares
 
+from ..blas import one_blas_thread
 from ..kernels import jacobian_block, sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
 from ..operating import Envelope
@@ -535,6 +536,7 @@ def _starts(prep: Prepared, structure: Structure, theta0: float | dict | np.ndar
     return starts
 
 
+@one_blas_thread
 def fit_output_error(
     record: Record,
     structure: Structure | None = None,

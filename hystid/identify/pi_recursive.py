@@ -61,6 +61,7 @@ from typing import Any
 
 import numpy as np
 
+from ..blas import one_blas_thread
 from ..pi import N_OPERATORS, PISandwich, PIStructure, pi_thresholds
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
@@ -697,6 +698,7 @@ def _ud_factor(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # =========================================================================== entry point
+@one_blas_thread
 def identify_pi(
     record: Record,
     method: str = "recursive",

@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..blas import one_blas_thread
 from ..model import Structure
 from ..records import Record
 
@@ -39,6 +40,7 @@ def _candidates() -> dict[str, Structure]:
 CANDIDATES = _candidates()
 
 
+@one_blas_thread
 def select_structure(
     record: Record, candidates: dict[str, Structure] | None = None, holdout: float = 0.25,
     max_nfev: int = 80,
