@@ -358,3 +358,14 @@ def test_a_record_too_short_to_choose_on_gets_the_duhem_sandwich_on_the_command_
     assert "alpha" in text
     code, _, err = run(["identify", tmp_path / "s.csv", "--model", "auto"], capsys)
     assert code == 2 and "--model duhem" in err.splitlines()[-1]
+
+
+def test_identify_says_when_it_compiles_its_kernels(tmp_path, capsys, monkeypatch):
+    from hystid.cli import support
+    from hystid.testing import stage_a_like
+
+    assert len(support.IDENTIFY_KERNELS) == 3
+    stage_a_like("prbn", seconds=0.1, rest_seconds=0.01, seed=3).save(tmp_path / "s.csv")
+    monkeypatch.setattr(identify_command, "kernels_cached", lambda kernels: False)
+    code, _, err = run(["identify", tmp_path / "s.csv", "--model", "duhem"], capsys)
+    assert code == 0 and "compiling the numba kernels" in err

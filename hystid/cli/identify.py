@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import OptionError
 from ..options import crop, parse_crop, parse_structure
 from .support import (
+    IDENTIFY_KERNELS,
     UNITS_HELP,
     CommandError,
     Progress,
@@ -28,6 +29,7 @@ from .support import (
     columns_arg,
     file_arg,
     jsonable,
+    kernels_cached,
     load,
     non_negative_arg,
     one_of,
@@ -419,6 +421,9 @@ def _identify(args: argparse.Namespace) -> int:
     train, target, scored_from = _split_for_validation(rec, val, args)
     _check_skip(args, train, structure)
     progress.say(f"identifying {args.record}: {train.n} samples at {rec.fs:g} Hz")
+    if not kernels_cached(IDENTIFY_KERNELS):
+        progress.say("compiling the numba kernels: once, up to a minute; later runs load them "
+                     "from numba's cache")
     with refused():
         with warnings.catch_warnings():  # the fit's own checks report what these would mean
             warnings.filterwarnings("ignore", NUMERIC_NOISE, RuntimeWarning)

@@ -36,8 +36,9 @@ from ..options import MAX_SECONDS, integer, number
 if TYPE_CHECKING:  # pragma: no cover
     from ..records import Record
 
-__all__ = ["DEMO_KERNELS", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "RECORD_FILES", "UNITS_HELP",
-           "CommandError", "OneLineParser", "Progress", "as_option", "bind", "check_model_on",
+__all__ = ["DEMO_KERNELS", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "IDENTIFY_KERNELS", "RECORD_FILES",
+           "UNITS_HELP", "CommandError", "OneLineParser", "Progress", "as_option", "bind",
+           "check_model_on",
            "check_out", "check_seconds", "columns_arg", "file_arg", "for_cli", "jsonable",
            "kernels_cached", "load", "non_negative_arg", "one_of", "positive_arg", "refused",
            "remember", "run_command", "seconds_arg", "seed_arg", "table", "tell", "units_arg"]
@@ -50,6 +51,10 @@ EXIT_INTERRUPTED = 130
 #: numba's cache yet, the demo says that it compiles them.
 DEMO_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensitivities_into"),
                 ("hystid.identify.online", "rpem_run"), ("hystid.identify.eria", "eria_run"))
+#: Compiled kernels the default ``hystid identify`` runs (the Duhem and PI sandwiches' fits):
+#: while one of them is not in numba's cache yet, the command says that it compiles them.
+IDENTIFY_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sensitivities_into"),
+                    ("hystid.identify.pi_kernels", "pi_sensitivities_into"))
 #: The file each record the command loaded came from, by the record's name.
 RECORD_FILES: dict[str, str] = {}
 #: Help of ``--units``.
