@@ -2,6 +2,11 @@
 
 * :func:`linear_block` -- L1 or L2 of eqs. (1)-(2) as a discrete :class:`control.TransferFunction`.
 * :func:`linear_coefficients` -- the inverse: (a, b, q) read back from a transfer function.
+* :func:`read_linear` -- ``(a, num, q)`` of :func:`transfer_function` read back from a transfer
+  function or a state-space realisation, its orders and delay read from the coefficients or
+  checked against given ones; :func:`as_transfer_function` -- a realisation back as a transfer
+  function (exactly when it is the controller form :meth:`Sandwich.to_control
+  <hystid.sandwich.Sandwich.to_control>` makes).
 * :func:`duhem_block` -- the discrete Duhem operator of eq. (7) as a
   :class:`control.NonlinearIOSystem` with states ``w1(k-1), w2(k-1)`` and pure
   update/output functions.
@@ -18,12 +23,14 @@ import numpy as np
 __all__ = [
     "DUHEM_PARAMS",
     "SHAPE_PARAMS",
+    "as_transfer_function",
     "duhem_increment",
     "duhem_block",
     "duhem_output",
     "linear_block",
     "linear_coefficients",
     "placement_blocks",
+    "read_linear",
     "state_from_past",
     "transfer_function",
 ]
@@ -156,6 +163,125 @@ def linear_coefficients(
     if nb is not None:
         b = np.pad(b, (0, max(0, nb - len(b))))[:nb]
     return a, b, q
+
+
+def as_transfer_function(
+    sys: ct.TransferFunction | ct.StateSpace, label: str
+) -> ct.TransferFunction:
+    """A SISO linear block as a transfer function named ``label``.
+
+    A state-space realisation in the controller form of ``control.tf2ss(method='scipy')`` (the
+    one :meth:`hystid.sandwich.Sandwich.to_control` makes: ``A`` a companion matrix, ``B`` the
+    first unit vector) is read exactly, its zero coefficients staying zero; any other one goes
+    through :func:`control.ss2tf` and coefficients below 1e-12 of the largest are set to zero.
+
+    Parameters
+    ----------
+    sys : control.TransferFunction or control.StateSpace
+        The block.
+    label : str
+        Its name in the result and in errors (``"L1"``, ``"L2"``).
+
+    Returns
+    -------
+    control.TransferFunction
+        The same block, named ``label``.
+
+    Raises
+    ------
+    ValueError
+        If ``sys`` is not a SISO transfer function or state-space system.
+    """
+    if isinstance(sys, ct.TransferFunction) and sys.ninputs == sys.noutputs == 1:
+        return sys
+    if not isinstance(sys, ct.StateSpace) or sys.ninputs != 1 or sys.noutputs != 1:
+        raise ValueError(f"{label}: expected a SISO control.TransferFunction or StateSpace, got "
+                         f"{type(sys).__name__} {getattr(sys, 'name', '')!r}")
+    A, B, C, D = (np.asarray(m, dtype=float) for m in (sys.A, sys.B, sys.C, sys.D))
+    n = A.shape[0]
+    d = float(D[0, 0])
+    if n == 0:
+        num, den = np.array([d]), np.array([1.0])
+    elif np.array_equal(A[1:], np.eye(n - 1, n)) and np.array_equal(B[:, 0], np.eye(n)[0]):
+        den = np.r_[1.0, -A[0]]
+        num = np.r_[d, C[0] + d * den[1:]]
+    else:
+        tf = ct.ss2tf(sys)
+        num = np.array(tf.num[0][0], dtype=float)
+        den = np.array(tf.den[0][0], dtype=float)
+        for c in (num, den[1:]):
+            c[np.abs(c) < 1e-12 * max(np.max(np.abs(den)), 1.0)] = 0.0
+    return ct.tf(num, den, sys.dt, inputs=sys.input_labels, outputs=sys.output_labels,
+                 name=label)
+
+
+def read_linear(
+    sys: ct.TransferFunction | ct.StateSpace,
+    label: str,
+    *,
+    q: int | None = None,
+    na: int | None = None,
+    nb: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Read ``(a, num, q)`` of :func:`transfer_function` back from a discrete SISO block.
+
+    Without ``q, na, nb`` they are read from the coefficients: the delay is the number of
+    leading zero numerator coefficients (in powers of ``z^-1``), the orders the spans of the
+    non-zero ones (a block whose last coefficient is exactly zero reads one order lower: the
+    same system). With them, the coefficients outside must be zero.
+
+    Parameters
+    ----------
+    sys : control.TransferFunction or control.StateSpace
+        The block (see :func:`as_transfer_function`).
+    label : str
+        Its name in errors.
+    q, na, nb : int, optional
+        Delay, denominator order and number of numerator coefficients to read (all three or
+        none).
+
+    Returns
+    -------
+    a : ndarray
+        Denominator coefficients ``a_1 .. a_na`` (``a_0 = 1``).
+    num : ndarray
+        Numerator coefficients from the delay on, ``num_0 .. num_{nb-1}``.
+    q : int
+        The delay.
+
+    Raises
+    ------
+    ValueError
+        If the block is not SISO, not proper, has a zero numerator, or does not fit the given
+        orders (saying which).
+    """
+    tf = as_transfer_function(sys, label)
+    num = np.atleast_1d(np.asarray(tf.num[0][0], dtype=float))
+    den = np.atleast_1d(np.asarray(tf.den[0][0], dtype=float))
+    if len(num) > len(den) or den[0] == 0:
+        raise ValueError(f"{label}: transfer function is not proper")
+    num = np.concatenate([np.zeros(len(den) - len(num)), num]) / den[0]
+    den = den / den[0]
+    given = [v is not None for v in (q, na, nb)]
+    if any(given) and not all(given):
+        raise ValueError(f"{label}: expected q, na and nb together, or none of them")
+    if q is None or na is None or nb is None:
+        nonzero = np.flatnonzero(num)
+        if nonzero.size == 0:
+            raise ValueError(f"{label}: transfer function has a zero numerator")
+        q = int(nonzero[0])
+        return np.trim_zeros(den[1:], "b"), num[q : nonzero[-1] + 1].copy(), q
+    scale = max(1.0, np.max(np.abs(num)))
+    m = max(len(den) - 1, na, q + nb - 1)  # coefficients of z^0, z^-1, .. cover the structure
+    num = np.pad(num, (0, m + 1 - len(num)))
+    den = np.pad(den, (0, m + 1 - len(den)))
+    outside = np.r_[num[:q], num[q + nb :]]
+    if np.any(np.abs(outside) > 1e-9 * scale) or np.any(np.abs(den[1 + na :]) > 1e-9):
+        raise ValueError(
+            f"{label}: does not fit the structure (delay {q}, {nb} numerator and {na} "
+            "denominator coefficients)"
+        )
+    return den[1 : 1 + na].copy(), num[q : q + nb].copy(), q
 
 
 def duhem_output(x: np.ndarray, w1: float, params: dict) -> float:

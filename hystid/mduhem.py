@@ -337,8 +337,13 @@ class MultiDuhemSandwich(UnitGainSandwich):
     # ----------------------------------------------------------------- python-control bridge
     @property
     def H(self) -> ct.NonlinearIOSystem:
-        """The parallel Duhem operators: discrete system w1 -> w2 (:func:`mduhem_block`)."""
-        return mduhem_block(self.rates, self.f1, self.g0, dt=self.dt, name="H")
+        """The parallel Duhem operators: discrete system w1 -> w2 (:func:`mduhem_block`).
+
+        Its ``params`` are the block's (``alpha0.., f1_0.., g0_0..``) and, where not zero, the
+        model's ``u_rest`` and ``offset``, which the update ignores and :meth:`from_control`
+        reads back.
+        """
+        return self._carry(mduhem_block(self.rates, self.f1, self.g0, dt=self.dt, name="H"))
 
     def operator_state(
         self, x0: InitialCondition | None = None, p0: np.ndarray | Sequence[float] | None = None
@@ -413,51 +418,50 @@ class MultiDuhemSandwich(UnitGainSandwich):
         w2 = float(np.sum(self._ramp(v, steps)))
         return InitialCondition(*(np.full(P, x) for x in (v, v, w2, w2)))
 
+    structure_type = MultiDuhemStructure
+
+    @classmethod
+    def _holds(cls, H: ct.NonlinearIOSystem) -> bool:
+        """Whether ``H`` is a block of parallel Duhem operators (:func:`mduhem_block`)."""
+        return {"alpha0", "f1_0", "g0_0"} <= H.params.keys()
+
+    @classmethod
+    def _describe(cls, H: ct.NonlinearIOSystem | None = None) -> str:
+        """What a multi-Duhem block is, for messages."""
+        if H is None:
+            return "Duhem operators in parallel, params alpha0, f1_0, g0_0 .."
+        return (f"{H.nstates - 1} Duhem operators in parallel (params alpha0.., f1_0.., "
+                "g0_0..)")
+
     @classmethod
     def _from_blocks(
         cls,
         L1: ct.TransferFunction,
         H: ct.NonlinearIOSystem,
         L2: ct.TransferFunction,
-        *,
         structure: MultiDuhemStructure | None = None,
-        name: str = "multi-Duhem sandwich",
-        u_rest: float = 0.0,
-        offset: float = 0.0,
+        **model: Any,
     ) -> MultiDuhemSandwich:
         """The model from its three blocks (see :meth:`Sandwich.from_control`).
 
         DC gains of ``L1`` and ``L2`` move into ``H`` exactly: with ``L1 = g1 L1'`` and
         ``L2 = g2 L2'`` (unit-gain ``L1', L2'``) the rates become ``|g1| alpha_j`` and the
-        slopes ``g1 g2 f1_j``, ``g1 g2 g0_j``. ``structure`` gives the orders and delays to
-        read (the default structure with as many operators as ``H`` has by default).
+        slopes ``g1 g2 f1_j``, ``g1 g2 g0_j``. The orders and delays are read from ``L1`` and
+        ``L2`` (``structure`` when given), the number of operators from ``H``.
         """
-        from .pi_operator import _read_tf
-
         m = H.nstates - 1
-        s = structure or MultiDuhemStructure(n_operators=m)
-        if s.n_operators != m:
-            raise ValueError(f"H has {m} Duhem operators, the structure {s.n_operators}")
+        if structure is not None and structure.n_operators != m:
+            raise ValueError(f"H has {m} Duhem operators, the structure {structure.n_operators}")
         try:
             alpha, f1, g0 = _operator_arrays(H.params, m)
         except KeyError as err:
-            raise ValueError(f"H: missing parameter {err} (expected alpha0.., f1_0.., g0_0..)") \
-                from None
-        a1, b1 = _read_tf(L1, s.q1, s.n1a, s.n1b, "L1")
-        a2, b2 = _read_tf(L2, s.q2, s.n2a, s.n2b, "L2")
-        g1 = np.sum(b1) / (1.0 + np.sum(a1))
-        g2 = np.sum(b2) / (1.0 + np.sum(a2))
-        if not (np.isfinite(g1) and np.isfinite(g2)) or g1 == 0 or g2 == 0:
-            raise ValueError(f"L1 and L2 need finite non-zero DC gains, got {g1:g} and {g2:g}")
-        values = {}
-        for prefix, vec in (("a1", a1), ("a2", a2)):
-            values.update({f"{prefix}{i + 1}": v for i, v in enumerate(vec)})
-        for prefix, vec, g in (("b1", b1, g1), ("b2", b2, g2)):
-            values.update({f"{prefix}{j + 1}": v / g for j, v in enumerate(vec) if j > 0})
+            raise ValueError(f"H: missing parameter {err} (expected alpha0.., f1_0.., g0_0.., "
+                             "one per operator)") from None
+        values, (g1, g2), orders = cls._linear_parts(L1, L2, structure)
         values.update({f"f1_{j}": g1 * g2 * v for j, v in enumerate(f1)})
         values.update({f"g0_{j}": g1 * g2 * v for j, v in enumerate(g0)})
-        return cls(values, abs(g1) * alpha, s, fs=1.0 / L1.dt, name=name, u_rest=u_rest,
-                   offset=offset)
+        s = structure or MultiDuhemStructure(n_operators=m, **orders)
+        return cls(values, abs(g1) * alpha, s, fs=1.0 / L1.dt, **model)
 
     # ----------------------------------------------------------------- simulation
     def _run(self, U: np.ndarray, W1: np.ndarray, W2: np.ndarray, Y: np.ndarray, P: int,

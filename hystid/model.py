@@ -258,19 +258,45 @@ class DuhemSandwich(Sandwich):
     # ----------------------------------------------------------------- python-control bridge
     @property
     def H(self) -> ct.NonlinearIOSystem:
-        """Duhem hysteresis (eq. 7): discrete nonlinear system w1 -> w2."""
+        """Duhem hysteresis (eq. 7): discrete nonlinear system w1 -> w2.
+
+        Its ``params`` are the block's (``alpha, f0, f1, g0`` and the shape's) and, where not
+        zero, the model's ``u_rest``, ``offset`` and ``rest_memory``, which the update ignores
+        and :meth:`from_control` reads back.
+        """
         from . import blocks
 
         p = self.params
-        return blocks.duhem_block(
+        return self._carry(blocks.duhem_block(
             p["alpha"], p["f1"], p["g0"], p.get("f0", 0.0), shape=self.shape, dt=self.dt,
             name="H"
-        )
+        ))
 
     def _h_state(self, x0: InitialCondition, **state: Any) -> np.ndarray:
         if state:
             raise TypeError(f"the Duhem block takes no state beyond x0, got {sorted(state)}")
         return np.array([x0.window("w1", 1)[0], x0.window("w2", 1)[0]])
+
+    structure_type = Structure
+    _carried = ("rest_memory",)
+    _reading_options = ("f0",)
+
+    @classmethod
+    def _holds(cls, H: ct.NonlinearIOSystem) -> bool:
+        """Whether ``H`` is a Duhem block (:func:`hystid.blocks.duhem_block`)."""
+        return {"alpha", "f1", "g0"} <= H.params.keys() and H.nstates == 2
+
+    @classmethod
+    def _describe(cls, H: ct.NonlinearIOSystem | None = None) -> str:
+        """What a Duhem block is, for messages."""
+        from .blocks import SHAPE_PARAMS
+
+        if H is None:
+            return "a Duhem block of eq. (7), 2 states, params alpha, f1, g0 (and f0, f2, ..)"
+        shape = [k for k in SHAPE_PARAMS if k in H.params]
+        if shape:
+            return f"a generalised Duhem block (params alpha, f1, g0, {', '.join(shape)})"
+        return "a Duhem block of eq. (7) (params alpha, f1, g0)"
 
     @classmethod
     def _from_blocks(
@@ -278,35 +304,54 @@ class DuhemSandwich(Sandwich):
         L1: ct.TransferFunction,
         H: ct.NonlinearIOSystem,
         L2: ct.TransferFunction,
+        structure: Structure | None = None,
         *,
         f0: bool | None = None,
-        name: str = "sandwich",
-        u_rest: float = 0.0,
-        offset: float = 0.0,
+        **model: Any,
     ) -> DuhemSandwich:
-        """The model from its three blocks (see :meth:`Sandwich.from_control`); ``f0`` keeps
-        the ``f0 sgn`` term, by default only when ``H.params['f0']`` is non-zero."""
+        """The model from its three blocks (see :meth:`Sandwich.from_control`).
+
+        The orders and delays are read from L1 and L2, the shape (``f_order``, ``g_order``,
+        ``directional``) from the parameters ``H`` has; ``f0`` keeps the ``f0 sgn`` term, by
+        default only when ``H.params['f0']`` is non-zero. With ``structure`` the blocks must
+        fit it (a shape parameter it lacks must be zero, one it has and ``H`` lacks is zero).
+        """
         from . import blocks
 
-        a1, b1, q1 = blocks.linear_coefficients(L1)
-        a2, b2, q2 = blocks.linear_coefficients(L2)
         hp = H.params
-        f0_value = float(hp.get("f0", 0.0))
-        use_f0 = bool(f0_value != 0.0) if f0 is None else f0
         shape = {k: float(hp[k]) for k in blocks.SHAPE_PARAMS if k in hp}
-        f_order = 3 if "f3" in shape else 2 if "f2" in shape else 1
-        g_order = 2 if "g2" in shape else 1 if "g1" in shape else 0
-        directional = "ad" in shape or "gd" in shape
-        structure = Structure(len(a1), len(b1), len(a2), len(b2), q1, q2, use_f0, f_order,
-                              g_order, directional)
-        values = {"alpha": hp["alpha"], "f1": hp["f1"], "g0": hp["g0"]}
-        values.update({k: shape.get(k, 0.0) for k in structure.names
-                       if k in blocks.SHAPE_PARAMS})
-        if use_f0:
-            values["f0"] = f0_value
-        for prefix, vec in (("a1", a1), ("b1", b1), ("a2", a2), ("b2", b2)):
+        f0_value = float(hp.get("f0", 0.0))
+        if structure is None:
+            a1, num1, q1 = blocks.read_linear(L1, "L1")
+            a2, num2, q2 = blocks.read_linear(L2, "L2")
+            structure = Structure(
+                len(a1), len(num1) - 1, len(a2), len(num2) - 1, q1, q2,
+                bool(f0_value != 0.0) if f0 is None else bool(f0),
+                3 if "f3" in shape else 2 if "f2" in shape else 1,
+                2 if "g2" in shape else 1 if "g1" in shape else 0,
+                "ad" in shape or "gd" in shape)
+        else:
+            if f0 is not None and bool(f0) != structure.f0:
+                raise ValueError(f"f0={f0!r} contradicts the structure (f0={structure.f0})")
+            s = structure
+            a1, num1, _ = blocks.read_linear(L1, "L1", q=s.q1, na=s.n1a, nb=s.n1b + 1)
+            a2, num2, _ = blocks.read_linear(L2, "L2", q=s.q2, na=s.n2a, nb=s.n2b + 1)
+            outside = {k: v for k, v in {**shape, "f0": f0_value}.items()
+                       if v != 0.0 and k not in s.names}
+            if outside:
+                raise ValueError(f"H: {', '.join(f'{k} = {v:g}' for k, v in outside.items())} "
+                                 f"not in the structure given ({s})")
+        for label, num in (("L1", num1), ("L2", num2)):
+            if not np.isclose(num[0], 1.0, rtol=1e-12, atol=0.0):
+                raise ValueError(
+                    f"{label}: leading numerator coefficient is {num[0]:g}; the Duhem sandwich "
+                    "fixes b_0 = 1 (scale it into the next block)")
+        values = {"alpha": hp["alpha"], "f1": hp["f1"], "g0": hp["g0"], "f0": f0_value}
+        values.update({k: shape.get(k, 0.0) for k in structure.names if k in blocks.SHAPE_PARAMS})
+        for prefix, vec in (("a1", a1), ("b1", num1[1:]), ("a2", a2), ("b2", num2[1:])):
             values.update({f"{prefix}{i + 1}": v for i, v in enumerate(vec)})
-        return cls(values, structure, fs=1.0 / L1.dt, name=name, u_rest=u_rest, offset=offset)
+        values = {k: float(values[k]) for k in structure.names}
+        return cls(values, structure, fs=1.0 / L1.dt, **model)
 
     # ----------------------------------------------------------------- simulation
     def _run(self, U: np.ndarray, W1: np.ndarray, W2: np.ndarray, Y: np.ndarray, P: int,

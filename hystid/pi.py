@@ -43,7 +43,6 @@ from .operating import Envelope
 from .pi_operator import (  # the operator; re-exported here, where the sandwich is
     _check_thresholds,
     _initial_states,
-    _read_tf,
     _unpack,
     pi_block,
     pi_inverse_block,
@@ -250,8 +249,12 @@ class PISandwich(UnitGainSandwich):
     # ----------------------------------------------------------------- python-control bridge
     @property
     def H(self) -> ct.NonlinearIOSystem:
-        """PI hysteresis (eq. 30): discrete nonlinear system w1 -> w2 (see :func:`pi_block`)."""
-        return pi_block(self.thresholds, self.mu, dt=self.dt, name="H")
+        """PI hysteresis (eq. 30): discrete nonlinear system w1 -> w2 (see :func:`pi_block`).
+
+        Its ``params`` are the block's (``pi_mu*``, ``pi_r*``) and, where not zero, the model's
+        ``u_rest`` and ``offset``, which the update ignores and :meth:`from_control` reads back.
+        """
+        return self._carry(pi_block(self.thresholds, self.mu, dt=self.dt, name="H"))
 
     @property
     def H_inverse(self) -> ct.NonlinearIOSystem:
@@ -289,50 +292,64 @@ class PISandwich(UnitGainSandwich):
             raise TypeError(f"the PI block takes the state p0, got {sorted(unknown)}")
         return self.operator_state(x0, state.get("p0"))
 
+    structure_type = PIStructure
+    _reading_options = ("prefix",)
+
+    @staticmethod
+    def _prefixes(H: ct.NonlinearIOSystem) -> list[str]:
+        """Prefixes ``p`` of the PI blocks whose ``p_mu0``, ``p_r0`` are in ``H.params``."""
+        return [k[:-4] for k in H.params if k.endswith("_mu0") and f"{k[:-4]}_r0" in H.params]
+
+    @classmethod
+    def _holds(cls, H: ct.NonlinearIOSystem) -> bool:
+        """Whether ``H`` is a PI block (:func:`pi_block`)."""
+        return bool(cls._prefixes(H))
+
+    @classmethod
+    def _describe(cls, H: ct.NonlinearIOSystem | None = None) -> str:
+        """What a PI block is, for messages."""
+        if H is None:
+            return "a Prandtl-Ishlinskii block, one state per play, params <prefix>_mu0, _r0 .."
+        p = cls._prefixes(H)[0]
+        return f"a Prandtl-Ishlinskii block of {H.nstates} plays (params {p}_mu*, {p}_r*)"
+
     @classmethod
     def _from_blocks(
         cls,
         L1: ct.TransferFunction,
         H: ct.NonlinearIOSystem,
         L2: ct.TransferFunction,
-        *,
         structure: PIStructure | None = None,
-        prefix: str = "pi",
-        name: str = "PI sandwich",
-        u_rest: float = 0.0,
-        offset: float = 0.0,
+        *,
+        prefix: str | None = None,
+        **model: Any,
     ) -> PISandwich:
         """The model from its three blocks (see :meth:`Sandwich.from_control`).
 
         Any DC gains of ``L1`` and ``L2`` are moved into ``H`` exactly: with ``L1 = g1 L1'``
         and ``L2 = g2 L2'`` (unit-gain ``L1', L2'``) the weights become ``g1 g2 mu_i`` and the
-        thresholds ``r_i / |g1|`` (a play operator is positively homogeneous). ``structure``
-        gives the orders and delays to read (the paper's by default), ``prefix`` the parameter
-        names of ``H``.
+        thresholds ``r_i / |g1|`` (a play operator is positively homogeneous). The orders and
+        delays are read from ``L1`` and ``L2`` (``structure`` when given), the number of plays
+        from ``H``; ``prefix`` names ``H``'s parameters (the one ``H`` has by default).
         """
         n = H.nstates
-        s = structure or PIStructure(n_operators=n)
-        if s.n_operators != n:
-            raise ValueError(f"H has {n} play operators, the structure {s.n_operators}")
+        if structure is not None and structure.n_operators != n:
+            raise ValueError(f"H has {n} play operators, the structure {structure.n_operators}")
+        if prefix is None:
+            found = cls._prefixes(H)
+            if len(found) != 1:
+                raise ValueError(f"H: params of {len(found)} PI blocks (prefixes {found}); pass "
+                                 "prefix= to say which")
+            prefix = found[0]
         try:
             mu, r = _unpack(H.params, prefix, n)
         except KeyError as err:
-            raise ValueError(f"H: missing parameter {err} (expected {prefix}_mu*, {prefix}_r*)") \
-                from None
-        a1, b1 = _read_tf(L1, s.q1, s.n1a, s.n1b, "L1")
-        a2, b2 = _read_tf(L2, s.q2, s.n2a, s.n2b, "L2")
-        g1 = np.sum(b1) / (1.0 + np.sum(a1))
-        g2 = np.sum(b2) / (1.0 + np.sum(a2))
-        if not (np.isfinite(g1) and np.isfinite(g2)) or g1 == 0 or g2 == 0:
-            raise ValueError(f"L1 and L2 need finite non-zero DC gains, got {g1:g} and {g2:g}")
-        values = {}
-        for prefix_, vec in (("a1", a1), ("a2", a2)):
-            values.update({f"{prefix_}{i + 1}": v for i, v in enumerate(vec)})
-        for prefix_, vec, g in (("b1", b1, g1), ("b2", b2, g2)):
-            values.update({f"{prefix_}{j + 1}": v / g for j, v in enumerate(vec) if j > 0})
+            raise ValueError(f"H: missing parameter {err} (expected {prefix}_mu0.., "
+                             f"{prefix}_r0.., one per state)") from None
+        values, (g1, g2), orders = cls._linear_parts(L1, L2, structure)
         values.update({f"mu{i}": g1 * g2 * m for i, m in enumerate(mu)})
-        return cls(values, r / abs(g1), s, fs=1.0 / L1.dt, name=name, u_rest=u_rest,
-                   offset=offset)
+        s = structure or PIStructure(n_operators=n, **orders)
+        return cls(values, r / abs(g1), s, fs=1.0 / L1.dt, **model)
 
     # ----------------------------------------------------------------- simulation
     def _run(self, U: np.ndarray, W1: np.ndarray, W2: np.ndarray, Y: np.ndarray, P: int,

@@ -332,30 +332,6 @@ def pi_inverse_block(
 
 
 # =========================================================================== helpers
-def _read_tf(tf, q: int, na: int, nb: int, label: str) -> tuple[np.ndarray, np.ndarray]:
-    """``(a, b)`` of ``sum_j b_j z^-(q+j-1) / (1 + sum_i a_i z^-i)`` from a SISO transfer fn."""
-    if not isinstance(tf, ct.TransferFunction) or tf.ninputs != 1 or tf.noutputs != 1:
-        raise ValueError(f"{label}: expected a SISO control.TransferFunction, got {tf!r}")
-    num = np.atleast_1d(np.asarray(tf.num[0][0], dtype=float))
-    den = np.atleast_1d(np.asarray(tf.den[0][0], dtype=float))
-    if len(num) > len(den):
-        raise ValueError(f"{label}: transfer function is not proper")
-    num = np.concatenate([np.zeros(len(den) - len(num)), num]) / den[0]
-    den = den / den[0]
-    scale = max(1.0, np.max(np.abs(num)))
-    # coefficients of z^-0, z^-1, ... : extend both to cover the structure
-    m = max(len(den) - 1, na, q + nb - 1)
-    num = np.pad(num, (0, m + 1 - len(num)))
-    den = np.pad(den, (0, m + 1 - len(den)))
-    outside = np.r_[num[:q], num[q + nb :]]
-    if np.any(np.abs(outside) > 1e-9 * scale) or np.any(np.abs(den[1 + na :]) > 1e-9):
-        raise ValueError(
-            f"{label}: does not fit the structure (delay {q}, {nb} numerator and {na} "
-            "denominator coefficients)"
-        )
-    return den[1 : 1 + na].copy(), num[q : q + nb].copy()
-
-
 def _weights(weights, n: int) -> np.ndarray:
     mu = np.ascontiguousarray(np.asarray(weights, dtype=float).ravel())
     if mu.shape != (n,) or not np.all(np.isfinite(mu)):

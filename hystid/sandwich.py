@@ -8,19 +8,23 @@ the hysteresis block:
 * placement, envelope and units (:class:`~hystid.operating.Placed`), :meth:`save`;
 * the linear blocks :attr:`L1`, :attr:`L2` as ``control.TransferFunction``;
 * :meth:`to_control` (the interconnection, with the ``U0``/``Y0`` placement blocks) and
-  :meth:`control_state`, :meth:`from_control` (its inverse);
+  :meth:`control_state`, :meth:`from_control` (its inverse, and that of ``(L1, H, L2)``: on
+  :class:`Sandwich` itself it chooses the member by the ``H`` block);
 * :meth:`simulate`, returning a :class:`~hystid.response.SandwichResponse`, and
   :meth:`admissibility` (the model's soundness, the envelope, a finite output).
 
 A member supplies only its own parts: its ``structure`` (with ``names``, ``history``, ``q1``,
 ``q2``), the coefficient vectors ``a1, a2`` and full numerators ``num1, num2`` of its linear
-blocks, the hysteresis block :attr:`H` and its state (:meth:`_h_state`), the compiled kernel
-(:meth:`_run`), and optionally its own admissibility test (:meth:`_block_admissibility`) and
-how it reads its blocks back (:meth:`_from_blocks`).
+blocks, the hysteresis block :attr:`H` (its ``params`` carrying the placement, :meth:`_carry`)
+and its state (:meth:`_h_state`), the compiled kernel (:meth:`_run`), optionally its own
+admissibility test (:meth:`_block_admissibility`), and how it reads its blocks back: which
+``H`` is its (:meth:`_holds`, :meth:`_describe`), its ``structure_type`` and
+:meth:`_from_blocks`.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -314,54 +318,175 @@ class Sandwich(Placed):
     @classmethod
     def from_control(
         cls,
-        L1: ct.TransferFunction | ct.InterconnectedSystem,
+        L1: ct.TransferFunction | ct.StateSpace | ct.InterconnectedSystem,
         H: ct.NonlinearIOSystem | None = None,
-        L2: ct.TransferFunction | None = None,
+        L2: ct.TransferFunction | ct.StateSpace | None = None,
         *,
+        structure: Any = None,
+        like: Sandwich | None = None,
         name: str | None = None,
         **options: Any,
     ) -> Sandwich:
-        """Build a model from python-control objects.
+        """Build a model from python-control objects: the inverse of :meth:`to_control` and of
+        ``(L1, H, L2)``.
+
+        What the blocks hold is read back: the parameters, the structure (orders and delays
+        from the coefficients, the number of plays or operators and the Duhem block's shape
+        from ``H``), the rest level and offset (the ``U0`` / ``Y0`` blocks of an
+        interconnected system; ``H`` carries them too, as ``params`` its update ignores, and
+        the Duhem block its ``rest_memory``). Called on :class:`Sandwich` itself, the member is
+        chosen by the ``H`` block; called on a member whose block ``H`` is not, it says which
+        class reads it.
+
+        The blocks do not hold the envelope nor the units (``None`` and ``{"u": "V", "y":
+        "um"}`` unless given), nor an order whose last coefficient is exactly zero (it reads
+        one order lower: the same system); pass ``like=model`` to take them from a model.
 
         Parameters
         ----------
         L1, H, L2 : control systems
-            The three blocks (transfer functions for L1 and L2, the member's hysteresis system
-            for H), or a single :class:`control.InterconnectedSystem` made by
-            :meth:`to_control` (its ``U0`` / ``Y0`` blocks give the rest level and offset).
+            The three blocks (transfer functions or state-space realisations for L1 and L2,
+            the member's hysteresis system for H), or a single
+            :class:`control.InterconnectedSystem` made by :meth:`to_control` (its ``U0`` /
+            ``Y0`` blocks give the rest level and offset; their absence means none).
+        structure : object, optional
+            The member's structure to read the blocks into (they must fit it); read from the
+            blocks by default.
+        like : Sandwich, optional
+            A model of the same member whose structure (unless ``structure`` is given),
+            envelope, units and name the result takes.
         name : str, optional
-            Name of the returned model (the member's default name otherwise).
+            Name of the returned model: the interconnected system's, ``like``'s or the
+            member's default otherwise.
         **options
-            The member's own reading options (see its ``_from_blocks``).
+            ``u_rest``, ``offset``, ``envelope``, ``units`` (and ``rest_memory`` of the Duhem
+            sandwich) override what the blocks and ``like`` give; the member's own reading
+            options (``f0`` of :class:`~hystid.model.DuhemSandwich`, ``prefix`` of
+            :class:`~hystid.pi.PISandwich`).
 
         Returns
         -------
         Sandwich
-            The model, placed as the interconnected system was.
+            The model; it simulates as the one the blocks came from.
+
+        Raises
+        ------
+        ValueError
+            If the system is not the sandwich's (its blocks named, the dt not shared, an ``H``
+            block of no member or of another member than ``cls``'s, blocks that do not fit
+            ``structure``).
+        TypeError
+            For an unknown option, naming the ones there are.
         """
         import control as ct
 
-        placement: dict[str, float] = {}
+        placed: dict[str, Any] = {}
         if isinstance(L1, ct.InterconnectedSystem) and H is None and L2 is None:
             sys = L1
             subs = {s.name: s for s in sys.syslist}
             if not {"L1", "H", "L2"} <= subs.keys():
-                raise ValueError(f"expected subsystems L1, H, L2 in {sys.name!r}, got {list(subs)}")
-            L1, H, L2 = (_clean_tf(ct.ss2tf(subs["L1"])), subs["H"],
-                         _clean_tf(ct.ss2tf(subs["L2"])))
-            placement = {k: float(subs[b].params[k]) for b, k in (("U0", "u_rest"),
-                                                                  ("Y0", "offset")) if b in subs}
-        if H is None or L2 is None:
-            raise ValueError("from_control needs L1, H and L2, or one InterconnectedSystem")
-        if not (L1.dt and L1.dt == L2.dt == H.dt):
-            raise ValueError(f"blocks must share one discrete dt; got {L1.dt}, {H.dt}, {L2.dt}")
-        extra = {"name": name} if name is not None else {}
-        return cls._from_blocks(L1, H, L2, **extra, **options, **placement)
+                raise ValueError(f"from_control: expected subsystems L1, H, L2 in {sys.name!r} "
+                                 f"(a system made by to_control), got {list(subs)}")
+            L1, H, L2 = subs["L1"], subs["H"], subs["L2"]
+            for block, key in (("U0", "u_rest"), ("Y0", "offset")):  # the system's placement
+                placed[key] = float(sys.params.get(key, subs[block].params[key])) \
+                    if block in subs else 0.0
+            if name is None and not re.fullmatch(r"sys\[\d+\]", str(sys.name)):
+                name = sys.name
+        elif H is None or L2 is None:
+            raise ValueError("from_control: expected the blocks L1, H and L2, or one "
+                             "control.InterconnectedSystem made by to_control; got "
+                             f"{type(L1).__name__} and H={H!r}, L2={L2!r}")
+        target = cls._reader(H)
+        dts = [getattr(b, "dt", None) for b in (L1, H, L2)]
+        if not (dts[0] and dts[0] is not True and dts[0] == dts[1] == dts[2]):
+            raise ValueError(f"from_control: L1, H and L2 must share one discrete dt in "
+                             f"seconds; got {dts}")
+        carried = ("u_rest", "offset", *target._carried)
+        settable = (*carried, "envelope", "units")
+        unknown = sorted(set(options) - set(settable) - set(target._reading_options))
+        if unknown:
+            raise TypeError(f"{cls.__name__}.from_control: unknown options {unknown}; expected "
+                            f"structure, like, name, {', '.join(settable)}"
+                            + "".join(f", {o}" for o in target._reading_options))
+        model: dict[str, Any] = {k: float(H.params[k]) for k in carried if k in H.params}
+        model.update(placed)
+        if like is not None:
+            if not isinstance(like, target):
+                raise ValueError(f"like: expected a {target.__name__} (the class that reads "
+                                 f"this H block), got {type(like).__name__}")
+            model.update(envelope=like.envelope, units=like.units)
+            structure = like.structure if structure is None else structure
+            name = like.name if name is None else name
+        model.update({k: v for k, v in options.items() if k in settable})
+        if name is not None:
+            model["name"] = name
+        if structure is not None and not isinstance(structure, target.structure_type):
+            raise TypeError(f"structure: expected a {target.structure_type.__name__} for "
+                            f"{target.__name__}, got {type(structure).__name__}")
+        reading = {k: v for k, v in options.items() if k in target._reading_options}
+        return target._from_blocks(L1, H, L2, structure, **reading, **model)
+
+    # ----------------------------------------------------------------- reading blocks back
+    #: The structure class of the member (set by each member).
+    structure_type: ClassVar[type] = object
+    #: Constructor keywords beyond ``u_rest`` and ``offset`` that :attr:`H` carries in its
+    #: ``params`` (the Duhem sandwich's ``rest_memory``).
+    _carried: ClassVar[tuple[str, ...]] = ()
+    #: The member's own options of :meth:`from_control`.
+    _reading_options: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def _holds(cls, H: ct.NonlinearIOSystem) -> bool:
+        """Whether ``H`` is this member's hysteresis block (none for the base)."""
+        return False
+
+    @classmethod
+    def _describe(cls, H: ct.NonlinearIOSystem | None = None) -> str:
+        """What ``H`` (or the member's block in general) is, for messages."""
+        return "a hysteresis block"
+
+    @classmethod
+    def _reader(cls, H: Any) -> type[Sandwich]:
+        """The class that reads ``H``: ``cls`` when it holds the block, the member that does
+        when ``cls`` is not a member (:class:`Sandwich` itself); otherwise a clear error."""
+        import control as ct
+
+        if not isinstance(H, ct.NonlinearIOSystem):
+            raise ValueError(f"H: expected the model's hysteresis block, a discrete "
+                             f"control.NonlinearIOSystem, got {type(H).__name__} "
+                             f"{getattr(H, 'name', '')!r}")
+        if cls._holds(H):
+            return cls
+        members = _member_classes()
+        owner = next((m for m in members if m._holds(H)), None)
+        if owner is None:
+            raise ValueError(
+                "H: expected the hysteresis block of a hystid member ("
+                + "; ".join(f"{m.__name__}: {m._describe(None)}" for m in members)
+                + f"), got {H.name!r} with {H.nstates} states and params {sorted(H.params)}")
+        if not cls.kind:
+            return owner
+        raise ValueError(
+            f"{cls.__name__}.from_control: the H block is {owner._describe(H)}, which "
+            f"{owner.__module__}.{owner.__name__} reads: call {owner.__name__}.from_control, or "
+            "hystid.sandwich.Sandwich.from_control, which chooses the class by the H block")
 
     @classmethod
     def _from_blocks(cls, L1: ct.TransferFunction, H: ct.NonlinearIOSystem,
-                     L2: ct.TransferFunction, **options: Any) -> Sandwich:
-        raise NotImplementedError
+                     L2: ct.TransferFunction, structure: Any = None, **model: Any) -> Sandwich:
+        """The member's model from its blocks; ``model`` holds the constructor's keywords."""
+        raise NotImplementedError(f"{cls.__name__} does not read python-control blocks; use "
+                                  "hystid.sandwich.Sandwich.from_control")
+
+    def _carry(self, block: ct.NonlinearIOSystem) -> ct.NonlinearIOSystem:
+        """``block`` with the model's non-zero placement (``u_rest``, ``offset`` and the
+        member's :attr:`_carried`) added to its ``params``: the update ignores them, and
+        :meth:`from_control` reads them back."""
+        block.params.update({k: float(getattr(self, k)) for k in ("u_rest", "offset",
+                                                                  *self._carried)
+                             if getattr(self, k)})
+        return block
 
     # ----------------------------------------------------------------- simulation
     def simulate(
@@ -516,6 +641,33 @@ class UnitGainSandwich(Sandwich):
         """L2 numerator coefficients ``b21, b22 ..`` (``b21`` derived: unit DC gain)."""
         return unit_gain_numerator(self.a2, self._part("b2"))
 
+    @classmethod
+    def _linear_parts(
+        cls, L1: Any, L2: Any, structure: Any = None
+    ) -> tuple[dict[str, float], tuple[float, float], dict[str, int]]:
+        """The free coefficients of L1 and L2 read as unit-gain blocks, the DC gains ``g1, g2``
+        moved out of them (the member moves them into H) and the orders and delays read
+        (``n1a, n1b, q1, n2a, n2b, q2``; those of ``structure`` when given)."""
+        from .blocks import read_linear
+
+        values: dict[str, float] = {}
+        gains: list[float] = []
+        orders: dict[str, int] = {}
+        for j, tf in ((1, L1), (2, L2)):
+            given = {} if structure is None else {
+                "q": getattr(structure, f"q{j}"), "na": getattr(structure, f"n{j}a"),
+                "nb": getattr(structure, f"n{j}b")}
+            a, b, q = read_linear(tf, f"L{j}", **given)
+            g = float(np.sum(b) / (1.0 + np.sum(a)))
+            if not np.isfinite(g) or g == 0:
+                raise ValueError(f"L{j}: expected a finite non-zero DC gain (moved into H), got "
+                                 f"{g:g}")
+            values.update({f"a{j}{i + 1}": float(v) for i, v in enumerate(a)})
+            values.update({f"b{j}{i + 1}": float(v) / g for i, v in enumerate(b) if i > 0})
+            gains.append(g)
+            orders.update({f"n{j}a": len(a), f"n{j}b": len(b), f"q{j}": q})
+        return values, (gains[0], gains[1]), orders
+
     @property
     def num1(self) -> np.ndarray:
         """Full numerator of L1 from its delay on: ``[b11, b12, ..]``."""
@@ -527,12 +679,10 @@ class UnitGainSandwich(Sandwich):
         return self.b2
 
 
-def _clean_tf(tf: ct.TransferFunction) -> ct.TransferFunction:
-    """Round-off clean-up of a transfer function obtained from a state-space realisation."""
-    import control as ct
+def _member_classes() -> tuple[type[Sandwich], ...]:
+    """The members of the family, each reading its own H block."""
+    from .mduhem import MultiDuhemSandwich
+    from .model import DuhemSandwich
+    from .pi import PISandwich
 
-    num = np.asarray(tf.num[0][0], float)
-    den = np.asarray(tf.den[0][0], float)
-    scale = max(np.max(np.abs(den)), 1.0)
-    num = np.where(np.abs(num) < 1e-12 * scale, 0.0, num)
-    return ct.tf(num, den, tf.dt, inputs=tf.input_labels, outputs=tf.output_labels)
+    return (DuhemSandwich, PISandwich, MultiDuhemSandwich)
