@@ -53,11 +53,11 @@ def test_sensor_offset_is_estimated(suite):
 
 
 def test_records_that_do_not_start_at_rest_and_outliers_are_said(suite):
-    notes = " ".join(identify(suite["mid_motion"]).info["warnings"])
+    notes = " ".join(identify(suite["mid_motion"], model="duhem").info["warnings"])
     assert "does not start at rest" in notes
-    notes = " ".join(identify(suite["outlier"]).info["warnings"])
+    notes = " ".join(identify(suite["outlier"], model="duhem").info["warnings"])
     assert "left out of the fit" in notes
-    notes = " ".join(identify(suite["end_glitch"]).info["warnings"])
+    notes = " ".join(identify(suite["end_glitch"], model="duhem").info["warnings"])
     assert "last sample" in notes
 
 
@@ -88,7 +88,7 @@ def test_saturated_sensor_is_detected(suite):
     rec = suite["offset"]
     top = np.quantile(rec.y, 0.9)
     clipped = Record(rec.u, np.minimum(rec.y, top), rec.fs, rec.units, "clipped")
-    notes = " ".join(identify(clipped).info["warnings"])
+    notes = " ".join(identify(clipped, model="duhem").info["warnings"])
     assert "saturated" in notes
 
 
