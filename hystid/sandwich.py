@@ -124,6 +124,11 @@ def params_vector(
     return theta
 
 
+#: The members of the family by ``kind``, each reading its own H block: a class that sets its
+#: own ``kind`` registers itself when it is defined (the base knows no member by name).
+_MEMBERS: dict[str, type[Sandwich]] = {}
+
+
 class Sandwich(Placed):
     """Base of every sandwich model ``L1 -> H -> L2``; members add their hysteresis block.
 
@@ -156,6 +161,11 @@ class Sandwich(Placed):
 
     #: The model file's ``kind`` (:mod:`hystid.modelfile`); set by each member.
     kind: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("kind"):  # a member: it names its own kind
+            _MEMBERS.setdefault(cls.__dict__["kind"], cls)
 
     structure: Any
 
@@ -680,9 +690,6 @@ class UnitGainSandwich(Sandwich):
 
 
 def _member_classes() -> tuple[type[Sandwich], ...]:
-    """The members of the family, each reading its own H block."""
-    from .mduhem import MultiDuhemSandwich
-    from .model import DuhemSandwich
-    from .pi import PISandwich
-
-    return (DuhemSandwich, PISandwich, MultiDuhemSandwich)
+    """The members of the family defined so far (a member's H block exists only once its
+    module is loaded), each reading its own H block."""
+    return tuple(_MEMBERS.values())

@@ -45,7 +45,7 @@ checks still hold the recursion to it.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 from numba import njit
@@ -53,8 +53,20 @@ from numba import njit
 from ..kernels import step
 from .online_kernels import _FIRST, _GOODAGE, _HOLD, _I_POS, _NREC, _SHORT, _SIG
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .online import OnlineIdentifier
+
+class Supervised(Protocol):
+    """What the supervisor reads and sets of the identifier it supervises
+    (:class:`hystid.identify.online.OnlineIdentifier`, which imports this module)."""
+
+    P: np.ndarray
+    structure: Any
+    window: int
+    _P_good: np.ndarray
+    _est: np.ndarray
+    _est_good: np.ndarray
+    _ints: np.ndarray
+    _scal: np.ndarray
+    _windows: tuple
 
 __all__ = ["BLOCK", "FORGET", "HYSTERESIS", "Supervisor"]
 
@@ -158,18 +170,18 @@ class Supervisor:
 
     # ----------------------------------------------------------------- helpers
     @staticmethod
-    def _shadow(ident: OnlineIdentifier) -> _Shadow:
+    def _shadow(ident: Supervised) -> _Shadow:
         """The recursion's estimate, covariance and signal windows, frozen."""
         pos, w = int(ident._ints[_I_POS]), ident.window
         return _Shadow(ident._est, ident.P, [a[pos - w:pos].copy() for a in ident._windows[:4]],
                        ident.structure.names.index("alpha"))
 
-    def _new_candidate(self, ident: OnlineIdentifier) -> None:
+    def _new_candidate(self, ident: Supervised) -> None:
         self.candidate = self._shadow(ident)
         self._live[:] = 0.0
         self._versus[:] = 0.0
 
-    def reset(self, ident: OnlineIdentifier, settle_until: int = 0) -> None:
+    def reset(self, ident: Supervised, settle_until: int = 0) -> None:
         """Accept the recursion's current estimate as it is (after a start-up solve).
 
         Parameters
@@ -191,7 +203,7 @@ class Supervisor:
         return BLOCK - self.filled
 
     # ----------------------------------------------------------------- the steps
-    def feed(self, ident: OnlineIdentifier, u: np.ndarray, y: np.ndarray, e: np.ndarray,
+    def feed(self, ident: Supervised, u: np.ndarray, y: np.ndarray, e: np.ndarray,
              k: int) -> bool:
         """Take samples the recursion has just processed (at most :attr:`room`).
 
@@ -222,7 +234,7 @@ class Supervisor:
         self.filled = 0
         return self._step(ident, k)
 
-    def feed_one(self, ident: OnlineIdentifier, u: float, y: float, e: float, k: int) -> bool:
+    def feed_one(self, ident: Supervised, u: float, y: float, e: float, k: int) -> bool:
         """:meth:`feed` for one sample (the real-time path).
 
         Parameters
@@ -249,7 +261,7 @@ class Supervisor:
         self.filled = 0
         return self._step(ident, k)
 
-    def _step(self, ident: OnlineIdentifier, k: int) -> bool:
+    def _step(self, ident: Supervised, k: int) -> bool:
         layout = ident._ints[:10].copy()
         u, y, e = self._u, self._y, self._e
         sq_a, n_a = self.accepted.run(layout, u, y)
@@ -294,7 +306,7 @@ class Supervisor:
             self._new_candidate(ident)
         return False
 
-    def _rollback(self, ident: OnlineIdentifier, k: int, reason: str) -> bool:
+    def _rollback(self, ident: Supervised, k: int, reason: str) -> bool:
         """The recursion restarts from the accepted estimate, its covariance and its free run."""
         a = self.accepted
         ident._est[:] = a.est
