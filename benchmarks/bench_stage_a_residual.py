@@ -28,11 +28,12 @@ import warnings
 
 import numpy as np
 from _common import table, write_json
-from bench_stage_a import STAGE_A, TRAIN, records  # noqa: I001  (the script's neighbour)
+from bench_stage_a import STAGE_A, TRAIN, records
 from scipy import signal
 
 from hystid.baselines import repeat_floor, rest_zero, simulate_from_rest
 from hystid.identify import identify
+from hystid.identify.prepare import rest_level
 
 #: The README blocks this script renders (see ``benchmarks/readme.py``).
 README_BLOCKS = {"stage-a-residual": "render"}
@@ -45,9 +46,8 @@ FUNDAMENTAL = 50.0  # Hz, the sines' and triangles' frequency
 
 
 def excitation(rec) -> slice:
-    """The record's excitation: from the first sample off its rest, the wrapped last out."""
-    moved = np.flatnonzero(rec.u != rec.u[0])
-    return slice(int(moved[0]) if moved.size else 0, rec.n - 2)
+    """The record's excitation: from the end of its leading rest, the wrapped last out."""
+    return slice(rest_level(rec.u)[2], rec.n - 2)
 
 
 def residual(model, rec) -> np.ndarray:
