@@ -5,8 +5,10 @@ The model is exported (``hystid.export.c_sources``), compiled with the system C 
 same input goes through ``model.simulate`` (numba) in this process. Reported: samples per second
 of ``hystid_model_step`` (goal: at least one million), of ``model.simulate``, their ratio, the
 largest relative difference of the outputs, and the C rates of the on-line identifier's step
-and of the compensator ``hystid_ff_step`` (``hystid.compensate.compensate`` one sample at a
-time, set beside ``compensate`` over the whole reference) for two models: the reference stage
+(with its supervisor, as exported by default, set beside ``hystid.export.rpem_reference``, and
+bare, ``-DHYSTID_RPEM_SUPERVISE=0``, beside ``rpem_run``) and of the compensator
+``hystid_ff_step`` (``hystid.compensate.compensate`` one sample at a time, set beside
+``compensate`` over the whole reference) for two models: the reference stage
 (a Duhem sandwich: its reversal planner looks 300 samples ahead, reusing the previous sample's
 look-ahead while the command follows the plan; limits 0-10 V, where the 50 Hz triangle
 saturates for a third of each period and the look-ahead is simulated again) and
@@ -30,6 +32,7 @@ Usage: OPENBLAS_NUM_THREADS=1 python benchmarks/bench_export.py [--quick] [--sam
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import platform
 import shutil
@@ -43,11 +46,13 @@ from _common import best_time, table, write_json
 
 from hystid.cli.compensate import scan_for
 from hystid.compensate import compensate
-from hystid.export import c_sources, ff_options, ff_plan, rpem_start
+from hystid.export import c_sources, ff_options, ff_plan, rpem_reference, rpem_start
 from hystid.identify.online import rpem_run
 from hystid.reference import paper_excitation, reference_model
 
 GOAL = 1e6  # C steps per second
+#: The on-line identifier's step without its supervisor.
+BARE = "-DHYSTID_RPEM_SUPERVISE=0"
 #: The compensator's options for the reference stage (it has no input envelope).
 REFERENCE_LIMITS = {"u_limits": (0.0, 10.0)}
 
@@ -120,8 +125,10 @@ int main(int argc, char **argv)
 """
 
 
-def compile_export(model, folder: Path, compensator: dict | None = None) -> Path:
-    """Export ``model`` into ``folder`` and build the timing driver; returns the program."""
+def compile_export(model, folder: Path, compensator: dict | None = None,
+                   defines: tuple[str, ...] = ()) -> Path:
+    """Export ``model`` into ``folder`` and build the timing driver (``defines``: ``-D``
+    options); returns the program."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         raise SystemExit("bench_export: no C compiler (cc or gcc) on PATH")
@@ -130,7 +137,8 @@ def compile_export(model, folder: Path, compensator: dict | None = None) -> Path
         (folder / name).write_text(text)
     (folder / "bench.c").write_text(DRIVER)
     exe = folder / "bench"
-    subprocess.run([cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-I", str(folder),
+    subprocess.run([cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", *defines,
+                    "-I", str(folder),
                     str(folder / "hystid_model.c"), str(folder / "bench.c"), "-o", str(exe),
                     "-lm"], check=True)
     return exe
@@ -186,6 +194,9 @@ def model_rates(model, folder: Path, n: int) -> dict:
         nf = min(n, 300_000)
         t_rpem, _ = c_rate(exe, folder, "rpem", u[:nf], y[:nf], reps=3)
         out["c_rpem_samples_per_s"] = nf / t_rpem
+        bare = compile_export(model, folder / "bare", defines=(BARE,))
+        t_bare, _ = c_rate(bare, folder, "rpem", u[:nf], y[:nf], reps=3)
+        out["c_rpem_bare_samples_per_s"] = nf / t_bare
     return out
 
 
@@ -252,16 +263,23 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
         agree = abs(checksum - float(np.cumsum(y)[-1])) / float(np.sum(np.abs(y)))
         nf = min(n, 300_000)
         t_rpem, _ = c_rate(exe, folder, "rpem", u[:nf], y[:nf], reps=3)
+        bare = compile_export(model, folder / "bare", defines=(BARE,))
+        t_rpem_bare, _ = c_rate(bare, folder, "rpem", u[:nf], y[:nf], reps=3)
         uu, yy = np.ascontiguousarray(u[:nf] - model.u_rest), np.ascontiguousarray(y[:nf])
 
-        start = rpem_start(model)
+        start, start_bare = rpem_start(model), rpem_start(model, supervise=False)
 
-        def python_rpem() -> None:
-            rpem_run(start._buf.copy(), start._ints.copy(), uu, yy,
+        def python_rpem() -> None:  # the supervised identifier, as the C step by default
+            rpem_reference(copy.deepcopy(start), u[:nf], y[:nf])
+
+        def python_rpem_bare() -> None:
+            rpem_run(start_bare._buf.copy(), start_bare._ints.copy(), uu, yy,
                      np.empty((nf, len(model.theta))), np.empty((nf, 7)))
 
         python_rpem()
+        python_rpem_bare()
         t_rpem_py = best_time(python_rpem, repeat=3, min_time=0)
+        t_rpem_py_bare = best_time(python_rpem_bare, repeat=3, min_time=0)
         ff = {"duhem": ff_rates(model, folder / "duhem", nf, REFERENCE_LIMITS),
               "pi_stage": ff_rates(pi_stage_model(), folder / "pi", nf, {})}
         # the planner's cost beside the goal: the same scan without saturation (every sample
@@ -278,13 +296,16 @@ def measure(quick: bool = False, samples: int | None = None) -> dict:
                    for name, m in member_models.items()})
     c_rate_model = n / t_c
     py_rate = n / t_py
-    rates = [c_rate_model, nf / t_rpem] + [v["c_samples_per_s"] for v in ff.values()] \
-        + [v[k] for v in members.values() for k in ("c_samples_per_s", "c_rpem_samples_per_s")
-           if k in v]
+    rates = [c_rate_model, nf / t_rpem, nf / t_rpem_bare] \
+        + [v["c_samples_per_s"] for v in ff.values()] \
+        + [v[k] for v in members.values() for k in ("c_samples_per_s", "c_rpem_samples_per_s",
+                                                    "c_rpem_bare_samples_per_s") if k in v]
     return {"samples": n, "goal_c_samples_per_s": GOAL,
             "c_model_samples_per_s": c_rate_model, "python_simulate_samples_per_s": py_rate,
             "ratio_c_vs_python": c_rate_model / py_rate,
             "c_rpem_samples_per_s": nf / t_rpem, "python_rpem_samples_per_s": nf / t_rpem_py,
+            "c_rpem_bare_samples_per_s": nf / t_rpem_bare,
+            "python_rpem_bare_samples_per_s": nf / t_rpem_py_bare,
             "ff": ff, "ff_context": context, "checksum_relative_difference": agree,
             "members": members,
             "meets_goal": bool(c_rate_model >= GOAL),
@@ -309,18 +330,25 @@ def render(payload: dict) -> str:
          f"{payload['ratio_c_vs_python']:.2g}x numba"],
         ["numba model.simulate (same process)", f"{payload['python_simulate_samples_per_s']:.3g}",
          "1"],
-        ["C hystid_rpem_step", f"{payload['c_rpem_samples_per_s']:.3g}",
+        ["C hystid_rpem_step (supervised)", f"{payload['c_rpem_samples_per_s']:.3g}",
          f"{payload['c_rpem_samples_per_s'] / payload['python_rpem_samples_per_s']:.2g}x "
-         "rpem_run"],
+         "rpem_reference"],
     ]
+    if "c_rpem_bare_samples_per_s" in payload:
+        bare = payload["c_rpem_bare_samples_per_s"]
+        rows.append(["C hystid_rpem_step, bare (HYSTID_RPEM_SUPERVISE 0)", f"{bare:.3g}",
+                     f"{bare / payload['python_rpem_bare_samples_per_s']:.2g}x rpem_run"])
     names = {"gduhem": "gduhem member (generalised Duhem block)",
              "mduhem": "mduhem member (6 Duhem operators)"}
     for key, m in payload.get("members", {}).items():
         rows.append([f"C hystid_model_step, {names[key]}", f"{m['c_samples_per_s']:.3g}",
                      f"{m['ratio_c_vs_python']:.2g}x numba"])
         if "c_rpem_samples_per_s" in m:
-            rows.append([f"C hystid_rpem_step, {names[key]}", f"{m['c_rpem_samples_per_s']:.3g}",
-                         ""])
+            rows.append([f"C hystid_rpem_step (supervised), {names[key]}",
+                         f"{m['c_rpem_samples_per_s']:.3g}", ""])
+        if "c_rpem_bare_samples_per_s" in m:
+            rows.append([f"C hystid_rpem_step, bare, {names[key]}",
+                         f"{m['c_rpem_bare_samples_per_s']:.3g}", ""])
     labels = {"duhem": "reference stage (Duhem", "pi_stage": "pi-stage (PI",
               "gduhem": "gduhem member (generalised Duhem, per sample",
               "mduhem": "mduhem member (6 Duhem operators, per sample",

@@ -19,7 +19,7 @@ from scipy import signal
 import hystid.compensate as hc
 from hystid import DuhemSandwich, Structure
 from hystid.cli import main
-from hystid.export import c_sources, export_c, ff_options, ff_plan, rpem_start
+from hystid.export import c_sources, export_c, ff_options, ff_plan, rpem_reference, rpem_start
 from hystid.identify.online import rpem_run
 from hystid.operating import Envelope
 from hystid.pi import PISandwich, PIStructure, pi_thresholds
@@ -94,14 +94,15 @@ int main(int argc, char **argv)
 
 
 # --------------------------------------------------------------------------- helpers
-def build(texts: dict[str, str], folder: Path) -> Path:
-    """Write the export and the driver into ``folder``, compile, return the program."""
+def build(texts: dict[str, str], folder: Path, extra: tuple[str, ...] = ()) -> Path:
+    """Write the export and the driver into ``folder``, compile (``FLAGS`` and ``extra``),
+    return the program."""
     folder.mkdir(parents=True, exist_ok=True)
     for name, text in texts.items():
         (folder / name).write_text(text)
     (folder / "driver.c").write_text(DRIVER)
     exe = folder / "driver"
-    proc = subprocess.run([CC, *FLAGS, "-I", str(folder), str(folder / "hystid_model.c"),
+    proc = subprocess.run([CC, *FLAGS, *extra, "-I", str(folder), str(folder / "hystid_model.c"),
                            str(folder / "driver.c"), "-o", str(exe), "-lm"],
                           capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
@@ -198,10 +199,10 @@ def test_model_and_rpem_match_on_stage_a(tmp_path):
         assert_close(run(exe, "model", rec.u)[:, 0], model.simulate(rec.u, check=False).y)
     sine = load_record(STAGE_A / "sine50_1.csv")
     n = 4_000
-    ident = rpem_start(model, prbn)
-    history = np.empty((n, len(model.theta)))
-    rpem_run(ident._buf, ident._ints, np.ascontiguousarray(sine.u[:n] - model.u_rest),
-             np.ascontiguousarray(sine.y[:n]), history, np.empty((n, 7)))
+    ident = rpem_start(model, prbn)  # supervised, as the export by default
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        history = rpem_reference(ident, sine.u[:n], sine.y[:n])
     assert_close(run(exe, "rpem", sine.u[:n], sine.y[:n])[:, :len(model.theta)], history)
 
 
@@ -610,11 +611,13 @@ def test_cli_export_of_a_member(name, members, tmp_path, capsys):
 
 # --------------------------------------------------------------------------- on-line identifier
 @needs_cc
-def test_rpem_step_matches_the_recursion(tmp_path):
-    """The parameter trajectory of the C step against rpem_run, with clipped outliers, a
+@pytest.mark.parametrize("supervise", [False, True])
+def test_rpem_step_matches_the_recursion(supervise, tmp_path):
+    """The parameter trajectory of the C step against the recursion (rpem_run; with the
+    supervisor, rpem_reference: rollbacks and validated candidates), with clipped outliers, a
     skipped sample and a diverging burst that forces a restart."""
     model = placed_duhem()
-    exe = build(c_sources(model), tmp_path)
+    exe = build(c_sources(model, rpem_supervise=supervise), tmp_path)
     n = 3_000
     u = excitation(model, n)
     truth = DuhemSandwich(model.theta * 1.02, model.structure, fs=model.fs,
@@ -624,27 +627,37 @@ def test_rpem_step_matches_the_recursion(tmp_path):
     y[500] += 5.0
     y[700] = np.nan
     y[1_500:1_800] += 30.0  # a diverging stretch: the recursion restarts (and projects)
-    ident = rpem_start(model)
+    ident = rpem_start(model, supervise=supervise)
     npar = len(model.theta)
-    history = np.empty((n, npar))
-    rpem_run(ident._buf, ident._ints, np.ascontiguousarray(u - model.u_rest), y, history,
-             np.empty((n, 7)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        history = rpem_reference(ident, u, y)
     out = run(exe, "rpem", u, y)
     assert_close(out[:, :npar], history)
     assert out[-1, npar] == ident.offset_estimate
     assert out[-1, -1] == ident.n_recoveries >= 1 and ident.n_projections >= 1
     assert np.max(np.abs(history[-1] / model.theta - 1)) > 1e-3  # the estimate moved
+    if supervise:
+        assert ident._supervisor.n_rollbacks >= 1 and ident._supervisor.n_accepted >= 1
+    else:  # rpem_reference without the supervisor is rpem_run on u - u_rest
+        bare = rpem_start(model, supervise=False)
+        again = np.empty((n, npar))
+        rpem_run(bare._buf, bare._ints, np.ascontiguousarray(u - model.u_rest), y, again,
+                 np.empty((n, 7)))
+        np.testing.assert_array_equal(again, history)
 
 
 @needs_cc
+@pytest.mark.parametrize("supervise", [False, True])
 @pytest.mark.parametrize("name", ["gduhem", "f0-f2-g1-directional", "directional-by-hand"])
-def test_rpem_step_matches_the_recursion_for_the_generalised_block(name, members, tmp_path):
+def test_rpem_step_matches_the_recursion_for_the_generalised_block(name, supervise, members,
+                                                                   tmp_path):
     """The generalised block's RPEM: the C trajectory against rpem_run through outliers, a
     skipped sample and a diverging burst, on an input the model was not identified on; the
     stage's hysteresis block 2 % off the model's (its L2, a slow pole near the unit circle,
     kept: 2 % more would make it unstable)."""
     model = members[name]
-    exe = build(c_sources(model), tmp_path)
+    exe = build(c_sources(model, rpem_supervise=supervise), tmp_path)
     n = 3_000
     u = unseen_inputs(model, n)[1]
     block = {"alpha", "f0", "f1", "g0", "f2", "f3", "g1", "g2", "ad", "gd"}
@@ -658,11 +671,11 @@ def test_rpem_step_matches_the_recursion_for_the_generalised_block(name, members
     y[500] += 0.5 * span
     y[700] = np.nan
     y[1_500:1_800] += 3.0 * span  # a diverging stretch: the recursion restarts
-    ident = rpem_start(model)
+    ident = rpem_start(model, supervise=supervise)
     npar = len(model.theta)
-    history = np.empty((n, npar))
-    rpem_run(ident._buf, ident._ints, np.ascontiguousarray(u - model.u_rest), y, history,
-             np.empty((n, 7)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        history = rpem_reference(ident, u, y)
     out = run(exe, "rpem", u, y)
     assert_close(out[:, :npar], history)
     assert out[-1, npar] == ident.offset_estimate

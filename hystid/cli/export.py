@@ -103,6 +103,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         help="on-line identifier: a record of the stage for its starting "
                         "covariance and residual scale (default: the model on the paper's "
                         "excitation within its envelope)")
+    parser.add_argument("--rpem-bare", action="store_true",
+                        help="on-line identifier: the bare recursion by default "
+                        "(HYSTID_RPEM_SUPERVISE 0), without the supervisor that rolls it back "
+                        "to the last validated estimate (default: supervised, as "
+                        "method='online')")
     parser.add_argument("--quiet", action="store_true", help="print nothing on success")
     bind(parser, run)
 
@@ -145,7 +150,7 @@ def _export(args: argparse.Namespace) -> None:
             record = load_record(args.rpem_record)
         paths = export_c(model, args.c_dir, force=args.force, source=str(args.model),
                          compensator=options or None, rpem_sigma=args.rpem_sigma,
-                         rpem_record=record, notes=notes)
+                         rpem_record=record, rpem_supervise=not args.rpem_bare, notes=notes)
     except ValueError as err:  # a ModelFileError, an OutputError, the generator's refusals
         message = _as_option(str(err))
         if record is not None and message.startswith(f"record {record.name!r}"):

@@ -8,5 +8,7 @@ step, the feed-forward compensator's step and the on-line identifier's step (see
 from __future__ import annotations
 
 from .c import C_FILES, c_sources, export_c, ff_options, ff_plan, rpem_start
+from .rpem import rpem_reference
 
-__all__ = ["C_FILES", "c_sources", "export_c", "ff_options", "ff_plan", "rpem_start"]
+__all__ = ["C_FILES", "c_sources", "export_c", "ff_options", "ff_plan", "rpem_reference",
+           "rpem_start"]

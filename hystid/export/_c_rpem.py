@@ -1,7 +1,8 @@
 """C99 text of the on-line identifier's step: the recursive prediction-error recursion of
 :mod:`hystid.identify.online` (``_rpem_sample`` with ``kernels.step_sens_row``,
 ``_recursive.admissible_into``, ``poly.schur_cohn_into``, ``_covariance_ok``, ``_resync``),
-written to do the same arithmetic in the same order.
+written to do the same arithmetic in the same order, and its supervisor
+(:mod:`hystid.export._c_rpem_supervisor`) under ``HYSTID_RPEM_SUPERVISE``.
 
 The signal windows hold ``HX_R_W`` samples (the newest at ``HX_R_W - 1``) and slide by one
 sample per step; the Python recursion slides them in blocks, which moves values but computes
@@ -9,6 +10,8 @@ nothing, so the numbers are the same.
 """
 
 from __future__ import annotations
+
+from ._c_rpem_supervisor import SUPERVISOR, SUPERVISOR_INIT, SUPERVISOR_STEP
 
 __all__ = ["GDUHEM_RPEM_STEP", "RPEM_STEP"]
 
@@ -86,11 +89,11 @@ static int hx_covariance_ok(double P[HX_R_NE][HX_R_NE], double trace_max)
     return tr < trace_max && tr > 0.0;
 }
 
-/* kernels.step_sens_row at index k (= ks) of the windows, with theta */
-static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
+/* kernels.step at index k of the windows, with theta: eqs. (1), (7), (2) (the recursion's
+   model step and the supervisor's free runs) */
+static void hx_step(const double *theta, const double *U, double *W1, double *W2, double *Y,
+                    int k)
 {
-    double *U = s->u, *W1 = s->w1, *W2 = s->w2, *Y = s->yh;
-    double (*S1)[HX_R_NPAR] = s->s1, (*S2)[HX_R_NPAR] = s->s2, (*SY)[HX_R_NPAR] = s->sy;
     const double alpha = theta[HX_R_I_ALPHA];
 #if HX_R_I_F0 >= 0
     const double f0 = theta[HX_R_I_F0];
@@ -99,9 +102,8 @@ static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
 #endif
     const double f1 = theta[HX_R_I_F1];
     const double g0 = theta[HX_R_I_G0];
-    double w1, y, w1p, w2p, dw1, G, s1, sd, absd, ddw1, dG, sy;
-    int i, j, p;
-    /* step: eqs. (1), (7), (2) */
+    double w1, y, w1p, w2p, dw1;
+    int i, j;
     w1 = U[k - HX_R_Q1];
     for (j = 1; j <= HX_R_N1B; j++) {
         w1 += theta[HX_R_I_B1 + j - 1] * U[k - HX_R_Q1 - j];
@@ -122,6 +124,27 @@ static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
         y -= theta[HX_R_I_A2 + i - 1] * Y[k - i];
     }
     Y[k] = y;
+}
+
+/* kernels.step_sens_row at index k (= ks) of the windows, with theta */
+static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
+{
+    double *U = s->u, *W1 = s->w1, *W2 = s->w2, *Y = s->yh;
+    double (*S1)[HX_R_NPAR] = s->s1, (*S2)[HX_R_NPAR] = s->s2, (*SY)[HX_R_NPAR] = s->sy;
+    const double alpha = theta[HX_R_I_ALPHA];
+#if HX_R_I_F0 >= 0
+    const double f0 = theta[HX_R_I_F0];
+#else
+    const double f0 = 0.0;
+#endif
+    const double f1 = theta[HX_R_I_F1];
+    const double g0 = theta[HX_R_I_G0];
+    double w1p, w2p, dw1, G, s1, sd, absd, ddw1, dG, sy;
+    int i, j, p;
+    /* step: eqs. (1), (7), (2) */
+    hx_step(theta, U, W1, W2, Y, k);
+    w1p = W1[k - 1];
+    w2p = W2[k - 1];
     /* sensitivities */
     dw1 = W1[k] - w1p;
     G = f0 * hx_sgn(w1p) + f1 * w1p - w2p;
@@ -197,6 +220,7 @@ static void hx_resync(hystid_rpem_state *s, const double *theta, int lo, int L)
     }
 }
 
+@SUPERVISOR@
 void hystid_rpem_init(hystid_rpem_state *s)
 {
     int i, j, p;
@@ -227,7 +251,7 @@ void hystid_rpem_init(hystid_rpem_state *s)
         }
     }
     s->e = NAN;
-}
+@SUPERVISOR_INIT@}
 
 void hystid_rpem_step(hystid_rpem_state *s, double u, double y)
 {
@@ -362,7 +386,7 @@ void hystid_rpem_step(hystid_rpem_state *s, double u, double y)
     }
     scal[HX_S_K] += 1.0;
     s->e = e;
-}
+@SUPERVISOR_STEP@}
 
 const double *hystid_rpem_theta(const hystid_rpem_state *s)
 {
@@ -383,27 +407,47 @@ long hystid_rpem_restarts(const hystid_rpem_state *s)
 {
     return (long)s->scal[HX_S_NREC];
 }
+
+long hystid_rpem_rollbacks(const hystid_rpem_state *s)
+{
+#if HYSTID_RPEM_SUPERVISE
+    return s->rollbacks;
+#else
+    (void)s;
+    return 0;
+#endif
+}
+
+long hystid_rpem_validated(const hystid_rpem_state *s)
+{
+#if HYSTID_RPEM_SUPERVISE
+    return s->validated;
+#else
+    (void)s;
+    return 0;
+#endif
+}
 """
+RPEM_STEP = (RPEM_STEP.replace("@SUPERVISOR@\n", SUPERVISOR)
+             .replace("@SUPERVISOR_INIT@", SUPERVISOR_INIT)
+             .replace("@SUPERVISOR_STEP@", SUPERVISOR_STEP))
 
 #: ``kernels.step_sens_row`` for the generalised Duhem block (its ``_shape_sens`` branch); needs
 #: ``hx_shape_terms`` and the ``HX_I_*`` shape indices of the model's part
 #: (:data:`hystid.export._c_model.SHAPE_TERMS`).
-_SHAPE_STEP_SENS = r"""/* kernels.step_sens_row at index k (= ks) of the windows, with theta: the
-   generalised eq. (7), w2(k) = w2(k-1) + A [f0 sgn(w1p) + F - w2(k-1)] |dw1| + G dw1
-   (hx_shape_terms) */
-static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
+_SHAPE_STEP_SENS = r"""/* kernels.step at index k of the windows, with theta: eqs. (1), (7),
+   (2) with the generalised eq. (7), w2(k) = w2(k-1) + A [f0 sgn(w1p) + F - w2(k-1)] |dw1|
+   + G dw1 (hx_shape_terms) (the recursion's model step and the supervisor's free runs) */
+static void hx_step(const double *theta, const double *U, double *W1, double *W2, double *Y,
+                    int k)
 {
-    double *U = s->u, *W1 = s->w1, *W2 = s->w2, *Y = s->yh;
-    double (*S1)[HX_R_NPAR] = s->s1, (*S2)[HX_R_NPAR] = s->s2, (*SY)[HX_R_NPAR] = s->sy;
 #if HX_R_I_F0 >= 0
     const double f0 = theta[HX_R_I_F0];
 #else
     const double f0 = 0.0;
 #endif
-    double w1, y, w1p, w2p, dw1, s1, sd, absd, ddw1, sy;
-    double A, F, G, dF, dG, E, dE, rate, pw;
-    int i, j, p;
-    /* step: eqs. (1), (7), (2) */
+    double w1, y, w1p, w2p, dw1, A, F, G, dF, dG;
+    int i, j;
     w1 = U[k - HX_R_Q1];
     for (j = 1; j <= HX_R_N1B; j++) {
         w1 += theta[HX_R_I_B1 + j - 1] * U[k - HX_R_Q1 - j];
@@ -425,6 +469,26 @@ static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
         y -= theta[HX_R_I_A2 + i - 1] * Y[k - i];
     }
     Y[k] = y;
+}
+
+/* kernels.step_sens_row at index k (= ks) of the windows, with theta (hx_step, then the
+   sensitivities of the generalised block) */
+static void hx_step_sens(hystid_rpem_state *s, const double *theta, int k)
+{
+    double *U = s->u, *W1 = s->w1, *W2 = s->w2, *Y = s->yh;
+    double (*S1)[HX_R_NPAR] = s->s1, (*S2)[HX_R_NPAR] = s->s2, (*SY)[HX_R_NPAR] = s->sy;
+#if HX_R_I_F0 >= 0
+    const double f0 = theta[HX_R_I_F0];
+#else
+    const double f0 = 0.0;
+#endif
+    double w1p, w2p, dw1, s1, sd, absd, ddw1, sy;
+    double A, F, G, dF, dG, E, dE, rate, pw;
+    int i, j, p;
+    /* step: eqs. (1), (7), (2) */
+    hx_step(theta, U, W1, W2, Y, k);
+    w1p = W1[k - 1];
+    w2p = W2[k - 1];
     /* sensitivities */
     dw1 = W1[k] - w1p;
     for (p = 0; p < HX_R_NPAR; p++) {
@@ -505,7 +569,7 @@ _ALPHA_CHECK = """    if (theta[HX_R_I_ALPHA] <= 0.0) {
 def _generalised(text: str) -> str:
     """:data:`RPEM_STEP` for the generalised Duhem block: its step and sensitivities
     (:data:`_SHAPE_STEP_SENS`) and, with directions, the admissible set's ``|ad| < 1``."""
-    start = text.index("/* kernels.step_sens_row")
+    start = text.index("/* kernels.step at index k")
     end = text.index("/* _resync")
     assert text.count(_ALPHA_CHECK) == 1
     text = text[:start] + _SHAPE_STEP_SENS + text[end:]

@@ -26,10 +26,12 @@ What each function is:
   reference followed by ``HYSTID_FF_DELAY`` copies of its last value, it returns
   ``compensate(model, r).u`` after those first calls.
 * ``hystid_rpem_step`` -- one sample of the on-line identifier's recursion
-  (:func:`hystid.identify.online.rpem_run`), warm-started from the saved model (see
-  :func:`hystid.export.rpem.rpem_start`); Duhem models only (the paper's block and the
-  generalised one). The start-up solve of :class:`~hystid.identify.online.OnlineIdentifier`
-  (a batch fit) is not part of the export.
+  (:func:`hystid.identify.online.rpem_run`) and its supervisor
+  (:mod:`hystid.identify.online_supervisor`; ``HYSTID_RPEM_SUPERVISE 0`` leaves it out),
+  warm-started from the saved model (see :func:`hystid.export.rpem.rpem_start`; its Python
+  counterpart is :func:`hystid.export.rpem.rpem_reference`); Duhem models only (the paper's
+  block and the generalised one). The start-up solve of
+  :class:`~hystid.identify.online.OnlineIdentifier` (a batch fit) is not part of the export.
 
 The placed model and the compensator are written for the Duhem sandwich (the paper's block and
 the generalised one: ``f_order``, ``g_order``, ``directional``), the Prandtl-Ishlinskii
@@ -370,19 +372,52 @@ def _ff_part(
     return head, src + member + ff_chain(kind)
 
 
-def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
-    """(header text, source text) of the on-line identifier's step."""
+def _rpem_part(ident: OnlineIdentifier, supervise: bool = True) -> tuple[str, str]:
+    """(header text, source text) of the on-line identifier's step; ``ident`` has its
+    supervisor (its constants are written whether it is on by default or not)."""
     from ..identify import online_kernels as on
+    from ..identify import online_supervisor as osup
     from ..kernels import offsets
 
     s = ident.structure
     npar = len(ident.theta)
     w = ident.window
     sett = ident._sett
+    sup = ident._supervisor
+    if sup is None or osup.BLOCK > 128:  # hx_block_sum is numpy's sum of at most 128 terms
+        raise ValueError("the exported on-line identifier needs the supervisor's state and "
+                         "blocks of at most 128 samples")
     head = ("\n/* On-line identifier (hystid.identify.online: recursive prediction error), "
             "warm-started from\n   the model. Parameters in the order of "
-            f"theta: {', '.join(s.names)}; then the offset. */\n"
+            f"theta: {', '.join(s.names)}; then the offset.\n"
+            "   HYSTID_RPEM_SUPERVISE 1: with the supervisor of "
+            "hystid.identify.online_supervisor (as\n   OnlineIdentifier(supervise=True) after "
+            "its start-up; the warm start is the validated estimate):\n   the last validated "
+            "estimate and a candidate run freely beside the recursion, and every\n"
+            "   HYSTID_RPEM_BLOCK samples the recursion is rolled back to the validated one "
+            "when it diverges\n   or wanders, or the candidate validates. 0: the bare "
+            "recursion (OnlineIdentifier(supervise=False)).\n"
+            "   Define it alike for every file that includes this header. Cost: every sample "
+            "is the recursion's\n   step (with its HYSTID_RPEM_NPAR sensitivities) and two "
+            "model steps (the free runs); the\n   sample that ends a block (the worst) adds a "
+            "sum of at most HYSTID_RPEM_BLOCK squares and at\n   most one rollback and one "
+            "new candidate: copies of (HYSTID_RPEM_NPAR + 1)^2 covariances and\n   of the "
+            "signal windows, O(HYSTID_RPEM_BLOCK + HYSTID_RPEM_NPAR^2 + HYSTID_RPEM_WINDOW "
+            "HYSTID_RPEM_NPAR). */\n"
+            + f"#ifndef HYSTID_RPEM_SUPERVISE\n#define HYSTID_RPEM_SUPERVISE {int(supervise)}\n"
+            "#endif\n"
             + _define("HYSTID_RPEM_NPAR", npar) + _define("HYSTID_RPEM_WINDOW", w)
+            + _define("HYSTID_RPEM_BLOCK", osup.BLOCK)
+            + "#if HYSTID_RPEM_SUPERVISE\n"
+            "/* a frozen estimate (with its covariance) and its free run: past samples of u - "
+            "u_rest, w1, w2\n   and y - offset, and since it was taken sum e^2, samples, "
+            "sum |dw1| */\n"
+            "typedef struct hystid_rpem_shadow {\n"
+            "    double est[HYSTID_RPEM_NPAR + 1];\n"
+            "    double P[HYSTID_RPEM_NPAR + 1][HYSTID_RPEM_NPAR + 1];\n"
+            "    double u[HYSTID_RPEM_WINDOW], w1[HYSTID_RPEM_WINDOW], w2[HYSTID_RPEM_WINDOW];\n"
+            "    double y[HYSTID_RPEM_WINDOW], sums[3];\n"
+            "} hystid_rpem_shadow;\n#endif\n"
             + "typedef struct hystid_rpem_state {\n"
             "    double est[HYSTID_RPEM_NPAR + 1], est_good[HYSTID_RPEM_NPAR + 1];\n"
             "    double P[HYSTID_RPEM_NPAR + 1][HYSTID_RPEM_NPAR + 1];\n"
@@ -394,7 +429,14 @@ def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
             "    double s1[HYSTID_RPEM_WINDOW][HYSTID_RPEM_NPAR];\n"
             "    double s2[HYSTID_RPEM_WINDOW][HYSTID_RPEM_NPAR];\n"
             "    double sy[HYSTID_RPEM_WINDOW][HYSTID_RPEM_NPAR];\n"
-            "    double e;\n} hystid_rpem_state;\n\n"
+            "    double e;\n"
+            "#if HYSTID_RPEM_SUPERVISE\n"
+            "    hystid_rpem_shadow shadow[2]; /* the validated estimate and the candidate */\n"
+            "    int accepted, filled, n_ok;\n"
+            "    double sq[HYSTID_RPEM_BLOCK]; /* the block's squared residuals */\n"
+            "    double before[2], live[2], versus[2], settle;\n"
+            "    long rollbacks, validated;\n"
+            "#endif\n} hystid_rpem_state;\n\n"
             "void hystid_rpem_init(hystid_rpem_state *s);\n"
             "/* One sample: the recorded input u and the measured output y (record units; a "
             "non-finite y\n   is skipped). */\n"
@@ -404,14 +446,21 @@ def _rpem_part(ident: OnlineIdentifier) -> tuple[str, str]:
             "double hystid_rpem_offset(const hystid_rpem_state *s);\n"
             "/* The last residual y - yhat - offset (NaN for a skipped sample). */\n"
             "double hystid_rpem_error(const hystid_rpem_state *s);\n"
-            "/* Restarts after a diverging residual so far. */\n"
-            "long hystid_rpem_restarts(const hystid_rpem_state *s);\n")
+            "/* Restarts after a diverging residual so far (the supervisor's rollbacks "
+            "included). */\n"
+            "long hystid_rpem_restarts(const hystid_rpem_state *s);\n"
+            "/* The supervisor's rollbacks and validated candidates so far (0 without it). */\n"
+            "long hystid_rpem_rollbacks(const hystid_rpem_state *s);\n"
+            "long hystid_rpem_validated(const hystid_rpem_state *s);\n")
     i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = (int(v) for v in offsets(s.layout))
     src = "".join(_define(f"HX_R_{k}", v) for k, v in (
         ("NPAR", npar), ("NE", npar + 1), ("W", w), ("N1A", s.n1a), ("N1B", s.n1b),
         ("N2A", s.n2a), ("N2B", s.n2b), ("Q1", s.q1), ("Q2", s.q2), ("I_ALPHA", i_alpha),
         ("I_F0", i_f0), ("I_F1", i_f1), ("I_B1", i_b1), ("I_G0", i_g0), ("I_A1", i_a1),
-        ("I_A2", i_a2), ("RESYNC", max(s.n2a, s.q2 + s.n2b)), ("ALPHA_MARGIN", on.ALPHA_MARGIN)))
+        ("I_A2", i_a2), ("RESYNC", max(s.n2a, s.q2 + s.n2b)), ("ALPHA_MARGIN", on.ALPHA_MARGIN),
+        ("BLOCK", osup.BLOCK), ("HYSTERESIS", osup.HYSTERESIS), ("FORGET", osup.FORGET),
+        ("FLOOR", sup.floor), ("SETTLE", float(sup._settle_until)),
+        ("SUP_RATIO", sup.diverge_ratio)))
     if i_b2 != 0:  # the C code reads b2j at theta[j - 1]
         raise ValueError("unexpected parameter layout: b2 does not lead theta")
     settings = {"LAM_INF": "LAM_INF", "LAM_RATE": "LAM_RATE", "CLIP": "CLIP",
@@ -435,6 +484,7 @@ def c_sources(
     compensator: Mapping[str, Any] | None = None,
     rpem_sigma: float | None = None,
     rpem_record: Record | None = None,
+    rpem_supervise: bool = True,
     notes: list[str] | None = None,
 ) -> dict[str, str]:
     """The text of ``hystid_model.h`` and ``hystid_model.c`` for a model.
@@ -453,6 +503,10 @@ def c_sources(
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
     rpem_record : Record, optional
         A record of the stage for the on-line identifier's starting information.
+    rpem_supervise : bool
+        The default of ``HYSTID_RPEM_SUPERVISE`` in the header: the on-line identifier's step
+        with its supervisor (as :class:`~hystid.identify.online.OnlineIdentifier`) or the
+        bare recursion; a ``-DHYSTID_RPEM_SUPERVISE=0`` (or ``1``) when compiling overrides it.
     notes : list of str, optional
         Receives what the export leaves out and why (a model whose compensator cannot be
         built is exported without it, ``HYSTID_NO_FF`` defined; a multi-Duhem model without
@@ -493,7 +547,7 @@ def c_sources(
             notes.append(f"no feed-forward compensator in the export: {reason}")
     rhead = rsrc = ""
     if duhem:
-        rhead, rsrc = _rpem_part(rpem_start(model, rpem_record, rpem_sigma))
+        rhead, rsrc = _rpem_part(rpem_start(model, rpem_record, rpem_sigma), rpem_supervise)
     elif isinstance(model, MultiDuhemSandwich):
         reason = "the multi-Duhem sandwich has no on-line identifier (it is identified in " \
                  "batch only)"
@@ -540,6 +594,7 @@ def export_c(
     compensator: Mapping[str, Any] | None = None,
     rpem_sigma: float | None = None,
     rpem_record: Record | None = None,
+    rpem_supervise: bool = True,
     notes: list[str] | None = None,
 ) -> list[Path]:
     """Write ``hystid_model.h`` and ``hystid_model.c`` into a folder.
@@ -560,6 +615,9 @@ def export_c(
         Initial residual scale of the on-line identifier (see :func:`rpem_start`).
     rpem_record : Record, optional
         A record of the stage for the on-line identifier's starting information.
+    rpem_supervise : bool
+        The on-line identifier's step with its supervisor by default (see
+        :func:`c_sources`).
     notes : list of str, optional
         Receives what the export leaves out and why (see :func:`c_sources`).
 
@@ -580,7 +638,7 @@ def export_c(
 
     out = check_output_dir(folder, C_FILES, option="--c", force=force)
     texts = c_sources(model, source=source, compensator=compensator, rpem_sigma=rpem_sigma,
-                      rpem_record=rpem_record, notes=notes)
+                      rpem_record=rpem_record, rpem_supervise=rpem_supervise, notes=notes)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name in C_FILES:

@@ -7,6 +7,12 @@ step starts at a saved model instead, and :func:`rpem_start` builds that start t
 record, and the residual scale the RMS of the model's error there. Without a record the
 information is taken on the paper's excitation scaled into the model's input envelope (the
 model's own output: no residual, so the scale is a thousandth of the output span).
+
+The supervisor (:mod:`hystid.identify.online_supervisor`) starts as it does after the
+identifier's start-up solve: the warm start is the first validated estimate, the recursion
+settles from it for ``n_start`` samples, and the residual floor is ``1e-9`` of the output's
+standard deviation on the starting information's samples. :func:`rpem_reference` runs the
+identifier so started, supervised or bare, as the exported step does.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..identify.online import OnlineIdentifier
     from ..records import Record
 
-__all__ = ["INFORMATION_SAMPLES", "rpem_start", "warm_information"]
+__all__ = ["INFORMATION_SAMPLES", "rpem_reference", "rpem_start", "warm_information"]
 
 #: Samples of a record (or of the synthetic input) the starting information is taken on.
 INFORMATION_SAMPLES = 2_000
@@ -107,8 +113,22 @@ def _largest_dw1(model: DuhemSandwich, record: Record | None, ident: OnlineIdent
     return value if np.isfinite(value) else 0.0
 
 
+def _output_spread(model: DuhemSandwich, record: Record | None) -> float:
+    """Standard deviation of the output on the starting information's samples (the record's,
+    else the model's own on the paper's excitation in its envelope; 0 without either)."""
+    if record is not None:
+        y = np.asarray(record.y[:INFORMATION_SAMPLES], dtype=float)
+        y = y[np.isfinite(y)]
+    else:
+        u = _synthetic_input(model, INFORMATION_SAMPLES)
+        y = np.zeros(0) if u is None else model.simulate(u, check=False).y
+        y = y[np.isfinite(y)]
+    return float(np.std(y)) if len(y) else 0.0
+
+
 def rpem_start(
-    model: DuhemSandwich, record: Record | None = None, sigma: float | None = None
+    model: DuhemSandwich, record: Record | None = None, sigma: float | None = None,
+    supervise: bool = True,
 ) -> OnlineIdentifier:
     """The on-line identifier warm-started from a model: the state ``hystid_rpem_init`` sets.
 
@@ -131,19 +151,24 @@ def rpem_start(
         Initial residual scale (output units; step 2 clips at ``clip`` times it); by default
         the model's RMS error on ``record``, else a thousandth of the output span the model's
         static line gives over its input envelope (``1e-3`` without an envelope).
+    supervise : bool
+        With the supervisor (as ``OnlineIdentifier`` by default), started as after the
+        start-up solve: the warm start is the validated estimate, the recursion settles for
+        ``n_start`` samples, the residual floor is ``1e-9`` of the output's standard deviation
+        on the starting information's samples.
 
     Returns
     -------
     OnlineIdentifier
-        Running (its start-up solve skipped), ready for ``rpem_run(ident._buf, ident._ints,
-        u - u_rest, y, ...)``.
+        Running (its start-up solve skipped), ready for :func:`rpem_reference` (or, bare,
+        ``rpem_run(ident._buf, ident._ints, u - u_rest, y, ...)``).
     """
     from ..identify import online_kernels as on
     from ..identify.online import OnlineIdentifier
 
     if not isinstance(model, DuhemSandwich):
         raise ValueError("the on-line identifier (RPEM) is exported for Duhem models only")
-    ident = OnlineIdentifier(model.structure, model.fs)
+    ident = OnlineIdentifier(model.structure, model.fs, supervise=supervise)
     npar = len(model.theta)
     if record is not None:
         if not np.isclose(float(record.fs), model.fs, rtol=1e-9):
@@ -185,4 +210,31 @@ def rpem_start(
     ident._running = True
     ident._verify_at = None
     ident.u_rest_ = model.u_rest
+    if ident._supervisor is not None:  # the warm start is the first validated estimate
+        ident._supervisor.floor = 1e-9 * max(_output_spread(model, record), 1e-300)
+        ident._supervisor.reset(ident, ident.n_start)
     return ident
+
+
+def rpem_reference(ident: OnlineIdentifier, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The exported ``hystid_rpem_step`` in Python: the identifier from :func:`rpem_start`
+    over samples, its supervisor (when it has one) included.
+
+    Parameters
+    ----------
+    ident : OnlineIdentifier
+        From :func:`rpem_start`; advanced in place (``ident.k`` counts the samples).
+    u, y : ndarray
+        Recorded input and measured output (record units; a non-finite ``y`` is skipped).
+
+    Returns
+    -------
+    ndarray
+        ``(n, npar)``: the estimate after each sample (after a rollback where one happened),
+        as ``hystid_rpem_theta`` gives it.
+    """
+    u = np.ascontiguousarray(np.asarray(u, dtype=float) - ident.u_rest_)
+    y = np.ascontiguousarray(y, dtype=float)
+    history = np.empty((len(u), len(ident.theta)))
+    ident._process(u, y, history, np.empty((len(u), ident.n_diagnostics)))
+    return history
