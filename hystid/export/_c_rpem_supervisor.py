@@ -9,10 +9,9 @@ sample that ends a block adds only the checks (a sum of at most ``BLOCK`` square
 most, one rollback and the taking of a new candidate (copies of the estimate, its covariance
 and the signal windows).
 
-The block's residual sum of squares is numpy's ``np.sum(e[ok] ** 2)``: its pairwise summation,
-which for at most 128 terms is eight interleaved partial sums combined as
-``((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))`` and the remainder added in order
-(fewer than eight terms: added in order); ``hx_block_sum`` does that. ``max`` is Python's
+The block's residual sum of squares is
+:func:`~hystid.identify.online_supervisor.finite_squares`: the squares of the finite residuals
+added in order (``hx_block_sum``), the same on every CPU and numpy. ``max`` is Python's
 (the first argument unless the second is larger: ``hx_pymax``). The accepted estimate's
 block sums are differences of its running sums, as ``_Shadow.run`` takes them.
 
@@ -38,28 +37,12 @@ static double hx_pymax(double a, double b)
     return b > a ? b : a;
 }
 
-/* np.sum of n <= 128 doubles: numpy's pairwise summation */
+/* online_supervisor.finite_squares: the squares added in order */
 static double hx_block_sum(const double *a, int n)
 {
-    double r[8], res;
-    int i, j;
-    if (n < 8) {
-        res = 0.0;
-        for (i = 0; i < n; i++) {
-            res += a[i];
-        }
-        return res;
-    }
-    for (j = 0; j < 8; j++) {
-        r[j] = a[j];
-    }
-    for (i = 8; i < n - (n % 8); i += 8) {
-        for (j = 0; j < 8; j++) {
-            r[j] += a[i + j];
-        }
-    }
-    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
-    for (; i < n; i++) {
+    double res = 0.0;
+    int i;
+    for (i = 0; i < n; i++) {
         res += a[i];
     }
     return res;
