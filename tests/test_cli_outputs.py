@@ -369,3 +369,13 @@ def test_identify_says_when_it_compiles_its_kernels(tmp_path, capsys, monkeypatc
     monkeypatch.setattr(identify_command, "kernels_cached", lambda kernels: False)
     code, _, err = run(["identify", tmp_path / "s.csv", "--model", "duhem"], capsys)
     assert code == 0 and "compiling the numba kernels" in err
+
+
+def test_a_holdout_that_leaves_too_little_to_fit_names_the_option(tmp_path, capsys, never_fit):
+    from hystid.testing import stage_a_like
+
+    stage_a_like("prbn", seconds=0.1, rest_seconds=0.0, seed=1).save(tmp_path / "a.csv")
+    code, _, err = run(["identify", tmp_path / "a.csv", "--holdout", "0.99"], capsys)
+    line = err.splitlines()[-1]
+    assert code == 2 and line.startswith("hystid identify: error: --holdout 0.99: leaves")
+    assert "expected at least 60 for --method batch" in line

@@ -284,6 +284,13 @@ def _split_for_validation(rec: Record, val: Record | None,
     if k < 2 or rec.n - k < 2:
         raise CommandError(f"--holdout {share:g}: record {rec.name!r} is too short to hold out "
                            "a part of it")
+    from ..identify import min_samples
+
+    need = min_samples(args.method or "batch")
+    if k < need:
+        raise CommandError(f"--holdout {share:g}: leaves {k} of the {rec.n} samples of record "
+                           f"{rec.name!r} to identify on (expected at least {need} for --method "
+                           f"{args.method or 'batch'}: a smaller --holdout, or --val)")
     return rec[:k], rec, k
 
 
