@@ -379,3 +379,20 @@ def test_a_holdout_that_leaves_too_little_to_fit_names_the_option(tmp_path, caps
     line = err.splitlines()[-1]
     assert code == 2 and line.startswith("hystid identify: error: --holdout 0.99: leaves")
     assert "expected at least 60 for --method batch" in line
+
+
+def test_diagnose_refuses_a_pi_model_file_saying_what_to_do(tmp_path, capsys):
+    import warnings
+
+    from hystid.identify import identify
+    from hystid.modelfile import save_model
+    from hystid.testing import stage_a_like
+
+    rec = stage_a_like("prbn", seconds=0.2, rest_seconds=0.02, seed=4)
+    rec.save(tmp_path / "a.csv")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        save_model(identify(rec, model="pi-stage").model, tmp_path / "m.json")
+    code, _, err = run(["diagnose", tmp_path / "a.csv", "--model", tmp_path / "m.json"], capsys)
+    line = err.splitlines()[-1]
+    assert code == 2 and "holds a PISandwich" in line and "without --model" in line

@@ -197,8 +197,10 @@ def _model(path: str | None, fs: float) -> DuhemSandwich | None:
         with refused("--model ", errors=ModelFileError):
             model = load_model(path)
         if not isinstance(model, DuhemSandwich):
-            raise CommandError(f"--model {path}: holds a {type(model).__name__} (diagnose needs "
-                               "a Duhem sandwich)")
+            raise CommandError(
+                f"--model {path}: holds a {type(model).__name__} (diagnose needs a Duhem "
+                "sandwich: its effects extend eq. (7); without --model it identifies the Duhem "
+                "sandwich and ends by scoring the members, pi-stage among them, beside it)")
         return model
     if not isinstance(data, dict) or not isinstance(data.get("params"), dict):
         raise CommandError(f"--model {path}: expected a model file (model.json) or a JSON "
