@@ -66,9 +66,13 @@ def creep_terms(u: np.ndarray, u_ref: float, fs: float) -> np.ndarray:
     return np.column_stack(cols)
 
 
+def _with_constant(columns: np.ndarray) -> np.ndarray:
+    return np.column_stack([columns, np.ones(len(columns))])
+
+
 def _fit(columns: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Least-squares coefficients of ``columns`` plus a constant for ``e``."""
-    coef, *_ = np.linalg.lstsq(np.column_stack([columns, np.ones(len(e))]), e, rcond=None)
+    coef, *_ = np.linalg.lstsq(_with_constant(columns), e, rcond=None)
     return coef
 
 
@@ -109,7 +113,8 @@ def measure() -> dict:
     u_ref = float(model.u_rest)
     k = excitation(train)
     e_train = residual(model, train)[k]
-    creep = _fit(creep_terms(train.u, u_ref, train.fs)[k], e_train)
+    cols_train = creep_terms(train.u, u_ref, train.fs)[k]
+    creep = _fit(cols_train, e_train)
     rows = []
     for name, rec in recs.items():
         if name == TRAIN:
@@ -119,10 +124,10 @@ def measure() -> dict:
         cols = creep_terms(rec.u, u_ref, rec.fs)[k]
         carried = cols @ creep[:-1]
         carried = carried - np.mean(carried - e)  # its constant refitted: a zero that moved
-        oracle = np.column_stack([cols, np.ones(len(e))]) @ _fit(cols, e)
+        oracle = _with_constant(cols) @ _fit(cols, e)
         t = np.linspace(-1.0, 1.0, len(e))
         cubic = np.column_stack([t, t ** 2, t ** 3])
-        drift = np.column_stack([cubic, np.ones(len(e))]) @ _fit(cubic, e)
+        drift = _with_constant(cubic) @ _fit(cubic, e)
         twin = f"{name.rsplit('_', 1)[0]}_{'2' if name.endswith('_1') else '1'}"
         floor = repeat_floor([rec, recs[twin]]) if twin in recs else None
         rows.append({"record": name, "rms": _rms(e), "rms_less_mean": _rms(e - np.mean(e)),
@@ -131,9 +136,7 @@ def measure() -> dict:
                      "drift_oracle": _rms(e - drift), "floor": floor})
     return {"train": TRAIN, "member": result.info.get("model"), "creep_taus_s": CREEP_TAUS,
             "train_rms": _rms(e_train),
-            "train_rms_with_creep": _rms(e_train - np.column_stack(
-                [creep_terms(train.u, u_ref, train.fs)[excitation(train)],
-                 np.ones(len(e_train))]) @ creep),
+            "train_rms_with_creep": _rms(e_train - _with_constant(cols_train) @ creep),
             "rows": rows, "command": COMMAND}
 
 

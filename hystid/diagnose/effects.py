@@ -263,6 +263,19 @@ def _lag_coefficient(tau, dt):
     return 1.0 - np.exp(-dt / tau) if tau > 0.0 else 1.0
 
 
+@njit(cache=True, inline="always")
+def l2_dc_terms(theta, i_b2, n2b, i_a2, n2a):
+    """L2's static gain as ``(1 + sum b2, 1 + sum a2)``, numerator and denominator (eq. 2,
+    ``b20 = 1``)."""
+    num2 = 1.0
+    for j in range(n2b):
+        num2 += theta[i_b2 + j]
+    den2 = 1.0
+    for i in range(n2a):
+        den2 += theta[i_a2 + i]
+    return num2, den2
+
+
 @njit(cache=True)
 def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt):
     """Simulate the augmented sandwich from index ``start`` on (extended arrays, past first).
@@ -311,12 +324,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
         wd = w * dt * np.sqrt(1.0 - zeta * zeta)
         p1 = 2.0 * r * np.cos(wd)
         p2 = -r * r
-        num2 = 1.0
-        for j in range(n2b):
-            num2 += theta[i_b2 + j]
-        den2 = 1.0
-        for i in range(n2a):
-            den2 += theta[i_a2 + i]
+        num2, den2 = l2_dc_terms(theta, i_b2, n2b, i_a2, n2a)
         bm = gm * (num2 / den2) * (1.0 - p1 - p2)
     ys1 = YL[start - 1]
     ys2 = YL[start - 2] if start >= 2 else ys1

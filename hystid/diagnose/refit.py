@@ -155,15 +155,23 @@ def simulate_fit_data(
     tuple of ndarray
         ``w1``, ``w2`` and ``y``.
     """
+    ws, _, _ = _started_workspace(model, phi, data)
+    return ws.run(model.theta, model.structure.layout, phi, model.dt)
+
+
+def _started_workspace(model: DuhemSandwich, phi: np.ndarray,
+                       data: FitData) -> tuple[_Workspace, int, float | None]:
+    """The record's workspace with its past set by the initial-state rule; returns it, the
+    history ``P`` and the model's own output at rest (the measured level less the sensor
+    offset ``phi[12]``; None without a level)."""
     P = max(model.structure.history, 2)
     ws = data.workspace(P)
-    # the model's own output at rest is the measured level less the sensor offset
     level = None if data.level is None else data.level - phi[12]
     x0 = initial_state(model, level, float(data.u[0]), P)
     if x0 is not None:
         ws.U[:P] = x0.u
         ws.past = {"w1": x0.w1, "w2": x0.w2, "y": x0.y}
-    return ws.run(model.theta, model.structure.layout, phi, model.dt)
+    return ws, P, level
 
 
 def simulate_fit_data_sens(
@@ -198,13 +206,7 @@ def simulate_fit_data_sens(
         dependence on ``theta`` and the sensor offset), ``SY`` of the record's samples:
         ``d y / d (theta, free slots)``.
     """
-    P = max(model.structure.history, 2)
-    ws = data.workspace(P)
-    level = None if data.level is None else data.level - phi[12]
-    x0 = initial_state(model, level, float(data.u[0]), P)
-    if x0 is not None:
-        ws.U[:P] = x0.u
-        ws.past = {"w1": x0.w1, "w2": x0.w2, "y": x0.y}
+    ws, P, level = _started_workspace(model, phi, data)
     ncol = ntc + int(np.count_nonzero(cols >= 0))
     if sens is None or sens[0].shape != (len(ws.U), ncol) or sens[4].shape != (ws.n, ncol):
         sens = [np.zeros((len(ws.U), ncol)) for _ in range(4)] + [np.zeros((ws.n, ncol))]

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from ..kernels import duhem_sens_row, l1_sens_row, l2_sens_row, offsets, sgn
-from .effects import LOG_STEP, N_LOG, N_SLOTS, augmented_into
+from .effects import LOG_STEP, N_LOG, N_SLOTS, augmented_into, l2_dc_terms
 
 __all__ = ["augmented_sens_into", "sensitivity_columns"]
 
@@ -166,12 +166,7 @@ def augmented_sens_into(theta, layout, phi, cols, ntc, U, UD, W1, W2, V, C, YL, 
             if c >= 0:
                 dp1[c] = 2.0 * np.cos(wd) * dr - 2.0 * r * np.sin(wd) * dwd
                 dp2[c] = -2.0 * r * dr
-        num2 = 1.0
-        for j in range(n2b):
-            num2 += theta[i_b2 + j]
-        den2 = 1.0
-        for i in range(n2a):
-            den2 += theta[i_a2 + i]
+        num2, den2 = l2_dc_terms(theta, i_b2, n2b, i_a2, n2a)
         K2 = num2 / den2
         bm = gm * K2 * (1.0 - p1 - p2)
         for c in range(ncol):
