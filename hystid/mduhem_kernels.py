@@ -27,8 +27,8 @@ from numba import njit
 
 from .kernels import l2_output, l2_output_sens
 
-__all__ = ["coefficient_offsets", "mduhem_sensitivities_into", "mduhem_simulate_into",
-           "mduhem_step"]
+__all__ = ["coefficient_offsets", "mduhem_advance", "mduhem_sensitivities_into",
+           "mduhem_simulate_into", "mduhem_step"]
 
 
 @njit(cache=True)
@@ -82,23 +82,31 @@ def mduhem_step(c, lay, U, W1, W2, Y, p, k):
     k : int
         Index to compute.
     """
+    mduhem_advance(c, lay, U, W1, W2, Y, p, k, k + 1)
+
+
+@njit(cache=True)
+def mduhem_advance(c, lay, U, W1, W2, Y, p, start, stop):
+    """:func:`mduhem_step` for every index ``start <= k < stop``: the one writing of the
+    recursion, with the layout read once before the loop."""
     n1a, n1b, m, n2a, n2b, q1, q2 = lay[0], lay[1], lay[2], lay[3], lay[4], lay[5], lay[6]
     ia1, ib1, ial, if1, ig0, ia2, ib2, nc = coefficient_offsets(lay)
-    w1 = 0.0
-    for j in range(n1b):
-        w1 += c[ib1 + j] * U[k - q1 - j]
-    for i in range(n1a):
-        w1 -= c[ia1 + i] * W1[k - 1 - i]
-    W1[k] = w1
-    v = W1[k - 1]
-    d = w1 - v
-    ad = abs(d)
-    w2 = 0.0
-    for j in range(m):
-        p[j] = p[j] + c[ial + j] * (c[if1 + j] * v - p[j]) * ad + c[ig0 + j] * d
-        w2 += p[j]
-    W2[k] = w2
-    l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
+    for k in range(start, stop):
+        w1 = 0.0
+        for j in range(n1b):
+            w1 += c[ib1 + j] * U[k - q1 - j]
+        for i in range(n1a):
+            w1 -= c[ia1 + i] * W1[k - 1 - i]
+        W1[k] = w1
+        v = W1[k - 1]
+        d = w1 - v
+        ad = abs(d)
+        w2 = 0.0
+        for j in range(m):
+            p[j] = p[j] + c[ial + j] * (c[if1 + j] * v - p[j]) * ad + c[ig0 + j] * d
+            w2 += p[j]
+        W2[k] = w2
+        l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
 
 
 @njit(cache=True)
@@ -118,8 +126,7 @@ def mduhem_simulate_into(c, lay, U, W1, W2, Y, p, start):
     start : int
         First index computed.
     """
-    for k in range(start, U.shape[0]):
-        mduhem_step(c, lay, U, W1, W2, Y, p, k)
+    mduhem_advance(c, lay, U, W1, W2, Y, p, start, U.shape[0])
 
 
 @njit(cache=True)

@@ -20,6 +20,7 @@ __all__ = [
     "free_gradient",
     "full_coefficients",
     "pi_output_sensitivities",
+    "pi_sens_range",
     "pi_sensitivities_into",
     "pi_step_sens",
     "recursion_one",
@@ -128,31 +129,38 @@ def pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k):
     (``d w1 / d c`` etc.); ``p`` and ``SP`` (``d p_i / d c``) hold the operator states at
     ``k-1`` and are updated in place.
     """
+    pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k, k + 1)
+
+
+@njit(cache=True)
+def pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start, stop):
+    """:func:`pi_step_sens` for every index ``start <= k < stop``: the one writing of the
+    recursion, with what it reads of ``layout`` read once before the loop."""
     n1a, n1b, n, n2a, n2b, q1, q2 = (layout[0], layout[1], layout[2], layout[3], layout[4],
                                      layout[5], layout[6])
     ia1, ib1, imu, ia2, ib2 = _layout_offsets(layout)
     nc = c.shape[0]
     n1 = n1a + n1b
-    w1 = _l1_step(c, n1a, n1b, q1, U, W1, S1, k)       # eq. (29)
-    _operators_step(w1, r, p, SP, S1, k, n1)            # eq. (30)
-    w2 = 0.0
-    for m in range(nc):
-        SW2[k, m] = 0.0
-    for i in range(n):
-        w2 += c[imu + i] * p[i]
-        SW2[k, imu + i] = p[i]
-        for m in range(n1):
-            SW2[k, m] += c[imu + i] * SP[i, m]
-    W2[k] = w2
-    # eq. (31)
-    l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc)
+    for k in range(start, stop):
+        w1 = _l1_step(c, n1a, n1b, q1, U, W1, S1, k)       # eq. (29)
+        _operators_step(w1, r, p, SP, S1, k, n1)            # eq. (30)
+        w2 = 0.0
+        for m in range(nc):
+            SW2[k, m] = 0.0
+        for i in range(n):
+            w2 += c[imu + i] * p[i]
+            SW2[k, imu + i] = p[i]
+            for m in range(n1):
+                SW2[k, m] += c[imu + i] * SP[i, m]
+        W2[k] = w2
+        # eq. (31)
+        l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc)
 
 
 @njit(cache=True)
 def pi_sensitivities_into(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start):
     """Run :func:`pi_step_sens` from ``start`` to the end of the extended arrays."""
-    for k in range(start, U.shape[0]):
-        pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k)
+    pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start, U.shape[0])
 
 
 @njit(cache=True)
