@@ -122,7 +122,7 @@ def duhem_w2(alpha, f0, f1, g0, w1p, w2p, dw1):
     return w2p + alpha * (f0 * sgn(w1p) + f1 * w1p - w2p) * abs(dw1) + g0 * dw1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step(theta, layout, U, W1, W2, Y, k):
     """Compute w1(k), w2(k), y(k) at index ``k`` from the entries before it (eqs. 1, 7, 2)."""
     advance(theta, layout, U, W1, W2, Y, k, k + 1)
@@ -169,7 +169,7 @@ def advance(theta, layout, U, W1, W2, Y, start, stop):
         Y[k] = y
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
     """One step of eqs. (1), (7), (2) with the parameter sensitivities d(.)/d(theta).
 
@@ -179,7 +179,7 @@ def step_sens(theta, layout, U, W1, W2, Y, S1, S2, SY, k):
     step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, k)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
     """:func:`step_sens` with the sensitivities of sample ``k`` at row ``ks`` of ``S1, S2, SY``
     (the rows before ``ks`` hold those of the samples before ``k``)."""
