@@ -235,8 +235,9 @@ def run_job(job: Job, kind: str = "identify", settings: dict[str, Any] | None = 
         nominal model.
     settings : dict, optional
         ``method`` and ``model`` (identify: the estimator and the member of the model family,
-        as :func:`hystid.identify.identify` takes them; ``"batch"`` and ``"duhem"`` by
-        default), ``holdout`` (share of ``train`` held out without ``val``,
+        as :func:`hystid.identify.identify` takes them; ``"batch"`` and the member
+        :func:`~hystid.identify.identify` fits by default, ``"auto"`` for ``"batch"`` and
+        ``"online"``, by default), ``holdout`` (share of ``train`` held out without ``val``,
         default 0.4), ``fs``, ``columns`` (for :func:`hystid.records.load_record`),
         ``effects``, ``initial`` (diagnose).
     seed : int
@@ -305,7 +306,7 @@ def _identify_row(train, vals, settings: dict[str, Any]) -> dict[str, Any]:
 
     fit_on, held, label = _split(train, vals, settings)
     method = settings.get("method") or "batch"
-    result = identify(fit_on, method=method, model=settings.get("model") or "duhem")
+    result = identify(fit_on, method=method, model=settings.get("model"))
     model = result.info.get("model") or getattr(result.model, "kind", "")
     return {"method": result.method, "model": model, "held_out": label,
             **_model_columns(result.model, fit_on),

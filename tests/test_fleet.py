@@ -85,7 +85,7 @@ def test_table_is_the_in_process_comparison_and_a_broken_record_is_isolated(
     for case in CASES:
         train = load_record(fleet_dir / f"{case}.csv")
         val = load_record(fleet_dir / "held" / f"{case}.npz")
-        row = compare(identify(train, model="duhem").model, train, [val]).rows[0]
+        row = compare(identify(train).model, train, [val]).rows[0]
         for key in ("model", "static_line", "linear"):
             assert ok.loc[case, f"rms_{key}"] == pytest.approx(row[key], rel=1e-6), (case, key)
         assert bool(ok.loc[case, "beats_baselines"]) == row["beats"]
@@ -93,8 +93,12 @@ def test_table_is_the_in_process_comparison_and_a_broken_record_is_isolated(
     # without a held-out record the end of the record is held out
     assert ok.loc["stage_b", "held_out"] == "last 40 % of the excitation"
     assert ok.loc["stage_b", "samples"] == round(0.6 * 600)
-    assert np.isfinite(ok[["rms_model", "rms_static_line", "rms_linear", "param_alpha"]]
-                       .to_numpy(float)).all()
+    assert np.isfinite(ok[["rms_model", "rms_static_line", "rms_linear"]].to_numpy(float)).all()
+    # the default member is identify's (chosen per record): each row has its member's parameters
+    first = {"duhem": "param_alpha", "pi-stage": "param_mu0"}
+    assert set(ok["model"]) <= set(first)
+    for name, model in ok["model"].items():
+        assert np.isfinite(float(ok.loc[name, first[model]])), name
     # CSV and Parquet hold the same table; no temporary file is left behind
     csv_path, parquet_path = result_paths(tmp_path, "identify")
     from_csv = pd.read_csv(csv_path, keep_default_na=False, na_values=[""]).set_index("name")

@@ -117,9 +117,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     _common(p)
     p.add_argument("--method", choices=("batch", "online", "eria", "ekf"), default="batch",
                    help="estimator (default batch)")
-    p.add_argument("--model", choices=("auto", *MODEL_NAMES), default="duhem",
-                   help="member of the model family (default duhem, the quickest; auto chooses "
-                   "per record as hystid identify does)")
+    p.add_argument("--model", choices=("auto", *MODEL_NAMES), default=None,
+                   help="member of the model family (default: as hystid identify, auto for "
+                   "batch and online, chosen per record on data held out inside it; duhem, "
+                   "the quickest, for eria and ekf)")
     bind(p, run)
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of every record",
                        description="Run the sim-to-real gap diagnosis on every record.")
