@@ -161,7 +161,8 @@ def rpem_start(
     -------
     OnlineIdentifier
         Running (its start-up solve skipped), ready for :func:`rpem_reference` (or, bare,
-        ``rpem_run(ident._buf, ident._ints, u - u_rest, y, ...)``).
+        ``rpem_run(ident._buf, ident._ints, u - u_rest, y, ...)``, the compiled recursion
+        taking the input relative to the rest).
     """
     from ..identify import online_kernels as on
     from ..identify.online import OnlineIdentifier
@@ -233,7 +234,7 @@ def rpem_reference(ident: OnlineIdentifier, u: np.ndarray, y: np.ndarray) -> np.
         ``(n, npar)``: the estimate after each sample (after a rollback where one happened),
         as ``hystid_rpem_theta`` gives it.
     """
-    u = np.ascontiguousarray(np.asarray(u, dtype=float) - ident.u_rest_)
+    u = np.ascontiguousarray(u, dtype=float)  # the identifier takes off u_rest_ itself
     y = np.ascontiguousarray(y, dtype=float)
     history = np.empty((len(u), len(ident.theta)))
     ident._process(u, y, history, np.empty((len(u), ident.n_diagnostics)))

@@ -665,11 +665,12 @@ class OnlineIdentifier(RecursiveIdentifier):
                 self._filled += stop - done
             elif sup is not None:
                 stop = min(stop, done + sup.room)
-            rpem_run(self._buf, self._ints, np.ascontiguousarray(u[done:stop], float),
-                     np.ascontiguousarray(y[done:stop], float), history[done:stop],
-                     diagnostics[done:stop])
+            # the recursion's windows hold u - u_rest (as the start-up solve's do)
+            rel = np.ascontiguousarray(u[done:stop] - (self.u_rest_ or 0.0), float)
+            rpem_run(self._buf, self._ints, rel, np.ascontiguousarray(y[done:stop], float),
+                     history[done:stop], diagnostics[done:stop])
             if (sup is not None and self._verify_at is None
-                    and sup.feed(self, u[done:stop], y[done:stop], diagnostics[done:stop, 0],
+                    and sup.feed(self, rel, y[done:stop], diagnostics[done:stop, 0],
                                  self.k + stop)):
                 history[stop - 1] = self.theta
             elif self._verify_at is not None and self._filled == self._verify_at:
@@ -697,10 +698,11 @@ class OnlineIdentifier(RecursiveIdentifier):
         """
         if (self._verify_at is None and self._running and isinstance(u_k, float)
                 and isinstance(y_k, float) and u_k - u_k == 0.0):  # the real-time path
-            n_rec = rpem_one(self._buf, self._ints, u_k, y_k)
+            v = u_k - (self.u_rest_ or 0.0)  # the recursion's windows hold u - u_rest
+            n_rec = rpem_one(self._buf, self._ints, v, y_k)
             self.k += 1
             if self._supervisor is not None:  # a rollback is a recovery
-                n_rec += self._supervisor.feed_one(self, u_k, y_k, self._diag[0], self.k)
+                n_rec += self._supervisor.feed_one(self, v, y_k, self._diag[0], self.k)
             if y_k - y_k != 0.0:
                 self.n_skipped += 1
             if n_rec != self._n_rec_seen:
