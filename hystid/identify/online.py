@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -61,6 +61,7 @@ from ..records import Record
 from ._recursive import RecursiveIdentifier
 from .base import as_sample
 from .offline import fit_output_error
+from .online_start import StartUpCheck, check_start
 from .online_supervisor import Supervisor
 from .prepare import IdentificationDataError
 
@@ -108,93 +109,6 @@ REST_KEEP = 50
 #: A start-up solution whose error anywhere in its window exceeds this many times the output's
 #: range has run away: it is not taken as a start while another is at hand.
 RUNAWAY = 2.0
-#: The start-up residual may exceed its noise estimate by this factor (white: about 1).
-NOISE_RATIO = 1.3
-
-# =========================================================================== start-up check
-@dataclass
-class StartUpCheck:
-    """The start-up solution against its own noise estimate and a linear model.
-
-    Attributes
-    ----------
-    samples : int
-        Samples the solution was fitted on.
-    rms : float
-        RMS simulation error of the solution on them (output units).
-    noise : float
-        Noise estimate from the same residual: ``RMS(diff r) / sqrt(2)`` (a white residual has
-        ``noise ~ rms``; a misfit is smooth and has ``noise << rms``).
-    rms_linear : float
-        RMS simulation error of a linear model of the sandwich's orders with its own offset.
-    start : str
-        Which start the solution came from.
-    passed : bool
-        ``rms <= NOISE_RATIO noise`` (or at round-off level) and ``rms < rms_linear``.
-    """
-
-    samples: int
-    rms: float
-    noise: float
-    rms_linear: float
-    start: str
-    passed: bool
-
-    def reason(self) -> str:
-        """Why the check failed, in words (empty when it passed).
-
-        Returns
-        -------
-        str
-        """
-        if self.passed:
-            return ""
-        parts = []
-        if self.rms > NOISE_RATIO * self.noise:
-            ratio = self.rms / max(self.noise, 1e-300)
-            parts.append(f"its simulation error ({self.rms:.3g} RMS) is {ratio:.2g}x its noise "
-                         f"estimate ({self.noise:.3g})")
-        if self.rms >= self.rms_linear:
-            parts.append(f"it does not beat a linear model ({self.rms_linear:.3g} RMS)")
-        return " and ".join(parts)
-
-
-def check_start(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, structure: Structure, fs: float,
-                start: str = "") -> StartUpCheck:
-    """Check a start-up solution on the samples it was fitted on.
-
-    Parameters
-    ----------
-    u, y : ndarray
-        The window's input and measured output.
-    yhat : ndarray
-        The solution's simulated output (offset included).
-    structure : Structure
-        The sandwich's structure (orders of the linear baseline).
-    fs : float
-        Sampling rate in Hz.
-    start : str
-        Label of the start the solution came from.
-
-    Returns
-    -------
-    StartUpCheck
-    """
-    from ..baselines import LinearModel
-
-    r = y - yhat
-    rms = float(np.sqrt(np.mean(r**2)))
-    noise = float(np.sqrt(np.mean(np.diff(r) ** 2) / 2.0))
-    s = structure
-    rec = Record(u, y, fs, name="start-up window")
-    linear = LinearModel.fit(rec, s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
-    rms_linear = float(np.sqrt(np.mean((y - linear.predict(u)) ** 2)))
-    round_off = 1e-9 * max(float(np.std(y)), 1e-300)
-    white = rms <= NOISE_RATIO * noise or rms <= round_off
-    passed = bool(white and rms < rms_linear)
-    return StartUpCheck(len(u), rms, noise, rms_linear, start, passed)
-
-
 # =========================================================================== the identifier
 class OnlineIdentifier(RecursiveIdentifier):
     """Converging on-line identifier of the Duhem sandwich (recursive prediction error).
@@ -665,8 +579,7 @@ class OnlineIdentifier(RecursiveIdentifier):
                 self._filled += stop - done
             elif sup is not None:
                 stop = min(stop, done + sup.room)
-            # the recursion's windows hold u - u_rest (as the start-up solve's do)
-            rel = np.ascontiguousarray(u[done:stop] - (self.u_rest_ or 0.0), float)
+            rel = np.ascontiguousarray(u[done:stop] - (self.u_rest_ or 0.0), float)  # as update
             rpem_run(self._buf, self._ints, rel, np.ascontiguousarray(y[done:stop], float),
                      history[done:stop], diagnostics[done:stop])
             if (sup is not None and self._verify_at is None
