@@ -381,18 +381,58 @@ def test_a_holdout_that_leaves_too_little_to_fit_names_the_option(tmp_path, caps
     assert "expected at least 60 for --method batch" in line
 
 
-def test_diagnose_refuses_a_pi_model_file_saying_what_to_do(tmp_path, capsys):
+def test_diagnose_scores_a_pi_model_file_beside_the_diagnosed_model(tmp_path, capsys):
+    """The default member's model file (pi-stage) is diagnosed as far as the effects allow:
+    the rounds diagnose a Duhem sandwich (the effects extend eq. 7), and the model given is a
+    row of the final table, scored like every row, and the incumbent there."""
+    import warnings
+
+    from hystid.baselines import rest_zero, simulate_from_rest
+    from hystid.identify import identify
+    from hystid.modelfile import save_model
+    from hystid.records import load_record
+    from hystid.testing import stage_a_like
+
+    rec = stage_a_like("prbn", seconds=0.2, rest_seconds=0.02, seed=4)
+    rec.save(tmp_path / "a.csv")
+    stage_a_like("sine50", seconds=0.2, rest_seconds=0.02, seed=5).save(tmp_path / "v.csv")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(rec, model="pi-stage").model
+    save_model(model, tmp_path / "m.json")
+    code, out, err = run(["diagnose", tmp_path / "a.csv", "--val", tmp_path / "v.csv",
+                          "--model", tmp_path / "m.json", "--out", tmp_path / "d",
+                          "--max-rounds", "1"], capsys)
+    assert code == 0, err
+    assert "the model given is scored beside it" in err + out
+    final = json.loads((tmp_path / "d" / "report.json").read_text())["final_model"]
+    rows = {r["candidate"]: r for r in final["candidates"]}
+    assert "given: m.json" in rows and "nominal" in rows
+    val = load_record(tmp_path / "v.csv")
+    p = simulate_from_rest(model, val.u, check=False)
+    rms = float(np.sqrt(np.mean((p + rest_zero(p, val) - val.y) ** 2)))
+    assert rows["given: m.json"]["mean_rms"] == pytest.approx(rms, rel=1e-9)
+    # the incumbent: replaced only by a candidate better by the margin
+    best = min(final["candidates"], key=lambda r: r["mean_rms"])
+    if final["chosen"] != "given: m.json":
+        assert best["mean_rms"] < 0.9 * rms and final["chosen"] == best["candidate"]
+    assert (tmp_path / "d" / "model.json").is_file()
+
+
+def test_diagnose_refuses_a_model_file_of_another_rate(tmp_path, capsys):
     import warnings
 
     from hystid.identify import identify
     from hystid.modelfile import save_model
+    from hystid.records import Record
     from hystid.testing import stage_a_like
 
     rec = stage_a_like("prbn", seconds=0.2, rest_seconds=0.02, seed=4)
     rec.save(tmp_path / "a.csv")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        save_model(identify(rec, model="pi-stage").model, tmp_path / "m.json")
+        other = Record(rec.u, rec.y, 2 * rec.fs, rec.units, "fast")
+        save_model(identify(other, model="pi-stage").model, tmp_path / "m.json")
     code, _, err = run(["diagnose", tmp_path / "a.csv", "--model", tmp_path / "m.json"], capsys)
     line = err.splitlines()[-1]
-    assert code == 2 and "holds a PISandwich" in line and "without --model" in line
+    assert code == 2 and "--model" in line and "expected the same rate" in line

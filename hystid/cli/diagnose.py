@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import DiagnosisError, OptionError, RecordError
 from ..options import crop, fraction, integer, number, parse_crop, parse_structure
@@ -22,6 +22,7 @@ from .support import (
     CommandError,
     as_option,
     bind,
+    check_model_on,
     check_out,
     positive_arg,
     refused,
@@ -33,7 +34,7 @@ from .support import (
 if TYPE_CHECKING:  # pragma: no cover
     from ..diagnose.final_model import FinalModel
     from ..diagnose.result import DiagnosisResult
-    from ..model import DuhemSandwich, Structure
+    from ..model import Structure
     from ..records import Record
 
 __all__ = ["OUTPUT_FILES", "configure_parser", "run"]
@@ -69,7 +70,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default=None, metavar="MODEL.json",
                         help="diagnose this saved model instead of identifying one (the "
                         "model.json written by 'hystid identify --out'; an older report.json "
-                        "with 'params' and 'structure' is read too)")
+                        "with 'params' and 'structure' is read too); a model of another member "
+                        "than the Duhem sandwich (e.g. pi-stage) is scored beside the "
+                        "diagnosed Duhem sandwich and the members in the final table")
     parser.add_argument("--structure", default=None, metavar="n1a=1,n2a=2,...",
                         help="structure of the identified nominal model (keys n1a, n1b, n2a, "
                         "n2b, q1, q2, f0); the paper's experimental one by default")
@@ -179,8 +182,9 @@ def _load(path: str, args: argparse.Namespace, label: str) -> Record:
     return rec
 
 
-def _model(path: str | None, fs: float) -> DuhemSandwich | None:
-    """The model saved in ``path`` (a model file, or an older report.json with a structure)."""
+def _model(path: str | None, fs: float) -> Any:
+    """The model saved in ``path`` (a model file of any member, or an older report.json of a
+    Duhem sandwich with a structure)."""
     if path is None:
         return None
     from ..errors import ModelFileError
@@ -196,11 +200,6 @@ def _model(path: str | None, fs: float) -> DuhemSandwich | None:
                                f"{FORMAT!r})")
         with refused("--model ", errors=ModelFileError):
             model = load_model(path)
-        if not isinstance(model, DuhemSandwich):
-            raise CommandError(
-                f"--model {path}: holds a {type(model).__name__} (diagnose needs a Duhem "
-                "sandwich: its effects extend eq. (7); without --model it identifies the Duhem "
-                "sandwich and ends by scoring the members, pi-stage among them, beside it)")
         return model
     if not isinstance(data, dict) or not isinstance(data.get("params"), dict):
         raise CommandError(f"--model {path}: expected a model file (model.json) or a JSON "
@@ -246,6 +245,7 @@ def _diagnose(args: argparse.Namespace) -> None:
     """``hystid diagnose``'s steps (see :func:`run`)."""
     from ..diagnose.diagnosis import DEFAULT_EFFECTS, diagnose
     from ..diagnose.final_model import final_model
+    from ..model import DuhemSandwich
     from ..validate import check_fit_size, check_magnitudes
 
     with refused(errors=DiagnosisError):
@@ -272,6 +272,19 @@ def _diagnose(args: argparse.Namespace) -> None:
                                    "comma-separated families or forms, e.g. creep,drift; leave "
                                    "--effects out for all of them)")
         model = _model(args.model, train.fs)
+        given = None
+        if model is not None and not isinstance(model, DuhemSandwich):
+            check_model_on(model, train)
+            if abs(model.fs - train.fs) > 1e-9 * train.fs:
+                raise CommandError(f"--model {args.model}: a model of a stage sampled at "
+                                   f"{model.fs:g} Hz, TRAIN {args.train} at {train.fs:g} Hz "
+                                   "(expected the same rate)")
+            given = (f"given: {Path(args.model).name}", model)
+            tell(args, f"--model {args.model}: a {type(model).__name__}; the candidate effects "
+                 "extend eq. (7), so the rounds diagnose a Duhem sandwich identified on the "
+                 "train record, and the model given is scored beside it and the members in the "
+                 "final table")
+            model = None
         try:
             result = diagnose(
                 train, vals, model, structure=_structure(args.structure), effects=names,
@@ -283,7 +296,7 @@ def _diagnose(args: argparse.Namespace) -> None:
             )
         except DiagnosisError as err:  # its settings said as the options that set them
             raise DiagnosisError(as_option(str(err), _OPTIONS)) from err
-        final = final_model(result, train, vals,
+        final = final_model(result, train, vals, given=given,
                             progress=None if args.quiet else (lambda m: tell(args, m)))
     report = result.to_dict()
     report["records"] = {"train": train.name, "val": [v.name for v in vals],

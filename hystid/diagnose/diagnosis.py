@@ -234,7 +234,10 @@ def diagnose(
     if isinstance(model, IdentificationResult):
         model = model.model
     if model is not None and not isinstance(model, DuhemSandwich):
-        raise DiagnosisError(f"model: expected a DuhemSandwich, got {type(model).__name__}")
+        raise DiagnosisError(
+            f"model: expected a DuhemSandwich, got {type(model).__name__} (the effects extend "
+            "eq. 7: diagnose without model=, then score yours beside the result with "
+            "hystid.diagnose.final_model.final_model(result, train, val, given=(name, model)))")
     try:  # before any fit: the augmented sandwich takes only the plain Duhem
         for given in (model.structure if model is not None else None, structure):
             if given is not None:

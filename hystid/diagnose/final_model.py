@@ -143,6 +143,7 @@ def final_model(
     members: Sequence[str] = FINAL_MEMBERS,
     margin: float = MARGIN,
     holdout: float = 0.4,
+    given: tuple[str, Any] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> FinalModel:
     """Score the nominal model, the nominal model with its effects and the members; keep one.
@@ -164,6 +165,10 @@ def final_model(
         then the nominal model with effects, then the members in the order given).
     holdout : float
         Share of the train record held out when there are no held-out records.
+    given : (str, model), optional
+        A model the user has (any member, e.g. the ``pi-stage`` model ``hystid identify``
+        writes by default) and its label: scored alike, after the nominal model, and the
+        incumbent: the others replace it only when better by ``margin``.
     progress : callable, optional
         ``progress(message)`` before each fit.
 
@@ -183,6 +188,8 @@ def final_model(
         k = held_out_from(train.u, holdout)
         fit_on, held = train[:k], [(train, k)]
     candidates: list[tuple[str, str, Any]] = [("nominal", "the nominal model", result.model)]
+    if given is not None:
+        candidates.append((given[0], "the model given", given[1]))
     if result.accepted:
         candidates.append((f"nominal + {' + '.join(result.accepted)}",
                            "the nominal model with the accepted effects", result.augmented))
@@ -200,23 +207,31 @@ def final_model(
                      "mean_rms": float(np.mean(rms))})
     for r in rows:
         r["gap_closed"] = gap_closed(rows[0]["mean_rms"], r["mean_rms"], floor)
-    chosen = rows[0]
-    for r in rows[1:]:
-        if r["mean_rms"] < (1.0 - margin) * chosen["mean_rms"]:
+    incumbent = rows[1] if given is not None else rows[0]
+    chosen = incumbent
+    for r in rows:
+        if r is not incumbent and r["mean_rms"] < (1.0 - margin) * chosen["mean_rms"]:
             chosen = r
     model = next(m for name, _, m in candidates if name == chosen["candidate"])
-    verdict = _verdict(chosen, rows, members)
+    verdict = _verdict(chosen, rows, members, given[0] if given is not None else None)
     return FinalModel(rows, chosen["candidate"], model, floor, verdict,
                       [f"{rec.name}" + (f" [{k}:]" if k else "") for rec, k in held])
 
 
-def _verdict(chosen: dict, rows: list[dict], members: Sequence[str]) -> str:
+def _verdict(chosen: dict, rows: list[dict], members: Sequence[str],
+             given: str | None = None) -> str:
     name = chosen["candidate"]
     share = f"{100 * chosen['gap_closed']:.0f} %"
+    if name == given:
+        return (f"the model given stays: it closes {share} of the nominal model's gap to the "
+                "floor, and neither an effect nor another member beats it by the margin")
     if name in members:
         return (f"the hysteresis operator is what the nominal model gets wrong: the {name} "
                 f"member closes {share} of the gap to the floor, more than any effect around "
                 "the nominal operator")
     if name != "nominal":
         return f"the accepted effects close {share} of the gap; no member does better"
+    if given is not None:
+        return ("the nominal model beats the model given by the margin, and neither an effect "
+                "nor another member beats it")
     return "neither an effect nor another member beats the nominal model by the margin"
