@@ -128,7 +128,7 @@ def step(theta, layout, U, W1, W2, Y, k):
     advance(theta, layout, U, W1, W2, Y, k, k + 1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def advance(theta, layout, U, W1, W2, Y, start, stop):
     """Compute w1(k), w2(k), y(k) for ``start <= k < stop``, each from the entries before it.
 
@@ -186,7 +186,7 @@ def step_sens_row(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks):
     sens_rows(theta, layout, U, W1, W2, Y, S1, S2, SY, k, ks, 1)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sens_rows(theta, layout, U, W1, W2, Y, S1, S2, SY, k0, ks0, count):
     """:func:`step_sens_row` for ``count`` consecutive samples from ``k0`` (rows from ``ks0``).
 
