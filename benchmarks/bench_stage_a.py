@@ -168,8 +168,8 @@ def render(payload: dict) -> str:
             text.append(f"- `{m}`: {min(ratio):.2f}-{max(ratio):.2f}x the batch fit's held-out "
                         "RMS (the goal: at most 1.25x on every record).")
     if payload.get("speed_auto_over_duhem"):
-        text.append(f"- `auto` takes {payload['speed_auto_over_duhem']:.1f}x the default Duhem "
-                    "fit's time on prbn_1 (20 001 samples, one process).")
+        text.append(f"- `auto` (the default) takes {payload['speed_auto_over_duhem']:.1f}x the "
+                    "Duhem sandwich's fit on prbn_1 (20 001 samples, one process).")
     return "\n".join(text)
 
 
