@@ -230,3 +230,31 @@ def test_check_plain_duhem_names_the_option_and_what_it_found():
         check_plain_duhem(np.r_[plain[:PLAIN_DUHEM_LAYOUT], 2, 1, 0], "an option")
     with pytest.raises(ValueError, match=r"only 6 entries"):
         check_plain_duhem(plain[:6], "an option")
+
+
+@pytest.mark.parametrize("structure", STRUCTURES[:6], ids=str)
+def test_one_sample_step_is_the_loop_bit_for_bit(structure):
+    """The kernels' loop (:func:`hystid.kernels.advance`, :func:`~hystid.kernels.sens_rows`,
+    which read theta and the layout once) and their one-sample forms (``step``,
+    ``step_sens_row``, as the on-line recursions call them) give the same bits."""
+    from hystid.kernels import sensitivities_into, step, step_sens_row
+
+    theta, P, U, past = _random_case(structure, seed=7)
+    loop = [past[k].copy() for k in ("w1", "w2", "y")]
+    simulate_into(theta, structure.layout, U.copy(), *loop, P)
+    one = [past[k].copy() for k in ("w1", "w2", "y")]
+    for k in range(P, P + N):
+        step(theta, structure.layout, U, *one, k)
+    for a, b in zip(loop, one, strict=True):
+        assert np.array_equal(a, b)
+    npar = len(theta)
+    sens_loop = [np.zeros((P + N, npar)) for _ in range(3)]
+    sig = [past[k].copy() for k in ("w1", "w2", "y")]
+    sensitivities_into(theta, structure.layout, U.copy(), *sig, *sens_loop, P)
+    sens_one = [np.zeros((P + N, npar)) for _ in range(3)]
+    sig1 = [past[k].copy() for k in ("w1", "w2", "y")]
+    for k in range(P, P + N):
+        step_sens_row(theta, structure.layout, U, *sig1, *sens_one, k, k)
+    for a, b in zip(sens_loop + sig, sens_one + sig1, strict=True):
+        assert np.array_equal(a, b)
+    assert np.any(sens_one[2][P:] != 0.0)
