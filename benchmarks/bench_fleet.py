@@ -208,10 +208,10 @@ def render(payload: dict) -> str:
     before, after = payload["load_average_before"], payload["load_average_after"]
     startup = payload["startup_s"]
     return "\n".join([
-        f"{st['records']} records of {st['seconds']:g} s from the reference stage, identified on "
-        f"60 % and scored on the rest against both baselines; best of {st['repeat']} "
-        f"interleaved timings; load average {before[0]:.1f} before, {after[0]:.1f} after, on "
-        f"{payload['cores']} cores:", "",
+        f"{st['records']} records of {st['seconds']:g} s from the reference stage, identified "
+        f"(the default member, chosen per record) on 60 % and scored on the rest against both "
+        f"baselines; best of {st['repeat']} interleaved timings; load average "
+        f"{before[0]:.1f} before, {after[0]:.1f} after, on {payload['cores']} cores:", "",
         table(rows, ["", "serial loop, no Dask", "1 worker", "2 workers"]), "",
         f"A fleet on one worker takes {abs(100 * payload['overhead_1_worker_vs_serial']):.1f} % "
         f"{'more' if payload['overhead_1_worker_vs_serial'] > 0 else 'less'} time than the "
