@@ -381,10 +381,12 @@ def test_a_holdout_that_leaves_too_little_to_fit_names_the_option(tmp_path, caps
     assert "expected at least 60 for --method batch" in line
 
 
-def test_diagnose_scores_a_pi_model_file_beside_the_diagnosed_model(tmp_path, capsys):
-    """The default member's model file (pi-stage) is diagnosed as far as the effects allow:
-    the rounds diagnose a Duhem sandwich (the effects extend eq. 7), and the model given is a
-    row of the final table, scored like every row, and the incumbent there."""
+@pytest.mark.parametrize("member", ["pi-stage", "gduhem"])
+def test_diagnose_scores_a_pi_model_file_beside_the_diagnosed_model(tmp_path, capsys, member):
+    """The default member's model file (pi-stage), or a generalised Duhem one, is diagnosed as
+    far as the effects allow: the rounds diagnose a plain Duhem sandwich (the effects extend
+    eq. 7), and the model given is a row of the final table, scored like every row, and the
+    incumbent there."""
     import warnings
 
     from hystid.baselines import rest_zero, simulate_from_rest
@@ -398,7 +400,7 @@ def test_diagnose_scores_a_pi_model_file_beside_the_diagnosed_model(tmp_path, ca
     stage_a_like("sine50", seconds=0.2, rest_seconds=0.02, seed=5).save(tmp_path / "v.csv")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = identify(rec, model="pi-stage").model
+        model = identify(rec, model=member).model
     save_model(model, tmp_path / "m.json")
     code, out, err = run(["diagnose", tmp_path / "a.csv", "--val", tmp_path / "v.csv",
                           "--model", tmp_path / "m.json", "--out", tmp_path / "d",

@@ -245,6 +245,7 @@ def _diagnose(args: argparse.Namespace) -> None:
     """``hystid diagnose``'s steps (see :func:`run`)."""
     from ..diagnose.diagnosis import DEFAULT_EFFECTS, diagnose
     from ..diagnose.final_model import final_model
+    from ..kernels import is_plain
     from ..model import DuhemSandwich
     from ..validate import check_fit_size, check_magnitudes
 
@@ -273,15 +274,18 @@ def _diagnose(args: argparse.Namespace) -> None:
                                    "--effects out for all of them)")
         model = _model(args.model, train.fs)
         given = None
-        if model is not None and not isinstance(model, DuhemSandwich):
+        if model is not None and (not isinstance(model, DuhemSandwich)
+                                  or not is_plain(model.structure.layout)):
             check_model_on(model, train)
             if abs(model.fs - train.fs) > 1e-9 * train.fs:
                 raise CommandError(f"--model {args.model}: a model of a stage sampled at "
                                    f"{model.fs:g} Hz, TRAIN {args.train} at {train.fs:g} Hz "
                                    "(expected the same rate)")
             given = (f"given: {Path(args.model).name}", model)
-            tell(args, f"--model {args.model}: a {type(model).__name__}; the candidate effects "
-                 "extend eq. (7), so the rounds diagnose a Duhem sandwich identified on the "
+            kind = ("generalised Duhem sandwich" if isinstance(model, DuhemSandwich)
+                    else type(model).__name__)
+            tell(args, f"--model {args.model}: a {kind}; the candidate effects extend the plain "
+                 "eq. (7), so the rounds diagnose a Duhem sandwich identified on the "
                  "train record, and the model given is scored beside it and the members in the "
                  "final table")
             model = None
