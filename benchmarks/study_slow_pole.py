@@ -56,30 +56,34 @@ class BoundedRealPole(constraints.Reflections):
     rho_max = 1.0 - 1e-6
 
     def to_z(self, theta: np.ndarray) -> np.ndarray:
-        z = super().to_z(theta)
+        z = np.array(theta, float)
         for g in self.groups:
-            if len(g) == 3:
-                roots = np.roots(np.r_[1.0, theta[g]])
-                real = roots[np.abs(roots.imag) < 1e-9].real
-                rho = float(real[np.argmax(real)]) if real.size else 0.0
-                quad = np.real(np.poly(np.delete(roots, np.argmin(np.abs(roots - rho)))))
-                z[g[:2]] = np.clip(constraints.poly_to_reflection(quad[1:]),
-                                   -constraints.K_MAX, constraints.K_MAX)
-                z[g[2]] = np.clip(rho, -self.rho_max, self.rho_max)
+            if len(g) != 3:
+                z[g] = np.clip(constraints.poly_to_reflection(theta[g]), -constraints.K_MAX,
+                               constraints.K_MAX)
+                continue
+            roots = np.roots(np.r_[1.0, theta[g]])
+            real = roots[np.abs(roots.imag) < 1e-9].real
+            rho = float(real[np.argmax(real)]) if real.size else 0.0
+            quad = np.real(np.poly(np.delete(roots, np.argmin(np.abs(roots - rho)))))
+            z[g[:2]] = np.clip(constraints.poly_to_reflection(quad[1:]), -constraints.K_MAX,
+                               constraints.K_MAX)
+            z[g[2]] = np.clip(rho, -self.rho_max, self.rho_max)
         return z
 
     def to_theta(self, z: np.ndarray, jacobian: bool = True):
-        theta, dtheta = super().to_theta(z, jacobian=True)
+        theta, dtheta = np.array(z, float), np.eye(self.n)
         for g in self.groups:
-            if len(g) == 3:
-                c, dc = constraints.reflection_to_poly(z[g[:2]])
-                rho = z[g[2]]
-                q = np.r_[1.0, c]
-                theta[g] = np.convolve(q, [1.0, -rho])[1:]
-                d = np.array([[1.0, 0.0], [-rho, 1.0], [0.0, -rho]])
-                dtheta[np.ix_(g, g)] = 0.0
-                dtheta[np.ix_(g, g[:2])] = d @ dc
-                dtheta[g, g[2]] = -q
+            if len(g) != 3:
+                theta[g], dtheta[np.ix_(g, g)] = constraints.reflection_to_poly(z[g])
+                continue
+            c, dc = constraints.reflection_to_poly(z[g[:2]])
+            rho = z[g[2]]
+            q = np.r_[1.0, c]
+            theta[g] = np.convolve(q, [1.0, -rho])[1:]
+            d = np.array([[1.0, 0.0], [-rho, 1.0], [0.0, -rho]])
+            dtheta[np.ix_(g, g[:2])] = d @ dc
+            dtheta[g, g[2]] = -q
         return theta, (dtheta if jacobian else None)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
