@@ -2,9 +2,10 @@
 
 Forward-mode differentiation through the augmented recursions, as :mod:`hystid.kernels` does
 for the plain sandwich (``d|x|/dx = sgn(x)``, ``d sgn/dx = 0``, a clipped step follows its
-limit): L1 and L2 are :func:`hystid.kernels.l1_sens_row` and :func:`hystid.kernels.l2_sens_row`,
-the Duhem step :func:`hystid.kernels.duhem_sens_row` with the effects' direction- and
-level-dependent coefficients; the effects add their own terms around them. The signals come
+limit): L1 and L2 are the two parts of :func:`hystid.kernels.l1_sens_row` and
+:func:`hystid.kernels.l2_sens_row` (their own terms under this kernel's ``direct``), the Duhem
+step :func:`hystid.kernels.duhem_sens_row` with the effects' direction- and level-dependent
+coefficients; the effects add their own terms around them. The signals come
 from :func:`~hystid.diagnose.effects.augmented_into` itself (called first), so the simulated
 output is the one a refit without sensitivities sees, bit for bit.
 
@@ -19,7 +20,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..kernels import duhem_sens_row, l1_sens_row, l2_sens_row, offsets, sgn
+from ..kernels import (
+    duhem_sens_row,
+    l1_sens_direct,
+    l1_sens_propagate,
+    l2_sens_direct,
+    l2_sens_propagate,
+    offsets,
+    sgn,
+)
 from .effects import LOG_STEP, N_LOG, N_SLOTS, augmented_into, l2_dc_terms
 
 __all__ = ["augmented_sens_into", "sensitivity_columns"]
@@ -191,7 +200,9 @@ def augmented_sens_into(theta, layout, phi, cols, ntc, U, UD, W1, W2, V, C, YL, 
 
     for k in range(start, n):
         # -------------------------------------------------------- eq. (1) on the delayed input
-        l1_sens_row(theta, layout, UD, W1, S1, k, k, ncol, direct)
+        l1_sens_propagate(theta, layout, S1, k, ncol)
+        if direct:  # the parts apart: see l1_sens_row
+            l1_sens_direct(theta, layout, UD, W1, S1, k, k)
         if input_sens:
             for m in range(2):
                 c = c_del if m == 0 else c_ru
@@ -274,7 +285,9 @@ def augmented_sens_into(theta, layout, phi, cols, ntc, U, UD, W1, W2, V, C, YL, 
                 for p in range(ncol):
                     SV[k, p] += sclog[j, p]
         # -------------------------------------------------------- eq. (2) on v
-        l2_sens_row(theta, layout, V, YL, SV, SYL, k, k, ncol, direct)
+        l2_sens_propagate(theta, layout, SV, SYL, k, ncol)
+        if direct:
+            l2_sens_direct(theta, layout, V, YL, SYL, k, k)
         for p in range(ncol):
             sout[p] = SYL[k, p]
         out = YL[k]

@@ -30,7 +30,7 @@ __all__ = [
 
 
 # =========================================================================== compiled kernels
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _l1_step(c, n1a, n1b, q1, U, W1, S1, k):
     # eq. (29) at index k and d w1 / d (a1, b1) with c = [a1 (n1a), b1 (n1b), ...]; returns w1
     w1 = 0.0
@@ -51,7 +51,7 @@ def _l1_step(c, n1a, n1b, q1, U, W1, S1, k):
     return w1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _operators_step(w1, r, p, SP, S1, k, n1):
     # eq. (30) for every operator with d p_i / d c1: an operator that moves follows w1
     # (dp/dw1 = 1), one that holds keeps its state and its sensitivity
@@ -442,7 +442,8 @@ def pi_output_sensitivities(
     )
     U[P:] = u
     nc = _n_full(s)
-    S1, SW2, SY = (np.zeros((P + n, nc)) for _ in range(3))
+    S1 = np.zeros((P + n, max(s.n1a + s.n1b, 1)))  # d w1 / d (L1's coefficients) alone
+    SW2, SY = (np.zeros((P + n, nc)) for _ in range(2))
     layout = _layout(s)
     c = np.empty(nc)
     full_coefficients(model.theta, layout, c)
