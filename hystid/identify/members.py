@@ -141,9 +141,10 @@ class Member:
             return run_placed(record, lambda rel: PIStageOnline(
                 **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
                 progress, zero_at_start=True)
+        # the record it runs on is already taken relative to its rest (run_placed)
         return run_placed(record, lambda rel: PIRecursiveIdentifier(
-            **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
-            progress, zero_at_start=True)
+            **{"thresholds": r, "structure": self.structure, "fs": record.fs, "u_rest": 0.0,
+               "offset": 0.0, **settings}), progress, zero_at_start=True)
 
 
 #: Warm-up of the ``pi-stage`` on-line identifier, in excited samples (0.2 s at 10 kHz), and

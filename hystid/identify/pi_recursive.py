@@ -36,10 +36,13 @@ Units. The recursion runs on normalised signals, like the off-line fit: the warm
 input and output scales about zero (:func:`~hystid.identify.prepare.scales` of its samples)
 divide ``u``, ``y`` and the thresholds, so that the weights, ``P``, ``Lambda^-1`` and the
 settings ``P0`` and ``epsilon`` are dimensionless and the identified model is the same in V or
-kV, um or m. Every output (the estimate and its history, the model, :meth:`update`'s return
-value, ``e``, ``yhat``, ``K``, ``P``, ``Lambda^-1``) is mapped back to the record's units: only
-the weights carry units (output per input). A cold start has no samples to take scales from
-and runs in the record's units.
+kV, um or m. The stage's rest (``u_rest``, ``offset``): the recursion runs on the input less the
+level the stage rests at and the output less the output there (the first record's first input
+value and its output while the input holds it, unless given), as it starts its play operators
+and L1, L2 at zero; the model carries both back. Every output (the estimate and its history,
+the model, :meth:`update`'s return value, ``e``, ``yhat``, ``K``, ``P``, ``Lambda^-1``) is mapped
+back to the record's units: only the weights carry units (output per input). A cold start has
+no samples to take scales from and runs in the record's units.
 
 After every update the estimate is kept stable (poles of L1 and L2 inside the unit circle): a
 step that would leave that set is halved until it does not (at most 30 times, then dropped).
@@ -174,6 +177,13 @@ class PIRecursiveIdentifier(Estimator):
     fs : float
         Sampling rate of the data in Hz; records must be sampled at it
         (:func:`identify_pi` passes the record's).
+    u_rest, offset : float, optional
+        The input level the stage rests at before the first sample, and the output there.
+        The recursion runs on ``u - u_rest`` and ``y - offset`` (its operators and filters start
+        at zero, at rest) and the model carries them. By default: the first input value the
+        identifier sees, and the median of the finite outputs while the input holds that
+        value (the first sample's output for :meth:`update`; 0 when none is finite).
+        ``thresholds`` are in the input less ``u_rest``.
 
     Attributes
     ----------
@@ -193,6 +203,8 @@ class PIRecursiveIdentifier(Estimator):
         The recursion's units ``(su, sy)``.
     k : int
         Number of samples processed.
+    u_rest_, offset_ : float or None
+        The rest level and output at rest in use (None before the first sample).
 
     Notes
     -----
@@ -224,6 +236,8 @@ class PIRecursiveIdentifier(Estimator):
         min_warmup: int = 1000,
         max_warmup: int = 20_000,
         fs: float = 30_000.0,
+        u_rest: float | None = None,
+        offset: float | None = None,
     ) -> None:
         if form not in FORMS:
             raise ValueError(f"form: expected one of {FORMS}, got {form!r}")
@@ -236,6 +250,9 @@ class PIRecursiveIdentifier(Estimator):
                 raise ValueError(f"{label}: expected a positive finite number, got {value!r}")
         if gamma > 1:
             raise ValueError(f"gamma: expected a value in (0, 1] (mu(k) <= 1), got {gamma!r}")
+        for label, value in (("u_rest", u_rest), ("offset", offset)):
+            if value is not None and not np.isfinite(value):
+                raise ValueError(f"{label}: expected a finite number or None, got {value!r}")
         if warmup != "sweep" and (isinstance(warmup, str) or int(warmup) != warmup
                                   or warmup < 0):
             raise ValueError(f"warmup: expected 'sweep' or a number of samples, got {warmup!r}")
@@ -259,6 +276,8 @@ class PIRecursiveIdentifier(Estimator):
         self.min_warmup = int(min_warmup)
         self.max_warmup = int(max_warmup)
         self.fs = float(fs)
+        self.u_rest = None if u_rest is None else float(u_rest)
+        self.offset = None if offset is None else float(offset)
         self.reset()
 
     # ----------------------------------------------------------------- configuration
@@ -271,7 +290,8 @@ class PIRecursiveIdentifier(Estimator):
                 "form": self.form, "warmup": self.warmup, "min_warmup": self.min_warmup,
                 "max_warmup": self.max_warmup, "fs": self.fs,
                 "n_operators": self._structure().n_operators,
-                "thresholds": None if r is None else np.asarray(r, float).ravel().tolist()}
+                "thresholds": None if r is None else np.asarray(r, float).ravel().tolist(),
+                "u_rest": self.u_rest, "offset": self.offset}
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -364,6 +384,8 @@ class PIRecursiveIdentifier(Estimator):
         self.warm_result_: IdentificationResult | None = None
         self.warmup_seconds_ = 0.0
         self.warmed_up = False
+        self.u_rest_: float | None = self.u_rest
+        self.offset_: float | None = self.offset
         if self.thresholds is not None:
             self._start(self.thresholds)
         return self
@@ -444,7 +466,8 @@ class PIRecursiveIdentifier(Estimator):
         """The current estimate as a :class:`~hystid.pi.PISandwich`."""
         self._require_start()
         return PISandwich(self.theta, self.thresholds_, self.structure_,
-                          fs=self.fs, name="identified PI sandwich")
+                          fs=self.fs, name="identified PI sandwich",
+                          u_rest=self.u_rest_ or 0.0, offset=self.offset_ or 0.0)
 
     def _require_start(self) -> None:
         if not self._ready:
@@ -555,11 +578,13 @@ class PIRecursiveIdentifier(Estimator):
         ndarray
             A copy of theta(k), in the order of :attr:`names`.
         """
-        if (self._ready and not self.warming_up and isinstance(u_k, float)
-                and isinstance(y_k, float) and u_k - u_k == 0.0):  # the real-time path
+        if (self._ready and not self.warming_up and self.offset_ is not None
+                and isinstance(u_k, float) and isinstance(y_k, float)
+                and u_k - u_k == 0.0):  # the real-time path
             return self._update_one(u_k, y_k)
         u, y = sample_arrays(u_k, y_k)
         self._require_start()
+        u, y = self._relative(u, y)
         history = np.empty((1, len(self.names)))
         errors, yhats = np.zeros(1), np.zeros(1)
         self._process(u, y, history, errors, yhats)
@@ -569,12 +594,14 @@ class PIRecursiveIdentifier(Estimator):
         """One sample after the warm-up: one compiled call on the signal windows, in place."""
         U, W1, W2, Y, S1, SW2, SY, PH, SPH = self._windows
         recursion_one(self._mode, self._theta, self._U, self._D, self._lam, self.gamma, self.k,
-                      self.layout_, self._rn, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
-                      self._p, self._SP, u_k / self._su, y_k / self._sy, self._K, self._last)
+                      self.layout_, self._rn, U, W1, W2, Y, S1, SW2, SY, PH, SPH, self._p,
+                      self._SP, (u_k - self.u_rest_) / self._su,
+                      (y_k - self.offset_) / self._sy, self._K, self._last)
         self.k += 1
         if y_k - y_k != 0.0:
             self.n_skipped += 1
-        self.e, self.yhat = float(self._last[0] * self._sy), float(self._last[1] * self._sy)
+        self.e = float(self._last[0] * self._sy)
+        self.yhat = float(self._last[1] * self._sy) + self.offset_
         return self._to_record(self._model_theta(self._theta))
 
     def _process(self, u, y, history, errors, yhats, progress=None) -> int:
@@ -605,7 +632,7 @@ class PIRecursiveIdentifier(Estimator):
                 progress(b, n)
         history[w:] = self._to_record(raw[w:] if same else self._model_theta(raw[w:]))
         errors[w:] *= self._sy
-        yhats[w:] *= self._sy
+        yhats[w:] = yhats[w:] * self._sy + self.offset_
         self.e, self.yhat = float(errors[-1]), float(yhats[-1])
         return w
 
@@ -619,8 +646,9 @@ class PIRecursiveIdentifier(Estimator):
     def _restart(self, record: Record) -> None:
         """:meth:`reset`, thresholds placed over the record's range when not given, and a record
         refused that is shorter than the warm-up."""
-        u, _, name = record_signals(record, self.fs)
+        u, y, name = record_signals(record, self.fs)
         self.reset()
+        u, _ = self._relative(u, y)
         self._place(u)
         w, done = self._warmup_take(u)
         if self.warming_up and (not done or w >= len(u)):
@@ -632,6 +660,20 @@ class PIRecursiveIdentifier(Estimator):
                         "of the thresholds: the warm-up lasts until it has")
             raise ValueError(f"record {name!r}: {len(u)} samples are too few for the PI "
                              f"recursion (expected at least {need})")
+
+    def _relative(self, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The input less the rest level and the output less the output at rest, both taken
+        from these samples when not known yet (the first input value; the median of the
+        finite outputs while the input holds it)."""
+        if self.u_rest_ is None:
+            self.u_rest_ = float(u[0])
+        if self.offset_ is None:
+            span = float(np.ptp(u)) if len(u) > 1 else 0.0
+            moved = np.flatnonzero(np.abs(u - self.u_rest_) > 1e-6 * span)
+            head = y[: int(moved[0]) if len(moved) else len(y)]
+            head = head[np.isfinite(head)]
+            self.offset_ = float(np.median(head)) if head.size else 0.0
+        return u - self.u_rest_, y - self.offset_
 
     def _place(self, u: np.ndarray) -> None:
         """Start with the given thresholds, or with thresholds placed over ``u``'s range."""
@@ -661,6 +703,7 @@ class PIRecursiveIdentifier(Estimator):
             over the last 10 % of the recursion's samples.
         """
         u, y, _ = record_signals(record, self.fs)
+        u, y = self._relative(u, y)
         self._place(u)
         n, before = len(u), self.n_skipped
         history = np.empty((n, len(self.names)))
