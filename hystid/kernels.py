@@ -66,7 +66,7 @@ def shape_offsets(layout):
     return i_f2, i_g1, i_ad
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def shape_terms(theta, layout, w1p, sd):
     """The generalised eq. (7)'s coefficients at ``w1(k-1) = w1p``, direction ``sd``.
 
@@ -329,7 +329,7 @@ def duhem_sens_row(S1, S2, ks, ncol, A, E, G, dF, dA, dG, absd, sd, dw1):
             S2[ks, p] += dA * s1p * E * absd
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _shape_sens(theta, layout, S1, S2, ks, w1p, w2p, dw1):
     """Row ``ks`` of ``S2`` for the generalised eq. (7) (see the module docstring)."""
     i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2 = offsets(layout)
