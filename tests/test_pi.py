@@ -536,3 +536,10 @@ def test_recursion_used_directly_follows_the_rest_level(shift, offset):
         np.testing.assert_allclose(est.theta, base.theta, rtol=1e-3, atol=1e-9)
     assert row["model"] == pytest.approx(row0["model"], rel=1e-3)
     assert row["model"] < 0.5 * min(row["static_line"], row["linear"]), row
+
+
+@pytest.mark.parametrize("option", ["u_rest", "offset"])
+def test_rest_options_refuse_a_non_finite_value(option):
+    with pytest.raises(ValueError, match=f"{option}: expected a finite number"):
+        PIRecursiveIdentifier(**{option: float("nan")})
+    assert PIRecursiveIdentifier(**{option: 2.0}).settings[option] == 2.0
