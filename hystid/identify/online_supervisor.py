@@ -185,7 +185,7 @@ class Supervisor:
     def _shadow(ident: Supervised) -> _Shadow:
         """The recursion's estimate, covariance and signal windows, frozen."""
         pos, w = int(ident._ints[_I_POS]), ident.window
-        return _Shadow(ident._est, ident.P, [a[pos - w:pos].copy() for a in ident._windows[:4]],
+        return _Shadow(ident._est, ident.P, [a[pos - w:pos] for a in ident._windows[:4]],
                        ident.structure.names.index("alpha"))
 
     def _new_candidate(self, ident: Supervised) -> None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
 
 from ..model import DuhemSandwich
 
@@ -40,22 +41,40 @@ def converged_at(history: np.ndarray, epsilon: float) -> int | None:
     int or None
         The sample index.
     """
-    history = np.asarray(history, dtype=float)
+    history = np.ascontiguousarray(history, dtype=float)
     if history.ndim != 2 or len(history) < 2:
         return None
-    step = np.max(
-        np.abs(np.diff(history, axis=0)) / np.maximum(np.abs(history[1:]), 1e-12), axis=1
-    )
-    above = np.flatnonzero(step > epsilon)
-    if len(above) == 0:
+    j = last_step_above(history, float(epsilon))
+    if j < 0:
         return 0
-    k = int(above[-1]) + 1
+    k = j + 1
     return k if k < len(history) - 1 else None
 
 
-def _relative_steps(rows: np.ndarray) -> np.ndarray:
-    """``max_i |theta_i(k) - theta_i(k-1)| / max(|theta_i(k)|, 1e-12)`` between successive rows."""
-    return np.max(np.abs(np.diff(rows, axis=0)) / np.maximum(np.abs(rows[1:]), 1e-12), axis=1)
+@njit(cache=True)
+def last_step_above(rows, epsilon):
+    """The last ``j`` whose step ``rows[j] -> rows[j + 1]`` exceeds ``epsilon`` (-1: none).
+
+    The step is ``max_i |theta_i(j+1) - theta_i(j)| / max(|theta_i(j+1)|, 1e-12)`` (a NaN in
+    it makes the step NaN, never above). Searched from the end, so that a run whose estimate
+    is still moving costs one row, not a pass over the history.
+    """
+    n, p = rows.shape
+    for j in range(n - 2, -1, -1):
+        m = -np.inf
+        for i in range(p):
+            d = abs(rows[j + 1, i])
+            if d < 1e-12:
+                d = 1e-12
+            v = abs(rows[j + 1, i] - rows[j, i]) / d
+            if v != v:
+                m = v
+                break
+            if v > m:
+                m = v
+        if m > epsilon:
+            return j
+    return -1
 
 
 class HistoryRecorder:
@@ -111,12 +130,13 @@ class HistoryRecorder:
         m = len(history)
         if m == 0:
             return
-        rows = history if self._last is None else np.vstack([self._last, history])
-        if len(rows) > 1:
-            above = np.flatnonzero(_relative_steps(rows) > self.epsilon)
-            if len(above):
-                shift = 0 if self._last is None else 1
-                self._last_above = self._seen - shift + int(above[-1])
+        history = np.ascontiguousarray(history, dtype=float)
+        j = last_step_above(history, self.epsilon)
+        if j >= 0:
+            self._last_above = self._seen + j
+        elif (self._last is not None
+              and last_step_above(np.vstack([self._last, history[:1]]), self.epsilon) == 0):
+            self._last_above = self._seen - 1  # the step from the previous chunk's last row
         self._last = history[-1:].copy()
         if len(self.history):
             first = self._seen
