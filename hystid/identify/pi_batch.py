@@ -209,9 +209,16 @@ class _PIOutputError:
                                                   self.un)
             y0 = z[self.n] if self.fit_offset else 0.0
             data = yhat[self.rows] + y0 - self.target
-            r = np.r_[data, self.ridge * theta[self.mu]]
-            J = np.vstack([np.hstack([J[self.rows] @ dtheta, self.ones]), self.ridge_rows])
-            self._cache = {"z": z.copy(), "data": data, **_folded(J, r)}
+            # [J | r] written in place: the data rows (sensitivities in z, the offset's ones),
+            # the ridge rows, the residuals last
+            m, width = len(self.rows), self.n + int(self.fit_offset)
+            A = np.empty((m + len(self.mu), width + 1))
+            A[:m, :self.n] = J[self.rows] @ dtheta
+            A[:m, self.n:width] = self.ones
+            A[m:, :width] = self.ridge_rows
+            A[:m, width] = data
+            A[m:, width] = self.ridge * theta[self.mu]
+            self._cache = {"z": z.copy(), "data": data, **_fold(A)}
         return self._cache
 
     def solve(self, z0: np.ndarray, max_nfev: int, tol: float):
@@ -232,7 +239,11 @@ def _folded(J: np.ndarray, r: np.ndarray) -> dict[str, np.ndarray]:
     ``least_squares`` takes the same steps on a square problem instead of a tall one (its
     SVD per iteration then costs nothing). A non-finite ``[J | r]`` gives non-finite
     residuals of the same length (the solver takes that as a failed step)."""
-    A = np.column_stack([J, r])
+    return _fold(np.column_stack([J, r]))
+
+
+def _fold(A: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`_folded` of the rows ``[J | r]`` as one matrix."""
     width = A.shape[1]
     if not np.all(np.isfinite(A)):
         return {"r": np.full(width, np.nan), "J": np.zeros((width, width - 1))}
