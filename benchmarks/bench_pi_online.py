@@ -9,11 +9,18 @@ Measured stage A (trained on ``prbn_1``, the five other records held out; left o
 (:func:`hystid.testing.stage_a_like`, 1 s of excitation, trained on PRBN seed 0, held out on
 PRBN, 50 Hz sine and triangle, seed 1).
 
+Then the on-line identifier's speed (:func:`throughput`): started on the training record, its
+samples per second over the first held-out record (``partial_fit``), the re-solves' share of
+that time, and the time of each ``update()`` call over 3 000 samples (median and worst: a
+re-solve runs inside the call it falls on), beside the Duhem on-line identifier on the same
+samples in the same process.
+
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_pi_online.py
 """
 
 from __future__ import annotations
 
+import time
 import warnings
 
 import numpy as np
@@ -22,7 +29,12 @@ from bench_stage_a import TRAIN, records
 
 from hystid.baselines import compare
 from hystid.identify import identify
+from hystid.identify.members import member, short_record_warmup
+from hystid.identify.online import OnlineIdentifier
+from hystid.identify.pi_online import PIStageOnline
+from hystid.identify.prepare import prepare
 from hystid.testing import stage_a_like
+from hystid.thresholds import RULES
 
 #: On-line settings compared: the default window (10 000 samples) and shorter ones.
 VARIANTS = {"online": {}, "online, window 7000": {"window": 7000},
@@ -61,6 +73,85 @@ def measure() -> dict:
     return out
 
 
+def _pi_stage_online(train) -> PIStageOnline:
+    """The ``pi-stage`` on-line identifier as ``identify(train, method="online")`` makes it."""
+    m = member("pi-stage")
+    r = RULES[m.settings.get("thresholds", "range")](train.u[prepare(train).fitted],
+                                                     m.structure.n_operators)
+    return PIStageOnline(thresholds=r, structure=m.structure, fs=train.fs,
+                         warmup=short_record_warmup(train.u, m.n_params))
+
+
+def throughput(train, held: list, calls: int = 3000) -> dict:
+    """Steady-state speed of the ``pi-stage`` and Duhem on-line identifiers on one record.
+
+    Parameters
+    ----------
+    train : Record
+        Record each identifier starts on (``fit``).
+    held : list of Record
+        ``partial_fit`` runs over the first; ``update()`` over the first ``calls`` samples
+        of the second after its first sample (the first record again when there is one only).
+    calls : int
+        ``update()`` calls timed one by one.
+
+    Returns
+    -------
+    dict
+        Per identifier: ``samples_per_s`` (``partial_fit``), ``resolve_share`` (``pi-stage``:
+        the re-solves' share of that time), ``update_median_us`` and ``update_max_us``; and
+        ``fs``, the records' sampling rate.
+    """
+    out = {"fs": train.fs}
+    second = held[1] if len(held) > 1 else held[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, make in (("pi-stage", lambda: _pi_stage_online(train)),
+                           ("duhem", lambda: OnlineIdentifier(fs=train.fs))):
+            est = make()
+            est.fit(train)
+            before = getattr(est, "resolve_seconds_", 0.0)
+            t0 = time.perf_counter()
+            est.partial_fit(held[0])
+            seconds = time.perf_counter() - t0
+            share = (getattr(est, "resolve_seconds_", 0.0) - before) / seconds
+            est.update(float(second.u[0]), float(second.y[0]))  # its first call untimed
+            times = np.empty(min(calls, second.n - 1))
+            for i, (u_k, y_k) in enumerate(zip(second.u[1:len(times) + 1].tolist(),
+                                               second.y[1:len(times) + 1].tolist(),
+                                               strict=True)):
+                t0 = time.perf_counter()
+                est.update(u_k, y_k)
+                times[i] = time.perf_counter() - t0
+            out[name] = {"samples_per_s": held[0].n / seconds, "resolve_share": share,
+                         "update_median_us": float(np.median(times) * 1e6),
+                         "update_max_us": float(np.max(times) * 1e6)}
+    return out
+
+
+def render_speed(speed: dict) -> str:
+    """The speed table of :func:`throughput`.
+
+    Parameters
+    ----------
+    speed : dict
+        From :func:`throughput`.
+
+    Returns
+    -------
+    str
+    """
+    fs = speed["fs"]
+    rows = [[name, f"{e['samples_per_s']:,.0f}", f"{e['samples_per_s'] / fs:.2g}x",
+             f"{e['samples_per_s'] / speed['duhem']['samples_per_s']:.3g}",
+             f"{100 * e['resolve_share']:.0f} %", f"{e['update_median_us']:.1f}",
+             f"{e['update_max_us']:,.0f}"]
+            for name, e in speed.items() if name != "fs"]
+    return table(rows, ["on-line identifier", "samples/s (partial_fit)",
+                        f"x real time at {fs:g} Hz", "ratio to duhem", "re-solves' share",
+                        "update() median [us]", "update() worst [us]"])
+
+
 def render(payload: dict) -> str:
     """Held-out RMS in nm and the ratio to the batch fit, one table per case.
 
@@ -74,17 +165,24 @@ def render(payload: dict) -> str:
     str
     """
     text = []
+    speed = payload.get("speed")
     for case, e in payload.items():
+        if case == "speed":
+            continue
         batch = np.array(e["rms"]["batch"])
         rows = [[m, *(f"{1e3 * v:.1f}" for v in r),
                  f"{np.max(np.array(r) / batch):.2f}"] for m, r in e["rms"].items()]
         text += [f"{case}: held-out RMS [nm]", "",
                  table(rows, ["method", *e["records"], "worst ratio to batch"]), ""]
+    if speed is not None:
+        text += ["Speed in steady state (one process):", "", render_speed(speed), ""]
     return "\n".join(text)
 
 
 def main() -> None:
     payload = measure()
+    train, held = next(iter(_cases().values()))
+    payload["speed"] = throughput(train, held)
     print(render(payload))
     print(f"written {write_json('pi_online', payload)}")
 
