@@ -43,6 +43,9 @@ def test_stage_coordinates_round_trip_and_predict_as_the_sandwich():
     phi = np.r_[rng.uniform(0.01, 0.1, 20), 0.4, np.arctanh(0.9995), 1.2, 2.0, -0.3]
     theta = theta_from_stage(phi, 20)
     np.testing.assert_allclose(stage_from_theta(theta, 20), phi, rtol=1e-6, atol=1e-9)
+    rows = np.vstack([phi, phi * 1.1, phi * 0.9])  # a row per sample, as the history takes it
+    assert np.array_equal(theta_from_stage(rows, 20),
+                          np.vstack([theta_from_stage(row, 20) for row in rows]))
     r = np.arange(20) / 20 * 1.5
     model = PISandwich(theta, r, STAGE)
     assert model.is_stable() and is_stage_structure(STAGE)
@@ -50,7 +53,7 @@ def test_stage_coordinates_round_trip_and_predict_as_the_sandwich():
     st = np.zeros((12, 20))
     yhat, err = np.empty(len(u)), np.empty(len(u))
     _run(phi, np.eye(25), 1.0, 1.0, 1.0, r, u, np.zeros(len(u)), st, False,
-         np.zeros((0, 25)), yhat, err)
+         np.zeros((0, 25)), yhat, err, np.zeros((0, 25)))
     y = model.simulate(u).y
     np.testing.assert_allclose(yhat, y, atol=1e-9 * np.max(np.abs(y)))
 
@@ -120,7 +123,7 @@ def test_branch_gradients_are_the_derivatives_of_the_prediction():
     def run(p):
         J, yhat, err = np.empty((len(u), 25)), np.empty(len(u)), np.empty(len(u))
         _run(p, np.eye(25), 1.0, 1.0, 1.0, r, u, np.zeros(len(u)), np.zeros((12, 20)), False,
-             J, yhat, err)
+             J, yhat, err, np.zeros((0, 25)))
         return yhat, J
 
     _, J = run(phi)

@@ -98,9 +98,10 @@ def is_stage_structure(structure: PIStructure) -> bool:
 
 
 # =========================================================================== coordinates
-def _filters(phi: np.ndarray, n: int) -> tuple[float, float, float, float, float]:
-    g, m1 = phi[n], phi[n + 4]
-    p, k1, c2 = (_KMAX * np.tanh(phi[n + j]) for j in (1, 2, 3))
+def _filters(phi: np.ndarray, n: int) -> tuple[Any, Any, Any, Any, Any]:
+    """``g, p, c1, c2, m1`` of a vector of search coordinates, or of each row of a matrix."""
+    g, m1 = phi[..., n], phi[..., n + 4]
+    p, k1, c2 = (_KMAX * np.tanh(phi[..., n + j]) for j in (1, 2, 3))
     return g, p, k1 * (1.0 + c2), c2, m1
 
 
@@ -110,21 +111,26 @@ def theta_from_stage(phi: np.ndarray, n_operators: int) -> np.ndarray:
     Parameters
     ----------
     phi : ndarray
-        ``[mu_0..mu_N-1, g, xp, x1, x2, m1]`` (see the module docstring).
+        ``[mu_0..mu_N-1, g, xp, x1, x2, m1]`` (see the module docstring), or one such row per
+        sample.
     n_operators : int
         Number of operators ``N``.
 
     Returns
     -------
     ndarray
-        Parameters in the order of ``PIStructure.names`` for the stage structure.
+        Parameters in the order of ``PIStructure.names`` for the stage structure (a row per
+        row of ``phi``).
     """
     n = n_operators
     g, p, c1, c2, m1 = _filters(phi, n)
     m0 = 1.0 + c1 + c2 - m1
-    a = np.convolve([1.0, -p], [1.0, c1, c2])
-    b = g * (1.0 - p) * np.array([1.0, c1, c2]) + (1.0 - g) * np.convolve([m0, m1], [1.0, -p])
-    return np.r_[phi[:n], a[1:], b[1:]]
+    # A(z) = (1 - p z^-1)(1 + c1 z^-1 + c2 z^-2); B(z) = g (1 - p) (1 + c1 z^-1 + c2 z^-2)
+    # + (1 - g)(m0 + m1 z^-1)(1 - p z^-1), both multiplied out (their leading terms are 1, m0)
+    gp, h = g * (1.0 - p), 1.0 - g
+    return np.concatenate([phi[..., :n], np.stack(
+        [c1 - p, c2 - p * c1, -p * c2,
+         gp * c1 + h * (m1 - p * m0), gp * c2 + h * -(p * m1)], axis=-1)], axis=-1)
 
 
 def stage_from_theta(theta: np.ndarray, n_operators: int) -> np.ndarray:
@@ -305,12 +311,13 @@ def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
 
 
 @njit(cache=True)
-def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err):
+def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err, kept):
     """Run the branches over ``u`` from the state ``st`` (updated in place).
 
     With ``learn`` each sample with a finite ``y`` updates ``phi`` and ``P``; ``J`` (one row per
     sample, or zero rows) receives the gradients; ``yhat`` and ``err`` the predictions and the
-    errors (NaN where ``y`` is not finite).
+    errors (NaN where ``y`` is not finite); ``kept`` (one row per sample, or zero rows) the
+    search coordinates after each sample.
     """
     n = r.shape[0]
     npar = phi.shape[0]
@@ -318,6 +325,7 @@ def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err):
     Pg = np.empty(npar)
     old = np.empty(npar)
     keep = J.shape[0] > 0
+    track = kept.shape[0] > 0
     for k in range(u.shape[0]):
         yh = _step(phi, r, u[k], st, psi)
         yhat[k] = yh
@@ -325,11 +333,13 @@ def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err):
             J[k, :] = psi
         if not np.isfinite(y[k]):
             err[k] = np.nan
-            continue
-        e = y[k] - yh
-        err[k] = e
-        if learn:
-            _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old)
+        else:
+            e = y[k] - yh
+            err[k] = e
+            if learn:
+                _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old)
+        if track:
+            kept[k, :] = phi
 
 
 # =========================================================================== the identifier
@@ -442,8 +452,12 @@ class PIStageOnline(Estimator):
         """The current estimate in the member's parameters, record units."""
         if self._phi is None:
             return self._theta_rest.copy()
-        th = theta_from_stage(self._phi, self.structure.n_operators)
-        th[: self.structure.n_operators] *= self._sy / self._su
+        return self._record_theta(self._phi)
+
+    def _record_theta(self, phi: np.ndarray) -> np.ndarray:
+        """The member's parameters in record units of search coordinates (a vector or rows)."""
+        th = theta_from_stage(phi, self.structure.n_operators)
+        th[..., : self.structure.n_operators] *= self._sy / self._su
         return th
 
     @property
@@ -547,15 +561,12 @@ class PIStageOnline(Estimator):
         m = len(u)
         un, yn = (u - self._u0) / self._su, y / self._sy
         yhat, err = np.empty(m), np.empty(m)
-        if history is None:
-            _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn, un, yn,
-                 self._st, True, np.zeros((0, len(self._phi))), yhat, err)
-        else:
-            for j in range(m):  # one sample at a time to record the estimate after each
-                _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
-                     un[j:j + 1], yn[j:j + 1], self._st, True, np.zeros((0, len(self._phi))),
-                     yhat[j:j + 1], err[j:j + 1])
-                history[j] = self.theta
+        npar = len(self._phi)
+        kept = np.empty((m if history is not None else 0, npar))
+        _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn, un, yn,
+             self._st, True, np.zeros((0, npar)), yhat, err, kept)
+        if history is not None:  # the estimate after each sample, as theta gives it
+            history[:] = self._record_theta(kept)
         if errors is not None:
             errors[:] = err * self._sy
         self.k += m
@@ -634,7 +645,8 @@ class PIStageOnline(Estimator):
         st = st0.copy()
         J = np.empty((len(u), len(phi)))
         yhat, err = np.empty(len(u)), np.empty(len(u))
-        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, u, y, st, False, J, yhat, err)
+        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, u, y, st, False, J, yhat, err,
+             np.zeros((0, len(phi))))
         return err, J, st
 
     def _resolve(self) -> None:
