@@ -670,10 +670,13 @@ class PIStageOnline(Estimator):
             err, J, st = self._simulate(phi, self._wstate, u, y)
             f = cost(phi, err)
             damping = 1e-3
+            A = grad = None
             for _ in range(self.iterations):
-                seen = np.isfinite(err)
-                A = J[seen].T @ J[seen] + R_a
-                grad = J[seen].T @ err[seen] - R_a @ (phi - phi_a)
+                if A is None:  # the normal equations at phi, kept while trials are refused
+                    seen = np.isfinite(err)
+                    Js, es = J[seen], err[seen]
+                    A = Js.T @ Js + R_a
+                    grad = Js.T @ es - R_a @ (phi - phi_a)
                 trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
                 if not ((_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n))
                         and _l2_stable(trial, n)):
@@ -684,6 +687,7 @@ class PIStageOnline(Estimator):
                 if np.isfinite(f_t) and f_t < f:
                     phi, err, J, st, f = trial, err_t, J_t, st_t, f_t
                     damping = max(damping / 3.0, 1e-9)
+                    A = None
                 else:
                     damping *= 4.0
             if best is None or f < best[0]:
