@@ -30,11 +30,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["advance", "as_layout", "duhem_sens_row", "duhem_w2", "is_plain", "jacobian_block",
-           "l1_sens_direct", "l1_sens_propagate", "l1_sens_row", "l2_output", "l2_output_sens",
-           "l2_sens_direct", "l2_sens_propagate", "l2_sens_row", "offsets", "sens_rows",
-           "shape_offsets", "shape_terms", "simulate_into", "sensitivities_into", "step",
-           "step_sens", "step_sens_row"]
+__all__ = ["advance", "as_layout", "duhem_sens_row", "duhem_w2", "filter_output", "is_plain",
+           "jacobian_block", "l1_sens_direct", "l1_sens_propagate", "l1_sens_row",
+           "l2_output_sens", "l2_sens_direct", "l2_sens_propagate", "l2_sens_row",
+           "monic_output", "offsets", "sens_rows", "shape_offsets", "shape_terms",
+           "simulate_into", "sensitivities_into", "step", "step_sens", "step_sens_row"]
 
 
 @njit(cache=True)
@@ -145,12 +145,7 @@ def advance(theta, layout, U, W1, W2, Y, start, stop):
     g0 = theta[i_g0]
     plain = is_plain(layout)
     for k in range(start, stop):
-        # eq. (1), b10 = 1
-        w1 = U[k - q1]
-        for j in range(1, n1b + 1):
-            w1 += theta[i_b1 + j - 1] * U[k - q1 - j]
-        for i in range(1, n1a + 1):
-            w1 -= theta[i_a1 + i - 1] * W1[k - i]
+        w1 = monic_output(theta, i_b1, n1b, i_a1, n1a, q1, U, W1, k)  # eq. (1), b10 = 1
         W1[k] = w1
         # eq. (7)
         w1p = W1[k - 1]
@@ -161,13 +156,7 @@ def advance(theta, layout, U, W1, W2, Y, start, stop):
         else:
             A, F, G, dF, dG = shape_terms(theta, layout, w1p, sgn(dw1))
             W2[k] = w2p + A * (f0 * sgn(w1p) + F - w2p) * abs(dw1) + G * dw1
-        # eq. (2), b20 = 1
-        y = W2[k - q2]
-        for j in range(1, n2b + 1):
-            y += theta[i_b2 + j - 1] * W2[k - q2 - j]
-        for i in range(1, n2a + 1):
-            y -= theta[i_a2 + i - 1] * Y[k - i]
-        Y[k] = y
+        Y[k] = monic_output(theta, i_b2, n2b, i_a2, n2a, q2, W2, Y, k)  # eq. (2), b20 = 1
 
 
 @njit(cache=True, inline="always")
@@ -361,21 +350,36 @@ def _shape_sens(theta, layout, S1, S2, ks, w1p, w2p, dw1):
 
 
 @njit(cache=True, inline="always")
-def l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k):
-    """``Y[k]`` of an L2 whose whole numerator ``c[ib2:ib2+n2b]`` is given (the unit-gain
-    members, eq. 31): ``y(k) = sum_j b2j w2(k-q2-j) - sum_i a2i y(k-1-i)``."""
+def monic_output(theta, ib, nb, ia, na, q, X, Y, k):
+    """``y(k)`` of eq. (1) or (2), whose numerator's leading coefficient is 1:
+    ``x(k-q) + sum_j theta[ib+j-1] x(k-q-j) - sum_i theta[ia+i-1] y(k-i)`` (``j, i`` from 1 to
+    ``nb``, ``na``); returned, not written (a caller may limit it first)."""
+    y = X[k - q]
+    for j in range(1, nb + 1):
+        y += theta[ib + j - 1] * X[k - q - j]
+    for i in range(1, na + 1):
+        y -= theta[ia + i - 1] * Y[k - i]
+    return y
+
+
+@njit(cache=True, inline="always")
+def filter_output(c, ib, nb, ia, na, q, X, Y, k):
+    """``y(k)`` of a filter whose whole numerator ``c[ib:ib+nb]`` is given (the unit-gain
+    members' L1 and L2, eqs. 29, 31): ``sum_j c[ib+j] x(k-q-j) - sum_i c[ia+i] y(k-1-i)``;
+    returned, not written."""
     y = 0.0
-    for j in range(n2b):
-        y += c[ib2 + j] * W2[k - q2 - j]
-    for i in range(n2a):
-        y -= c[ia2 + i] * Y[k - 1 - i]
-    Y[k] = y
+    for j in range(nb):
+        y += c[ib + j] * X[k - q - j]
+    for i in range(na):
+        y -= c[ia + i] * Y[k - 1 - i]
+    return y
 
 
 @njit(cache=True, inline="always")
 def l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc):
-    """:func:`l2_output` with the sensitivities ``SY[k, :nc]`` from those of ``w2``."""
-    l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
+    """L2's :func:`filter_output` written to ``Y[k]``, with the sensitivities ``SY[k, :nc]`` from
+    those of ``w2``."""
+    Y[k] = filter_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
     # a term at a time over the whole row (each column summed in the same order as a column
     # at a time, so the same to the last bit; the row's loop is the one that vectorises)
     for q in range(nc):

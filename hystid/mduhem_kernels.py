@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from .kernels import l2_output, l2_output_sens
+from .kernels import filter_output, l2_output_sens
 
 __all__ = ["coefficient_offsets", "mduhem_advance", "mduhem_sensitivities_into",
            "mduhem_simulate_into", "mduhem_step"]
@@ -92,11 +92,7 @@ def mduhem_advance(c, lay, U, W1, W2, Y, p, start, stop):
     n1a, n1b, m, n2a, n2b, q1, q2 = lay[0], lay[1], lay[2], lay[3], lay[4], lay[5], lay[6]
     ia1, ib1, ial, if1, ig0, ia2, ib2, nc = coefficient_offsets(lay)
     for k in range(start, stop):
-        w1 = 0.0
-        for j in range(n1b):
-            w1 += c[ib1 + j] * U[k - q1 - j]
-        for i in range(n1a):
-            w1 -= c[ia1 + i] * W1[k - 1 - i]
+        w1 = filter_output(c, ib1, n1b, ia1, n1a, q1, U, W1, k)
         W1[k] = w1
         v = W1[k - 1]
         d = w1 - v
@@ -106,7 +102,7 @@ def mduhem_advance(c, lay, U, W1, W2, Y, p, start, stop):
             p[j] = p[j] + c[ial + j] * (c[if1 + j] * v - p[j]) * ad + c[ig0 + j] * d
             w2 += p[j]
         W2[k] = w2
-        l2_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
+        Y[k] = filter_output(c, ib2, n2b, ia2, n2a, q2, W2, Y, k)
 
 
 @njit(cache=True)
@@ -161,11 +157,7 @@ def mduhem_sensitivities_into(c, lay, U, W1, W2, Y, p, S1, SW2, SY, SP, start):
     n1 = n1a + n1b
     for k in range(start, U.shape[0]):
         # L1 and its sensitivities (only to a1, b1)
-        w1 = 0.0
-        for j in range(n1b):
-            w1 += c[ib1 + j] * U[k - q1 - j]
-        for i in range(n1a):
-            w1 -= c[ia1 + i] * W1[k - 1 - i]
+        w1 = filter_output(c, ib1, n1b, ia1, n1a, q1, U, W1, k)
         W1[k] = w1
         for q in range(nc):
             S1[k, q] = 0.0

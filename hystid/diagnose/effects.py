@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..kernels import offsets, sgn
+from ..kernels import monic_output, offsets, sgn
 from ..model import DuhemSandwich, InitialCondition, SandwichResponse
 from ..signals import finite_signal
 from ..validate import check_plain_duhem
@@ -351,12 +351,8 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
     lim = 1.0 / (inv_rate / dt) if inv_rate > 0.0 else 0.0
     drifts = d1 != 0.0 or d2 != 0.0 or d3 != 0.0
     for k in range(start, U.shape[0]):
-        # eq. (1) on the delayed input, b10 = 1
-        w1 = UD[k - q1]
-        for j in range(1, n1b + 1):
-            w1 += theta[i_b1 + j - 1] * UD[k - q1 - j]
-        for i in range(1, n1a + 1):
-            w1 -= theta[i_a1 + i - 1] * W1[k - i]
+        # eq. (1) on the delayed input
+        w1 = monic_output(theta, i_b1, n1b, i_a1, n1a, q1, UD, W1, k)
         if inv_rate > 0.0:
             step = w1 - W1[k - 1]
             if step > lim:
@@ -389,13 +385,7 @@ def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt)
                 c_log[j] += lam_log[j] * (k_log / N_LOG * W2[k] - c_log[j])
                 v += c_log[j]
         V[k] = v
-        # eq. (2), b20 = 1
-        y = V[k - q2]
-        for j in range(1, n2b + 1):
-            y += theta[i_b2 + j - 1] * V[k - q2 - j]
-        for i in range(1, n2a + 1):
-            y -= theta[i_a2 + i - 1] * YL[k - i]
-        YL[k] = y
+        YL[k] = monic_output(theta, i_b2, n2b, i_a2, n2a, q2, V, YL, k)  # eq. (2) on v
         # extra modes, in parallel with L2 and in series after it
         if bm != 0.0:
             M[k] = p1 * M[k - 1] + p2 * M[k - 2] + bm * V[k]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..kernels import l2_output_sens
+from ..kernels import filter_output, l2_output_sens
 from ..model import InitialCondition
 from ..pi import PISandwich, PIStructure
 from ..pi_operator import play
@@ -33,11 +33,7 @@ __all__ = [
 @njit(cache=True, inline="always")
 def _l1_step(c, n1a, n1b, q1, U, W1, S1, k):
     # eq. (29) at index k and d w1 / d (a1, b1) with c = [a1 (n1a), b1 (n1b), ...]; returns w1
-    w1 = 0.0
-    for j in range(n1b):
-        w1 += c[n1a + j] * U[k - q1 - j]
-    for i in range(n1a):
-        w1 -= c[i] * W1[k - 1 - i]
+    w1 = filter_output(c, n1a, n1b, 0, n1a, q1, U, W1, k)
     W1[k] = w1
     for m in range(n1a + n1b):
         s = 0.0
