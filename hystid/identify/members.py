@@ -124,27 +124,48 @@ class Member:
 
     def _online(self, record: Record, progress: Callable[[int, int], None] | None,
                 settings: dict[str, Any]) -> IdentificationResult:
-        """The PI member's on-line identifier on the record less its rest, placed back; the
-        thresholds by the member's rule over the fitted samples. The ``pi-stage`` shape runs
-        :class:`~hystid.identify.pi_online.PIStageOnline`, other PI structures the extended
-        recursion :class:`~hystid.identify.pi_recursive.PIRecursiveIdentifier`."""
-        from ..thresholds import RULES
+        """The PI member's on-line identifier (:meth:`online_estimator`) on the record less its
+        rest, placed back."""
         from . import run_placed
+
+        return run_placed(record, lambda rel: self.online_estimator(record, **settings),
+                          progress, zero_at_start=True)
+
+    def online_estimator(self, record: Record, **settings: Any) -> Any:
+        """The PI member's on-line identifier for a record, as ``identify(..., method="online")``
+        configures it (not run); it is given the record less its rest.
+
+        The thresholds by the member's rule over the record's fitted samples. The ``pi-stage``
+        shape is :class:`~hystid.identify.pi_online.PIStageOnline` (its warm-up follows a
+        short record), other PI structures the extended recursion
+        :class:`~hystid.identify.pi_recursive.PIRecursiveIdentifier` (at rest at 0, no
+        offset: the record it is given is already relative).
+
+        Parameters
+        ----------
+        record : Record
+            The record the thresholds and the warm-up are taken from.
+        **settings
+            Passed to the identifier's constructor.
+
+        Returns
+        -------
+        PIStageOnline or PIRecursiveIdentifier
+        """
+        from ..thresholds import RULES
         from .pi_online import PIStageOnline, is_stage_structure
         from .pi_recursive import PIRecursiveIdentifier
         from .prepare import prepare
 
+        if self.kind != "pi":
+            raise ValueError(f"model: the {self.name} member has no PI on-line identifier")
         rule = self.settings.get("thresholds", "range")
         r = RULES[rule](record.u[prepare(record).fitted], self.structure.n_operators)
+        base = {"thresholds": r, "structure": self.structure, "fs": record.fs}
         if is_stage_structure(self.structure):
-            settings = {"warmup": short_record_warmup(record.u, self.n_params), **settings}
-            return run_placed(record, lambda rel: PIStageOnline(
-                **{"thresholds": r, "structure": self.structure, "fs": record.fs, **settings}),
-                progress, zero_at_start=True)
-        # the record it runs on is already taken relative to its rest (run_placed)
-        return run_placed(record, lambda rel: PIRecursiveIdentifier(
-            **{"thresholds": r, "structure": self.structure, "fs": record.fs, "u_rest": 0.0,
-               "offset": 0.0, **settings}), progress, zero_at_start=True)
+            return PIStageOnline(**{**base, "warmup": short_record_warmup(record.u, self.n_params),
+                                    **settings})
+        return PIRecursiveIdentifier(**{**base, "u_rest": 0.0, "offset": 0.0, **settings})
 
 
 #: Warm-up of the ``pi-stage`` on-line identifier, in excited samples (0.2 s at 10 kHz), and
