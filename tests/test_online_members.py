@@ -97,7 +97,12 @@ def test_online_is_within_the_goal_of_batch_on_the_look_alike():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = identify(train, model="pi-stage", method="online").model
+        rows = compare(model, train, held).rows
     assert _admissible(model)
+    # and it beats a static line and a linear model on every held-out record (measured 31 / 56
+    # / 63 nm against linear 58 / 124 / 112 nm and static 192-221 nm)
+    for r in rows:
+        assert r["model"] < 0.7 * min(r["static_line"], r["linear"]), r
     big = stage_a_like("large_sine", seconds=1.0, seed=1)  # beyond the training envelope
     y = simulate_from_rest(model, big.u, check=False)
     assert np.all(np.isfinite(y)) and np.max(np.abs(y)) < 10 * np.ptp(big.y)
