@@ -73,6 +73,37 @@ def test_update_sample_by_sample_is_fit():
     assert res.info["excited_at"] == est.excited_at > 0
 
 
+def test_the_resolve_rate_bounds_the_work_of_each_update_and_changes_no_estimate():
+    """The re-solve runs in steps beside the recursion (hystid.identify.horizon): each
+    ``update()`` does at most ``resolve_rate`` simulated samples of its work and one step more,
+    except at a chunk boundary where a re-solve not yet solved is finished; the estimates are the
+    same whatever the rate."""
+    from hystid.identify.horizon import SLICE, TRIAL
+
+    rec = stage_a_like("prbn", seconds=0.25, rest_seconds=0.05, seed=2)
+    u, y = rec.u - rec.u[0], rec.y - rec.y[0]
+    r = np.arange(20) / 20 * 0.5 * np.ptp(u[:-1])
+    settings = dict(warmup=600, window=1000, every=250, fs=rec.fs)
+    ref = PIStageOnline(r, STAGE, resolve_rate=np.inf, **settings).fit(Record(u, y, rec.fs))
+    slow = PIStageOnline(r, STAGE, resolve_rate=20.0, **settings)
+    work, steps, boundary = [], [], []
+    for a, b in zip(u, y, strict=True):
+        before, resolves = slow.resolve_work_, slow.n_resolves
+        steps.append(slow.update(float(a), float(b)))
+        work.append(slow.resolve_work_ - before)
+        boundary.append(slow.n_resolves > resolves)  # a re-solve took over in this call
+    assert np.array_equal(np.array(steps), ref.history)
+    work, boundary = np.array(work), np.array(boundary)
+    assert boundary.sum() == ref.info["resolves"] > 3
+    within = work[~boundary & (np.arange(len(u)) > np.flatnonzero(boundary)[0])]
+    assert within.max() <= 20.0 + max(SLICE, TRIAL) + 1
+    assert np.mean(within) == pytest.approx(20.0, rel=0.5)  # the rate is used, on average
+    # a rate of 20 is too slow for these re-solves: the boundaries finish them
+    assert work[boundary].max() > 1000
+    with pytest.raises(ValueError, match="resolve_rate"):
+        PIStageOnline(r, STAGE, resolve_rate=0.0)
+
+
 def test_settings_are_checked():
     r = np.arange(20) / 20.0
     with pytest.raises(ValueError, match="structure"):

@@ -36,13 +36,17 @@ The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
 3. every sample: the branch states and their sensitivities are propagated and the estimate is
    updated by a recursive Gauss-Newton step (a recursive prediction-error method) with a
    bounded step, kept admissible;
-4. every ``every`` excited samples (a *background* re-solve of bounded size): a few
+4. every ``every`` excited samples (a chunk), a *background* re-solve of bounded size: a few
    Levenberg-Marquardt iterations on the last ``window`` samples, from the branch states at
    the window's start, with an arrival cost (a moving-horizon estimator): each chunk of
    samples that leaves the window is folded into a quadratic prior, linearised at the
-   estimate of the time. Its cost, ``O(window n^2)`` per iteration every ``every`` samples,
-   is bounded per sample whatever the record's length; with the default ``window`` (1 s at
-   10 kHz) the last re-solve on a record with 1 s of excitation spans all of it.
+   estimate of the time. Its cost, ``O(window n^2)`` per iteration, is spread over the
+   samples that follow (:class:`~hystid.identify.horizon.HorizonSolve`, ``resolve_rate``
+   simulated samples of work per sample), and its estimate taken at the first chunk
+   boundary after it finished, the branches carried forward over the samples since its
+   window ended: no ``update()`` call carries a whole re-solve, and the estimates depend on
+   sample counts only. With the default ``window`` (1 s at 10 kHz) the last re-solve on a
+   record with 1 s of excitation spans all of it.
 
 Admissible: L2 stable (by construction) and a positive loading slope, every cumulative sum of
 the weights ``mu_0 + .. + mu_i > 0``: the warm-up fit is moved into that set
@@ -64,6 +68,7 @@ from ..pi import PISandwich, PIStructure
 from ..poly import KMAX_STABLE, schur_stable
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
+from .horizon import HorizonSolve, drain, run_steps
 from .result import IdentificationResult, converged_at
 
 __all__ = ["PIStageOnline", "admissible_weights", "is_stage_structure", "stage_from_theta",
@@ -77,6 +82,11 @@ _STATE_ROWS = 12
 _KMAX = 1.0 - 1e-6
 #: Rest samples kept before the excitation for the warm-up fit.
 _REST_KEPT = 200
+#: Default work of the running re-solve per processed sample, in simulated samples (20-35 us a
+#: sample on stage A: 20 operators, 140-250 ns a simulated sample). A re-solve there takes
+#: 20 000-80 000 (a few simulations of the 10 000-sample window, most trials refused), so
+#: nearly all end within the 500 samples of a chunk; the rare rest is done at its boundary.
+RESOLVE_RATE = 150.0
 
 
 def is_stage_structure(structure: PIStructure) -> bool:
@@ -366,6 +376,16 @@ class PIStageOnline(Estimator):
         Excited samples between two re-solves.
     iterations : int
         Levenberg-Marquardt evaluations per re-solve (0: the recursion alone).
+    resolve_rate : float
+        Work of the running re-solve done per processed sample, in simulated samples (see
+        :mod:`hystid.identify.horizon`): the bound on the re-solve's share of each
+        ``update()`` call: a re-solve's estimate takes over at the next chunk boundary, and
+        the work it has left then (if any) is done in that call. The estimates do not depend
+        on it.
+    settle_at_end : bool
+        :meth:`partial_fit` (and :meth:`fit`) end with :meth:`settle`, so that the model at
+        the end of a record is the re-solve's over its last window (``identify`` runs it so);
+        by default they end as ``update()`` calls would.
     P0 : float
         Prior variance of every search coordinate (normalised units) before any data.
     forgetting : float
@@ -385,6 +405,9 @@ class PIStageOnline(Estimator):
         Samples processed.
     n_resolves : int
         Re-solves run so far.
+    resolve_work_ : float
+        Work the re-solves have done so far, in simulated samples
+        (:attr:`~hystid.identify.horizon.HorizonSolve.spent`).
     e, yhat : float
         Prediction error and prediction of the last sample (output units).
     """
@@ -400,6 +423,8 @@ class PIStageOnline(Estimator):
         window: int = 10_000,
         every: int = 500,
         iterations: int = 12,
+        resolve_rate: float = RESOLVE_RATE,
+        settle_at_end: bool = False,
         P0: float = 1.0,
         forgetting: float = 1.0,
         max_step: float = 0.05,
@@ -424,11 +449,14 @@ class PIStageOnline(Estimator):
                              ("fs", fs)):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{label}: expected a positive finite number, got {value!r}")
+        if not resolve_rate > 0:  # inf allowed
+            raise ValueError(f"resolve_rate: expected a positive number, got {resolve_rate!r}")
         if not 0.0 < forgetting <= 1.0:
             raise ValueError(f"forgetting: expected a value in (0, 1], got {forgetting!r}")
         self.thresholds, self.structure = r, s
         self.warmup, self.window, self.every = int(warmup), int(window), int(every)
-        self.iterations = int(iterations)
+        self.iterations, self.resolve_rate = int(iterations), float(resolve_rate)
+        self.settle_at_end = bool(settle_at_end)
         self.P0, self.forgetting, self.max_step = float(P0), float(forgetting), float(max_step)
         self.epsilon, self.fs = float(epsilon), float(fs)
         self.reset()
@@ -439,8 +467,10 @@ class PIStageOnline(Estimator):
         """The constructor's configuration as plain values (JSON-ready)."""
         return {"thresholds": self.thresholds.tolist(), "n_operators": self.structure.n_operators,
                 "warmup": self.warmup, "window": self.window, "every": self.every,
-                "iterations": self.iterations, "P0": self.P0, "forgetting": self.forgetting,
-                "max_step": self.max_step, "epsilon": self.epsilon, "fs": self.fs}
+                "iterations": self.iterations, "resolve_rate": self.resolve_rate,
+                "settle_at_end": self.settle_at_end,
+                "P0": self.P0, "forgetting": self.forgetting, "max_step": self.max_step,
+                "epsilon": self.epsilon, "fs": self.fs}
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -482,6 +512,7 @@ class PIStageOnline(Estimator):
         self.excited_at: int | None = None
         self.warmup_seconds_ = 0.0
         self.resolve_seconds_ = 0.0
+        self.resolve_work_ = 0.0
         self._u0: float | None = None
         self._rest: list[tuple[float, float]] = []
         self._buffer: list[tuple[float, float]] = []
@@ -497,6 +528,7 @@ class PIStageOnline(Estimator):
         self._wstate = np.zeros((_STATE_ROWS, n))  # the branches at the window's start
         self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
         self._solved: np.ndarray | None = None  # the last re-solve's estimate
+        self._job: HorizonSolve | None = None  # the re-solve running
         return self
 
     # ----------------------------------------------------------------- one sample
@@ -517,6 +549,21 @@ class PIStageOnline(Estimator):
         """
         u, y = sample_arrays(u_k, y_k)
         self._process(u, y)
+        return self.theta
+
+    def settle(self) -> np.ndarray:
+        """Let the running re-solve's estimate take over now, its remaining work done in this
+        call: the estimate of the latest window (and the branches and covariance with it)
+        instead of the recursion's since the last chunk boundary. For the model at the end of
+        a record; beside a loop it is the burst the stepped re-solve avoids.
+
+        Returns
+        -------
+        ndarray
+            A copy of theta(k), in the order of :attr:`names`.
+        """
+        if self._job is not None:
+            self._apply()
         return self.theta
 
     def _process(self, u: np.ndarray, y: np.ndarray,
@@ -573,9 +620,9 @@ class PIStageOnline(Estimator):
         self.e, self.yhat = float(err[-1] * self._sy), float(yhat[-1] * self._sy)
         self._chunk_u.extend(un.tolist())
         self._chunk_y.extend(yn.tolist())
+        self._advance(un, yn)
         if len(self._chunk_u) >= self.every:
             self._close_chunk()
-            self._resolve()
             if history is not None:
                 history[-1] = self.theta
 
@@ -610,97 +657,78 @@ class PIStageOnline(Estimator):
         self._phi, self._st, self._solved = phi, st, phi.copy()
         self._P = np.linalg.inv(J[seen].T @ J[seen] + self._arrival[1])
         self._buffer, self._rest = [], []
-        while len(self._chunks) > self._keep():
-            self._fold(phi)
+        if self._chunks and not self._chunk_u:  # a first re-solve, in the warm-up's time
+            self._launch((phi, phi))
+            self._apply()
         self.warmup_seconds_ = time.perf_counter() - t0
-        if self._chunks and not self._chunk_u:
-            self._resolve()
 
     # ----------------------------------------------------------------- moving horizon
     def _keep(self) -> int:
         return max(1, self.window // self.every)
 
     def _close_chunk(self) -> None:
-        """The open chunk is complete: keep it in the window; open the next one."""
+        """The open chunk is complete: keep it in the window and open the next one; the
+        running re-solve's estimate takes over (the work it has left done now) and the next
+        re-solve is launched."""
         self._chunks.append((np.array(self._chunk_u), np.array(self._chunk_y)))
         self._chunk_u, self._chunk_y = [], []
-
-    def _fold(self, phi: np.ndarray) -> None:
-        """Drop the window's oldest chunk into the arrival cost, linearised at ``phi``.
-
-        Its cost ``|e - J d|^2`` is added to ``(d - d_a)' R_a (d - d_a)`` (``d = phi' - phi``),
-        and the window starts at the chunk's end, the branches run with ``phi``.
-        """
-        u, y = self._chunks.pop(0)
-        err, J, st = self._simulate(phi, self._wstate, u, y)
-        seen = np.isfinite(err)
-        J, err = J[seen], err[seen]
-        phi_a, R_a = self._arrival
-        R = R_a + J.T @ J
-        self._arrival = (np.linalg.solve(R, R_a @ phi_a + J.T @ (J @ phi + err)), R)
-        self._wstate = st
+        recursion = self._phi.copy()
+        if self._job is not None:
+            self._apply()
+        self._launch((recursion, self._solved))
 
     def _simulate(self, phi: np.ndarray, st0: np.ndarray, u: np.ndarray,
                   y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        st = st0.copy()
-        J = np.empty((len(u), len(phi)))
-        yhat, err = np.empty(len(u)), np.empty(len(u))
-        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, u, y, st, False, J, yhat, err,
+        return drain(run_steps(self._slice, phi, st0, u, y))
+
+    def _slice(self, phi: np.ndarray, st: np.ndarray, u: np.ndarray, y: np.ndarray,
+               J: np.ndarray, err: np.ndarray) -> None:
+        """The branches over a slice, gradients and errors written (the re-solve's
+        :data:`~hystid.identify.horizon.Simulate`)."""
+        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, u, y, st, False, J, np.empty(len(u)), err,
              np.zeros((0, len(phi))))
-        return err, J, st
 
-    def _resolve(self) -> None:
-        """Levenberg-Marquardt on the window with the arrival cost, from the recursion's
-        estimate and from the last re-solve's (the lower cost is kept: the recursion may have
-        drifted along a direction the data do not fix); then the oldest chunk is folded into
-        the arrival cost once the window is full."""
-        t0 = time.perf_counter()
-        u = np.concatenate([c[0] for c in self._chunks])
-        y = np.concatenate([c[1] for c in self._chunks])
+    def _admissible(self, trial: np.ndarray, phi: np.ndarray) -> bool:
+        """A re-solve's trial: L2 stable, the loading slope positive or no lower than at
+        ``phi``."""
         n = self.structure.n_operators
-        phi_a, R_a = self._arrival
+        after = _slope(trial, n)
+        return bool((after > 0 or after >= _slope(phi, n)) and _l2_stable(trial, n))
 
-        def cost(phi, err):
-            d = phi - phi_a
-            return float(np.nansum(err ** 2) + d @ R_a @ d)
+    def _launch(self, starts: tuple[np.ndarray, ...]) -> HorizonSolve:
+        """A re-solve of the window's last ``window // every`` chunks (the older ones folded
+        into the arrival cost at the last re-solve's estimate first), from the recursion's
+        estimate and from the last re-solve's (the lower cost is kept: the recursion may have
+        drifted along a direction the data do not fix)."""
+        leaving = max(0, len(self._chunks) - self._keep())
+        self._job = HorizonSolve(self._slice, self._admissible, self._chunks, self._wstate,
+                                 self._arrival, starts, self.iterations, leaving=leaving,
+                                 linearised_at=self._solved)
+        return self._job
 
-        best = None
-        for start in (self._phi, self._solved):
-            phi = start.copy()
-            err, J, st = self._simulate(phi, self._wstate, u, y)
-            f = cost(phi, err)
-            damping = 1e-3
-            A = grad = None
-            for _ in range(self.iterations):
-                if A is None:  # the normal equations at phi, kept while trials are refused
-                    seen = np.isfinite(err)
-                    Js, es = J[seen], err[seen]
-                    A = Js.T @ Js + R_a
-                    grad = Js.T @ es - R_a @ (phi - phi_a)
-                trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), grad)
-                if not ((_slope(trial, n) > 0 or _slope(trial, n) >= _slope(phi, n))
-                        and _l2_stable(trial, n)):
-                    damping *= 4.0
-                    continue
-                err_t, J_t, st_t = self._simulate(trial, self._wstate, u, y)
-                f_t = cost(trial, err_t)
-                if np.isfinite(f_t) and f_t < f:
-                    phi, err, J, st, f = trial, err_t, J_t, st_t, f_t
-                    damping = max(damping / 3.0, 1e-9)
-                    A = None
-                else:
-                    damping *= 4.0
-            if best is None or f < best[0]:
-                best = (f, phi, err, J, st)
-        _, phi, err, J, st = best
-        self._solved = phi.copy()
-        seen = np.isfinite(err)
-        self._phi, self._st = phi, st
-        self._P = np.linalg.inv(J[seen].T @ J[seen] + R_a)
-        if len(self._chunks) >= self._keep():
-            self._fold(phi)
+    def _apply(self) -> None:
+        """The solved re-solve's estimate takes over, with the branches it ran over the
+        samples since its window ended and its information (the recursion's covariance is the
+        inverse); the chunks it folded leave the window."""
+        t0, before = time.perf_counter(), self._job.spent
+        res = self._job.result()
+        self.resolve_work_ += self._job.spent - before
+        del self._chunks[:len(self._job.leaving)]
+        self._arrival, self._wstate = res.arrival, res.start
+        self._phi, self._st, self._solved = res.phi.copy(), res.state, res.phi.copy()
+        self._P = np.linalg.inv(res.information)
+        self._job = None
         self.n_resolves += 1
         self.resolve_seconds_ += time.perf_counter() - t0
+
+    def _advance(self, u: np.ndarray, y: np.ndarray) -> None:
+        """Samples the running re-solve follows, and its share of work for them."""
+        if self._job is not None:
+            t0, before = time.perf_counter(), self._job.spent
+            self._job.feed(u, y)
+            self._job.advance(len(u) * self.resolve_rate)
+            self.resolve_work_ += self._job.spent - before
+            self.resolve_seconds_ += time.perf_counter() - t0
 
     # ----------------------------------------------------------------- a record
     def _restart(self, record: Record) -> None:
@@ -740,6 +768,8 @@ class PIStageOnline(Estimator):
         errors = np.empty(n)
         t0 = time.perf_counter()
         self._process(u, y, history, errors, progress)
+        if self.settle_at_end and n:
+            history[-1] = self.settle()
         self._warn_skipped(before)
         tail = errors[-max(1, n // 10):]
         tail = tail[np.isfinite(tail)]
