@@ -180,6 +180,9 @@ class _PIOutputError:
                  structure: PIStructure, fit_offset: bool) -> None:
         s = self.structure = structure
         self.un, self.r, self.rows, self.target = un, r, rows, yn[rows]
+        # the fitted samples as a slice when they are a run (no copy of the Jacobian's rows)
+        whole = len(rows) and np.array_equal(rows, np.arange(rows[0], rows[0] + len(rows)))
+        self.kept = slice(int(rows[0]), int(rows[0]) + len(rows)) if whole else rows
         self.fit_offset = fit_offset
         self.n = len(s.names)
         sl, index = s.slices(), np.arange(self.n)
@@ -205,15 +208,15 @@ class _PIOutputError:
         if self._cache.get("z") is None or not np.array_equal(self._cache["z"], z):
             theta, dtheta = self.rp.to_theta(z[: self.n])
             with np.errstate(over="ignore", invalid="ignore"):
-                yhat, J = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
-                                                  self.un)
+                yhat, Jz = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
+                                                   self.un, chain=dtheta)
             y0 = z[self.n] if self.fit_offset else 0.0
-            data = yhat[self.rows] + y0 - self.target
+            data = yhat[self.kept] + y0 - self.target
             # [J | r] written in place: the data rows (sensitivities in z, the offset's ones),
             # the ridge rows, the residuals last
             m, width = len(self.rows), self.n + int(self.fit_offset)
             A = np.empty((m + len(self.mu), width + 1))
-            A[:m, :self.n] = J[self.rows] @ dtheta
+            A[:m, :self.n] = Jz[self.kept]
             A[:m, self.n:width] = self.ones
             A[m:, :width] = self.ridge_rows
             A[:m, width] = data

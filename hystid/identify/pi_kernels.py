@@ -410,7 +410,8 @@ def _n_full(s: PIStructure) -> int:
 
 
 def pi_output_sensitivities(
-    model: PISandwich, u: np.ndarray, x0: InitialCondition | None = None
+    model: PISandwich, u: np.ndarray, x0: InitialCondition | None = None,
+    chain: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Simulated output and its Jacobian ``d yhat / d theta`` (``N x n_params``) from rest/x0.
 
@@ -422,11 +423,14 @@ def pi_output_sensitivities(
         Input samples.
     x0 : InitialCondition, optional
         Past signal values; at rest by default.
+    chain : ndarray, optional
+        ``d theta / d z`` (``n_params x n_z``): the Jacobian is then ``d yhat / d z``, formed
+        in one product with the sensitivities (a search in other coordinates).
 
     Returns
     -------
     tuple of ndarray
-        ``yhat`` (N) and its Jacobian (N x n_params).
+        ``yhat`` (N) and its Jacobian (N x n_params, or N x n_z with ``chain``).
     """
     s = model.structure
     x0 = x0 or InitialCondition()
@@ -447,7 +451,7 @@ def pi_output_sensitivities(
     SP = np.zeros((s.n_operators, nc))
     pi_sensitivities_into(c, layout, model.thresholds, U, W1, W2, Y, S1, SW2, SY, p, SP, P)
     T = _free_map(layout, len(model.theta), nc)
-    return Y[P:], SY[P:] @ T
+    return Y[P:], SY[P:] @ (T if chain is None else T @ chain)
 
 
 def _free_map(layout: np.ndarray, npar: int, nc: int) -> np.ndarray:
