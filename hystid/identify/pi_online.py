@@ -108,11 +108,25 @@ def is_stage_structure(structure: PIStructure) -> bool:
 
 
 # =========================================================================== coordinates
-def _filters(phi: np.ndarray, n: int) -> tuple[Any, Any, Any, Any, Any]:
-    """``g, p, c1, c2, m1`` of a vector of search coordinates, or of each row of a matrix."""
-    g, m1 = phi[..., n], phi[..., n + 4]
-    p, k1, c2 = (_KMAX * np.tanh(phi[..., n + j]) for j in (1, 2, 3))
-    return g, p, k1 * (1.0 + c2), c2, m1
+@njit(cache=True)
+def _theta_rows(phi, n, out):
+    # theta_from_stage of each row of phi (2-D), into out
+    for k in range(phi.shape[0]):
+        g, m1 = phi[k, n], phi[k, n + 4]
+        p = _KMAX * np.tanh(phi[k, n + 1])
+        c2 = _KMAX * np.tanh(phi[k, n + 3])
+        c1 = _KMAX * np.tanh(phi[k, n + 2]) * (1.0 + c2)
+        m0 = 1.0 + c1 + c2 - m1
+        # A(z) = (1 - p z^-1)(1 + c1 z^-1 + c2 z^-2); B(z) = g (1 - p) (1 + c1 z^-1 + c2 z^-2)
+        # + (1 - g)(m0 + m1 z^-1)(1 - p z^-1), both multiplied out (their leading terms 1, m0)
+        gp, h = g * (1.0 - p), 1.0 - g
+        for i in range(n):
+            out[k, i] = phi[k, i]
+        out[k, n] = c1 - p
+        out[k, n + 1] = c2 - p * c1
+        out[k, n + 2] = -p * c2
+        out[k, n + 3] = gp * c1 + h * (m1 - p * m0)
+        out[k, n + 4] = gp * c2 + h * -(p * m1)
 
 
 def theta_from_stage(phi: np.ndarray, n_operators: int) -> np.ndarray:
@@ -132,15 +146,11 @@ def theta_from_stage(phi: np.ndarray, n_operators: int) -> np.ndarray:
         Parameters in the order of ``PIStructure.names`` for the stage structure (a row per
         row of ``phi``).
     """
-    n = n_operators
-    g, p, c1, c2, m1 = _filters(phi, n)
-    m0 = 1.0 + c1 + c2 - m1
-    # A(z) = (1 - p z^-1)(1 + c1 z^-1 + c2 z^-2); B(z) = g (1 - p) (1 + c1 z^-1 + c2 z^-2)
-    # + (1 - g)(m0 + m1 z^-1)(1 - p z^-1), both multiplied out (their leading terms are 1, m0)
-    gp, h = g * (1.0 - p), 1.0 - g
-    return np.concatenate([phi[..., :n], np.stack(
-        [c1 - p, c2 - p * c1, -p * c2,
-         gp * c1 + h * (m1 - p * m0), gp * c2 + h * -(p * m1)], axis=-1)], axis=-1)
+    phi = np.asarray(phi, dtype=float)
+    rows = np.ascontiguousarray(phi.reshape(-1, phi.shape[-1]))
+    out = np.empty((rows.shape[0], n_operators + 5))
+    _theta_rows(rows, int(n_operators), out)
+    return out.reshape(phi.shape[:-1] + (n_operators + 5,))
 
 
 def stage_from_theta(theta: np.ndarray, n_operators: int) -> np.ndarray:
@@ -529,6 +539,7 @@ class PIStageOnline(Estimator):
         self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
         self._solved: np.ndarray | None = None  # the last re-solve's estimate
         self._job: HorizonSolve | None = None  # the re-solve running
+        self._no_rows = np.zeros((0, len(self.names)))  # the kernel's optional outputs unused
         return self
 
     # ----------------------------------------------------------------- one sample
@@ -608,10 +619,10 @@ class PIStageOnline(Estimator):
         m = len(u)
         un, yn = (u - self._u0) / self._su, y / self._sy
         yhat, err = np.empty(m), np.empty(m)
-        npar = len(self._phi)
-        kept = np.empty((m if history is not None else 0, npar))
+        none = self._no_rows
+        kept = none if history is None else np.empty((m, len(self._phi)))
         _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn, un, yn,
-             self._st, True, np.zeros((0, npar)), yhat, err, kept)
+             self._st, True, none, yhat, err, kept)
         if history is not None:  # the estimate after each sample, as theta gives it
             history[:] = self._record_theta(kept)
         if errors is not None:
@@ -686,7 +697,7 @@ class PIStageOnline(Estimator):
         """The branches over a slice, gradients and errors written (the re-solve's
         :data:`~hystid.identify.horizon.Simulate`)."""
         _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, u, y, st, False, J, np.empty(len(u)), err,
-             np.zeros((0, len(phi))))
+             self._no_rows)
 
     def _admissible(self, trial: np.ndarray, phi: np.ndarray) -> bool:
         """A re-solve's trial: L2 stable, the loading slope positive or no lower than at
