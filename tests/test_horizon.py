@@ -7,6 +7,7 @@ written for this test (not a hystid model), with its exact gradient.
 import numpy as np
 import pytest
 
+from hystid.identify import horizon
 from hystid.identify.horizon import SLICE, TRIAL, HorizonSolve, drain, fold_steps, run_steps
 
 
@@ -93,9 +94,11 @@ def test_the_estimate_does_not_depend_on_how_the_work_is_granted(grant):
     assert calls > 1
 
 
-def test_folding_a_chunk_keeps_what_it_said_about_the_parameters():
+def test_folding_a_chunk_keeps_what_it_said_about_the_parameters(monkeypatch):
     # the arrival cost after folding the first 1500 samples, with the rest solved, gives the
-    # estimate of the whole record solved at once (the model is nearly linear in phi there)
+    # estimate of the whole record solved at once (the model is nearly linear in phi there);
+    # both solved to the end (no early stop)
+    monkeypatch.setattr(horizon, "RTOL", 0.0)
     u, y = record(3000, seed=5, noise=0.02)
     whole = job(u, y, np.array([0.9, 0.5]), iterations=12).result()
     phi0 = whole.phi
@@ -105,6 +108,23 @@ def test_folding_a_chunk_keeps_what_it_said_about_the_parameters():
     rest = HorizonSolve(simulate, admissible, chunks_of(u[1500:], y[1500:], 300), st, arrival,
                         [phi0], 12).result()
     np.testing.assert_allclose(rest.phi, phi0, rtol=1e-6)
+
+
+def test_a_start_stops_once_its_steps_gain_next_to_nothing(monkeypatch):
+    # from the optimum the first step's predicted gain is below RTOL of the cost: one
+    # simulation and the normal equations, no trial simulated; with RTOL = 0 every trial runs
+    u, y = record(3000, seed=7)
+    opt = job(u, y, np.array([0.2, 1.0]), iterations=40).result().phi
+    spent, default = {}, horizon.RTOL
+    assert default > 0
+    for rtol in (default, 0.0):
+        monkeypatch.setattr(horizon, "RTOL", rtol)
+        one = HorizonSolve(simulate, admissible, chunks_of(u, y, 300), np.zeros(4),
+                           (np.zeros(2), np.eye(2) * 1e-6), [opt], 12)
+        res = one.result()
+        spent[rtol] = one.spent
+        np.testing.assert_allclose(res.phi, opt, rtol=1e-4)
+    assert spent[default] < 0.3 * spent[0.0]
 
 
 def test_leaving_chunks_need_a_point_to_fold_at():

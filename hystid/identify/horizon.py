@@ -42,6 +42,14 @@ SLICE = 100
 #: 10 000 x 25 rows in 0.31 ms, their simulation with gradients 1.4 ms).
 NORMAL_ROW = 0.25
 
+#: A start's iterations stop when an accepted step lowered the cost by less than this share of
+#: it, or when the next step's predicted decrease is below it (the damping only grows then).
+#: Measured on the Bouc-Wen look-alike of stage A (6 s record): every re-solve ran its 12
+#: iterations, each step lowering the window's cost by 1e-4-1e-3 of it; stopped at 1e-4 the
+#: on-line identification took 2.9 s instead of 5.4 s with the same held-out figures (to 0.1
+#: nm); on stage A the re-solves end earlier on refused trials and nothing changed.
+RTOL = 1e-4
+
 #: Cost of a trial step (its linear solve and admissibility test) in simulated samples (measured:
 #: 10-20 us, most trials on stage A refused without a simulation).
 TRIAL = 100.0
@@ -404,17 +412,23 @@ class HorizonSolve:
             for _ in range(self.iterations):
                 if A is None:  # the normal equations at phi, kept while trials are refused
                     A, g = yield from self._normal(phi, J, err)
-                trial = phi + np.linalg.solve(A + damping * np.diag(np.diag(A)), g)
+                d = np.linalg.solve(A + damping * np.diag(np.diag(A)), g)
                 yield TRIAL
+                if 2.0 * (g @ d) - d @ A @ d <= RTOL * f:
+                    break  # the step, and any more damped one, would gain next to nothing
+                trial = phi + d
                 if not self.admissible(trial, phi):
                     damping *= 4.0
                     continue
                 err_t, J_t, st_t = yield from self._run(trial)
                 f_t = self._cost(trial, err_t)
                 if np.isfinite(f_t) and f_t < f:
+                    converged = f - f_t <= RTOL * f
                     phi, err, J, st, f = trial, err_t, J_t, st_t, f_t
                     damping = max(damping / 3.0, 1e-9)
                     A = None
+                    if converged:
+                        break
                 else:
                     damping *= 4.0
             if best is None or f < best[0]:
