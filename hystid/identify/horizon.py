@@ -20,7 +20,8 @@ The re-solve, in the identifier's search coordinates ``phi`` (``J = d yhat / d p
     trial     = phi + (A + damping diag(A))^-1 g
 
 from each start; a trial outside the admissible set is refused without a simulation, a trial
-that lowers the cost accepted (the damping divided by 3), any other refused (times 4); the
+that lowers the cost accepted (the damping divided by 3), any other refused (times 4); a start
+stops after ``iterations`` trials or once a step gains less than :data:`RTOL` of the cost; the
 lowest cost over the starts is the estimate. The normal equations are formed once per accepted
 step, a slice of rows at a time.
 """
@@ -51,7 +52,7 @@ NORMAL_ROW = 0.25
 RTOL = 1e-4
 
 #: Cost of a trial step (its linear solve and admissibility test) in simulated samples (measured:
-#: 10-20 us, most trials on stage A refused without a simulation).
+#: 10-20 us; most trials on stage A are refused without a simulation).
 TRIAL = 100.0
 
 #: ``simulate(phi, state, u, y, J, err)``: run the model over ``u`` from ``state`` (updated in
@@ -266,31 +267,6 @@ class HorizonSolve:
         self._n_fed = self._n_run = 0  # .. how many, and how many the model has run over
         self._rows: tuple[np.ndarray, np.ndarray] | None = None  # their (J, err) ..
         self._nrows = 0  # .. up to SLICE: whole slices are summed into the information
-
-    @staticmethod
-    def most_work(window: int, iterations: int, leaving: int = 0, starts: int = 2) -> float:
-        """The most work a re-solve can take before the samples fed, in simulated samples.
-
-        Parameters
-        ----------
-        window : int
-            Samples in the window.
-        iterations : int
-            Trials per start.
-        leaving : int
-            Samples folded into the arrival cost first.
-        starts : int
-            Start vectors.
-
-        Returns
-        -------
-        float
-            The folds; then for each start a simulation and a linear solve per trial and one
-            more simulation, normal equations after each accepted trial and at the start; the
-            estimate's normal equations once more.
-        """
-        per_start = (1 + iterations) * window * (1.0 + NORMAL_ROW) + iterations * TRIAL
-        return leaving * (1.0 + NORMAL_ROW) + starts * per_start + window * NORMAL_ROW
 
     # ----------------------------------------------------------------- running
     def feed(self, u: np.ndarray, y: np.ndarray) -> None:
