@@ -5,7 +5,9 @@ The model ``hystid identify`` chooses on ``prbn_1`` (defaults) runs free on ever
 accuracy table of the project scores it). Over each record's excitation (from the first sample
 that leaves the rest, the wrapped last sample left out) the residual is split into frequency
 bands (shares of its power; the mean, the sensor's zero that moved, apart) and the share at
-the harmonics of a periodic input's fundamental (50 Hz) is given. Then three slow terms are
+the harmonics of a periodic input's fundamental (50 Hz) is given, with the RMS of its means over
+whole periods of that fundamental (its slow part), and, for records of different inputs on the
+same slow input, how alike their slow parts are. Then three slow terms are
 fitted by least squares, with a free constant:
 
 * ``creep (prbn_1)``: five first-order lags of the input (3 ms to 3 s, log-spaced, each less
@@ -95,6 +97,41 @@ def band_shares(e: np.ndarray, fs: float) -> dict:
     return shares
 
 
+def period_means(x: np.ndarray, fs: float) -> np.ndarray:
+    """Means of ``x`` over whole periods of :data:`FUNDAMENTAL` (its slow part)."""
+    m = int(round(fs / FUNDAMENTAL))
+    n = len(x) // m
+    return x[:n * m].reshape(n, m).mean(axis=1)
+
+
+def shared_slow_error(slow: dict) -> list[dict]:
+    """For each pair of records of different inputs whose slow inputs agree (correlation of
+    their per-period means above 0.99): the correlation of their residuals' per-period means.
+
+    Parameters
+    ----------
+    slow : dict
+        Per record: ``u`` and ``e``, the per-period means of input and residual.
+
+    Returns
+    -------
+    list of dict
+        ``pair``, ``r_input`` and ``r_residual``.
+    """
+    out = []
+    names = sorted(slow)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            if a.rsplit("_", 1)[0] == b.rsplit("_", 1)[0]:
+                continue  # repeats of one input: their agreement is the floor's business
+            n = min(len(slow[a]["u"]), len(slow[b]["u"]))
+            r_u = float(np.corrcoef(slow[a]["u"][:n], slow[b]["u"][:n])[0, 1])
+            if r_u > 0.99:
+                r_e = float(np.corrcoef(slow[a]["e"][:n], slow[b]["e"][:n])[0, 1])
+                out.append({"pair": [a, b], "r_input": r_u, "r_residual": r_e})
+    return out
+
+
 def measure() -> dict:
     """Identify with defaults on ``prbn_1`` and describe the residual on the other records.
 
@@ -115,12 +152,13 @@ def measure() -> dict:
     e_train = residual(model, train)[k]
     cols_train = creep_terms(train.u, u_ref, train.fs)[k]
     creep = _fit(cols_train, e_train)
-    rows = []
+    rows, slow = [], {}
     for name, rec in recs.items():
         if name == TRAIN:
             continue
         k = excitation(rec)
         e = residual(model, rec)[k]
+        slow[name] = {"u": period_means(rec.u[k], rec.fs), "e": period_means(e, rec.fs)}
         cols = creep_terms(rec.u, u_ref, rec.fs)[k]
         carried = cols @ creep[:-1]
         carried = carried - np.mean(carried - e)  # its constant refitted: a zero that moved
@@ -132,12 +170,13 @@ def measure() -> dict:
         floor = repeat_floor([rec, recs[twin]]) if twin in recs else None
         rows.append({"record": name, "rms": _rms(e), "rms_less_mean": _rms(e - np.mean(e)),
                      "bands": band_shares(e, rec.fs),
+                     "slow_part": _rms(slow[name]["e"] - np.mean(slow[name]["e"])),
                      "creep_carried": _rms(e - carried), "creep_oracle": _rms(e - oracle),
                      "drift_oracle": _rms(e - drift), "floor": floor})
     return {"train": TRAIN, "member": result.info.get("model"), "creep_taus_s": CREEP_TAUS,
             "train_rms": _rms(e_train),
             "train_rms_with_creep": _rms(e_train - _with_constant(cols_train) @ creep),
-            "rows": rows, "command": COMMAND}
+            "rows": rows, "shared_slow_error": shared_slow_error(slow), "command": COMMAND}
 
 
 def render(payload: dict) -> str:
@@ -156,17 +195,25 @@ def render(payload: dict) -> str:
     nm = 1e3
     bands = list(payload["rows"][0]["bands"])
     rows = [[r["record"], f"{r['rms'] * nm:.0f}", f"{r['rms_less_mean'] * nm:.0f}",
-             *[f"{100 * r['bands'][b]:.0f} %" for b in bands],
+             f"{r['slow_part'] * nm:.0f}", *[f"{100 * r['bands'][b]:.0f} %" for b in bands],
              f"{r['creep_carried'] * nm:.0f}", f"{r['creep_oracle'] * nm:.0f}",
              f"{r['drift_oracle'] * nm:.0f}",
              "" if r["floor"] is None else f"{r['floor'] * nm:.0f}"] for r in payload["rows"]]
-    head = ["record", "RMS over the excitation [nm]", "less its mean [nm]", *bands,
+    head = ["record", "RMS over the excitation [nm]", "less its mean [nm]",
+            "per-period means [nm]", *bands,
             "creep (prbn_1) [nm]", "creep (oracle) [nm]", "drift (oracle) [nm]",
             "repeat floor [nm]"]
+    pairs = payload.get("shared_slow_error", [])
+    shared = ("" if not pairs else
+              "\n\nRecords of different inputs on the same slow input (per-period means of `u` "
+              "correlating above 0.99) leave the same slow error: their residuals' per-period "
+              "means correlate at " + ", ".join(
+                  f"{p['r_residual']:.2f} ({p['pair'][0]} / {p['pair'][1]})" for p in pairs)
+              + ".")
     return (f"Identified on {payload['train']} with the defaults (`{payload['member']}`); on "
             f"{payload['train']} itself the creep lags take its residual from "
             f"{payload['train_rms'] * nm:.1f} to {payload['train_rms_with_creep'] * nm:.1f} nm.\n\n"
-            + table(rows, head))
+            + table(rows, head) + shared)
 
 
 def main() -> None:
