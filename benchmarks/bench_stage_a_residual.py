@@ -171,12 +171,14 @@ def measure() -> dict:
         rows.append({"record": name, "rms": _rms(e), "rms_less_mean": _rms(e - np.mean(e)),
                      "bands": band_shares(e, rec.fs),
                      "slow_part": _rms(slow[name]["e"] - np.mean(slow[name]["e"])),
+                     "slow_input_span": float(np.ptp(slow[name]["u"])),
                      "creep_carried": _rms(e - carried), "creep_oracle": _rms(e - oracle),
                      "drift_oracle": _rms(e - drift), "floor": floor})
     return {"train": TRAIN, "member": result.info.get("model"), "creep_taus_s": CREEP_TAUS,
             "train_rms": _rms(e_train),
             "train_rms_with_creep": _rms(e_train - _with_constant(cols_train) @ creep),
-            "rows": rows, "shared_slow_error": shared_slow_error(slow), "command": COMMAND}
+            "rows": rows, "shared_slow_error": shared_slow_error(slow),
+            "u_unit": train.units.get("u", ""), "command": COMMAND}
 
 
 def render(payload: dict) -> str:
@@ -204,8 +206,11 @@ def render(payload: dict) -> str:
             "creep (prbn_1) [nm]", "creep (oracle) [nm]", "drift (oracle) [nm]",
             "repeat floor [nm]"]
     pairs = payload.get("shared_slow_error", [])
+    span = [r["slow_input_span"] for r in payload["rows"]]
     shared = ("" if not pairs else
-              "\n\nRecords of different inputs on the same slow input (per-period means of `u` "
+              f"\n\nThe per-period means of the input span {min(span):.0f}-{max(span):.0f} "
+              f"{payload.get('u_unit', 'V')} on these records." +
+              " Records of different inputs on the same slow input (per-period means of `u` "
               "correlating above 0.99) leave the same slow error: their residuals' per-period "
               "means correlate at " + ", ".join(
                   f"{p['r_residual']:.2f} ({p['pair'][0]} / {p['pair'][1]})" for p in pairs)
