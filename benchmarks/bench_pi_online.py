@@ -88,8 +88,8 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
     -------
     dict
         Per identifier: ``samples_per_s`` (``partial_fit``), ``resolve_share`` (``pi-stage``:
-        the re-solves' share of that time), ``update_median_us``, ``update_p99_us`` and
-        ``update_max_us``; and
+        the re-solves' share of that time, ``resolve_work``: their mean work in simulated
+        samples), ``update_median_us``, ``update_p99_us`` and ``update_max_us``; and
         ``fs``, the records' sampling rate.
     """
     out = {"fs": train.fs}
@@ -104,10 +104,14 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
             est = make()
             est.fit(train)
             before = getattr(est, "resolve_seconds_", 0.0)
+            work0, n0 = getattr(est, "resolve_work_", 0.0), getattr(est, "n_resolves", 0)
             t0 = time.perf_counter()
             est.partial_fit(held[0])
             seconds = time.perf_counter() - t0
             share = (getattr(est, "resolve_seconds_", 0.0) - before) / seconds
+            resolves = getattr(est, "n_resolves", 0) - n0
+            work = ((getattr(est, "resolve_work_", 0.0) - work0) / resolves if resolves
+                    else None)
             est.update(float(second.u[0]), float(second.y[0]))  # its first call untimed
             times = np.empty(min(calls, second.n - 1))
             for i, (u_k, y_k) in enumerate(zip(second.u[1:len(times) + 1].tolist(),
@@ -117,6 +121,7 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
                 est.update(u_k, y_k)
                 times[i] = time.perf_counter() - t0
             out[name] = {"samples_per_s": held[0].n / seconds, "resolve_share": share,
+                         "resolve_work": work,
                          "update_median_us": float(np.median(times) * 1e6),
                          "update_p99_us": float(np.percentile(times, 99) * 1e6),
                          "update_max_us": float(np.max(times) * 1e6)}
@@ -138,11 +143,14 @@ def render_speed(speed: dict) -> str:
     fs = speed["fs"]
     rows = [[name, f"{e['samples_per_s']:,.0f}", f"{e['samples_per_s'] / fs:.2g}x",
              f"{e['samples_per_s'] / speed['duhem']['samples_per_s']:.3g}",
-             f"{100 * e['resolve_share']:.0f} %", f"{e['update_median_us']:.1f}",
+             f"{100 * e['resolve_share']:.0f} %",
+             "" if e.get("resolve_work") is None else f"{e['resolve_work']:,.0f}",
+             f"{e['update_median_us']:.1f}",
              f"{e['update_p99_us']:.0f}", f"{e['update_max_us']:,.0f}"]
             for name, e in speed.items() if name != "fs"]
     return table(rows, ["on-line identifier", "samples/s (partial_fit)",
                         f"x real time at {fs:g} Hz", "ratio to duhem", "re-solves' share",
+                        "work per re-solve [simulated samples]",
                         "update() median [us]", "update() 99th percentile [us]",
                         "update() worst [us]"])
 

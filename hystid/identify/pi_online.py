@@ -83,9 +83,10 @@ _KMAX = 1.0 - 1e-6
 #: Rest samples kept before the excitation for the warm-up fit.
 _REST_KEPT = 200
 #: Default work of the running re-solve per processed sample, in simulated samples (20-35 us a
-#: sample on stage A: 20 operators, 140-250 ns a simulated sample). A re-solve there takes
-#: 20 000-80 000 (a few simulations of the 10 000-sample window, most trials refused), so
-#: nearly all end within the 500 samples of a chunk; the rare rest is done at its boundary.
+#: sample on stage A: 20 operators, 140-250 ns a simulated sample). A re-solve there takes some
+#: 38 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
+#: window, most trials refused), so most end within the 500 samples of a chunk; the rest of a
+#: longer one is done at its boundary.
 RESOLVE_RATE = 150.0
 
 
