@@ -332,6 +332,13 @@ def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
 
 
 @njit(cache=True)
+def _inverse(A):
+    # the covariance of an information matrix (compiled: numpy's call costs more than the
+    # 25 x 25 inversion itself)
+    return np.linalg.inv(A)
+
+
+@njit(cache=True)
 def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err, kept):
     """Run the branches over ``u`` from the state ``st`` (updated in place).
 
@@ -533,8 +540,8 @@ class PIStageOnline(Estimator):
         self._rn = self.thresholds
         self._P = np.eye(len(self.names)) * self.P0
         self._st = np.zeros((_STATE_ROWS, n))
-        self._chunk_u: list[float] = []
-        self._chunk_y: list[float] = []
+        self._open = np.empty((2, self.every))  # the open chunk: u, y (normalised) ..
+        self._n_open = 0  # .. its samples so far
         self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # the window's whole chunks
         self._wstate = np.zeros((_STATE_ROWS, n))  # the branches at the window's start
         self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
@@ -589,7 +596,7 @@ class PIStageOnline(Estimator):
                 i = self._before_recursion(u, y, i, history, errors)
                 continue
             # the recursion up to the end of the open chunk (or of the block)
-            b = min(n, i + self.every - len(self._chunk_u))
+            b = min(n, i + self.every - self._n_open)
             self._recurse(u[i:b], y[i:b], None if errors is None else errors[i:b],
                           None if history is None else history[i:b])
             i = b
@@ -630,10 +637,11 @@ class PIStageOnline(Estimator):
             errors[:] = err * self._sy
         self.k += m
         self.e, self.yhat = float(err[-1] * self._sy), float(yhat[-1] * self._sy)
-        self._chunk_u.extend(un.tolist())
-        self._chunk_y.extend(yn.tolist())
+        self._open[0, self._n_open:self._n_open + m] = un
+        self._open[1, self._n_open:self._n_open + m] = yn
+        self._n_open += m
         self._advance(un, yn)
-        if len(self._chunk_u) >= self.every:
+        if self._n_open >= self.every:
             self._close_chunk()
             if history is not None:
                 history[-1] = self.theta
@@ -665,11 +673,13 @@ class PIStageOnline(Estimator):
         for a in range(0, len(exc) - self.every + 1, self.every):
             self._chunks.append((un[nr + a:nr + a + self.every], yn[nr + a:nr + a + self.every]))
         done = len(self._chunks) * self.every
-        self._chunk_u, self._chunk_y = un[nr + done:].tolist(), yn[nr + done:].tolist()
+        left = len(exc) - done
+        self._open[0, :left], self._open[1, :left] = un[nr + done:], yn[nr + done:]
+        self._n_open = left
         self._phi, self._st, self._solved = phi, st, phi.copy()
         self._P = np.linalg.inv(J[seen].T @ J[seen] + self._arrival[1])
         self._buffer, self._rest = [], []
-        if self._chunks and not self._chunk_u:  # a first re-solve, in the warm-up's time
+        if self._chunks and not self._n_open:  # a first re-solve, in the warm-up's time
             self._launch((phi, phi))
             self._apply()
         self.warmup_seconds_ = time.perf_counter() - t0
@@ -682,8 +692,8 @@ class PIStageOnline(Estimator):
         """The open chunk is complete: keep it in the window and open the next one; the
         running re-solve's estimate takes over (the work it has left done now) and the next
         re-solve is launched."""
-        self._chunks.append((np.array(self._chunk_u), np.array(self._chunk_y)))
-        self._chunk_u, self._chunk_y = [], []
+        self._chunks.append((self._open[0].copy(), self._open[1].copy()))
+        self._n_open = 0
         recursion = self._phi.copy()
         if self._job is not None:
             self._apply()
@@ -728,7 +738,7 @@ class PIStageOnline(Estimator):
         del self._chunks[:len(self._job.leaving)]
         self._arrival, self._wstate = res.arrival, res.start
         self._phi, self._st, self._solved = res.phi.copy(), res.state, res.phi.copy()
-        self._P = np.linalg.inv(res.information)
+        self._P = _inverse(res.information)
         self._job = None
         self.n_resolves += 1
         self.resolve_seconds_ += time.perf_counter() - t0
