@@ -104,6 +104,28 @@ def test_the_resolve_rate_bounds_the_work_of_each_update_and_changes_no_estimate
         PIStageOnline(r, STAGE, resolve_rate=0.0)
 
 
+def test_a_copy_or_a_pickle_taken_mid_record_goes_on_as_the_original():
+    """The running re-solve is a generator, which neither copy nor pickle can take: it is run
+    to its solution first, which changes no estimate."""
+    import copy
+    import pickle
+
+    rec = stage_a_like("prbn", seconds=0.25, rest_seconds=0.05, seed=2)
+    u, y = rec.u - rec.u[0], rec.y - rec.y[0]
+    r = np.arange(20) / 20 * 0.5 * np.ptp(u[:-1])
+    settings = dict(warmup=600, window=1000, every=250, fs=rec.fs, resolve_rate=20.0)
+    ref = PIStageOnline(r, STAGE, **settings).fit(Record(u, y, rec.fs))
+    est = PIStageOnline(r, STAGE, **settings)
+    first, k = [], 0
+    while k < 1500 or est._job is None or est._job.solved:  # on to a re-solve running
+        first.append(est.update(float(u[k]), float(y[k])))
+        k += 1
+    twins = [copy.deepcopy(est), pickle.loads(pickle.dumps(est))]
+    for one in [est, *twins]:
+        rest = [one.update(float(a), float(b)) for a, b in zip(u[k:], y[k:], strict=True)]
+        assert np.array_equal(np.array(first + rest), ref.history)
+
+
 def test_settings_are_checked():
     r = np.arange(20) / 20.0
     with pytest.raises(ValueError, match="structure"):

@@ -268,6 +268,19 @@ class HorizonSolve:
         self._rows: tuple[np.ndarray, np.ndarray] | None = None  # their (J, err) ..
         self._nrows = 0  # .. up to SLICE: whole slices are summed into the information
 
+    # ----------------------------------------------------------------- copy and pickle
+    def __getstate__(self) -> dict:
+        """State for copy and pickle. A generator cannot be either: the re-solve is run to
+        its solution first (its estimate is the same whenever that is done)."""
+        if not self.solved:
+            self.advance(math.inf)
+        return {k: v for k, v in self.__dict__.items() if k != "_job"}
+
+    def __setstate__(self, state: dict) -> None:
+        """Restore a solved re-solve (see :meth:`__getstate__`)."""
+        self.__dict__.update(state)
+        self._job = None
+
     # ----------------------------------------------------------------- running
     def feed(self, u: np.ndarray, y: np.ndarray) -> None:
         """Samples that arrived after the launch (the model follows them once solved).
