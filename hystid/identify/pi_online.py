@@ -393,13 +393,14 @@ class PIStageOnline(Estimator):
     every : int
         Excited samples between two re-solves.
     iterations : int
-        Levenberg-Marquardt evaluations per re-solve (0: the recursion alone).
+        Levenberg-Marquardt trials per start of a re-solve (0: the recursion alone); a start
+        stops earlier once its steps gain next to nothing
+        (:data:`~hystid.identify.horizon.RTOL`).
     resolve_rate : float
         Work of the running re-solve done per processed sample, in simulated samples (see
-        :mod:`hystid.identify.horizon`): the bound on the re-solve's share of each
-        ``update()`` call: a re-solve's estimate takes over at the next chunk boundary, and
-        the work it has left then (if any) is done in that call. The estimates do not depend
-        on it.
+        :mod:`hystid.identify.horizon`), which bounds its share of each ``update()`` call. A
+        re-solve's estimate takes over at the next chunk boundary; the work it has left then
+        (if any) is done in that call. The estimates do not depend on the rate.
     settle_at_end : bool
         :meth:`partial_fit` (and :meth:`fit`) end with :meth:`settle`, so that the model at
         the end of a record is the re-solve's over its last window (``identify`` runs it so);
