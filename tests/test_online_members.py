@@ -126,6 +126,39 @@ def test_a_copy_or_a_pickle_taken_mid_record_goes_on_as_the_original():
         assert np.array_equal(np.array(first + rest), ref.history)
 
 
+def test_used_directly_it_takes_the_sensor_offset_off_itself():
+    """On a record as measured (a rest level, a sensor offset), the identifier used directly:
+    the offset was left in and the fit was 0.5-0.64 um off stage A's records (25-31 nm with
+    the rest output taken off by hand). Here on the Bouc-Wen look-alike moved 13 V / 2 um."""
+    from hystid.identify.members import short_record_warmup
+
+    train = stage_a_like("prbn", seconds=1.0, seed=0)
+    held = [stage_a_like(k, seconds=1.0, seed=1) for k in ("prbn", "sine50", "tri50")]
+    r = member("pi-stage").online_estimator(train).thresholds
+    warm = short_record_warmup(train.u, 25)
+    moved = Record(train.u + 13.0, train.y + 2.0, train.fs)
+    start = int(np.flatnonzero(train.u != train.u[0])[0])  # the excitation's first sample
+    y_rest = float(np.median(train.y[start - 200:start]))  # the rest the identifier keeps
+    rel = Record(train.u - train.u[0], train.y - y_rest, train.fs)
+    fits = {}
+    for label, rec, offset in (("moved", moved, None), ("relative", rel, 0.0)):
+        est = PIStageOnline(r, STAGE, warmup=warm, settle_at_end=True, offset=offset,
+                            fs=train.fs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fits[label] = est.fit(rec).model
+    assert fits["moved"].offset == pytest.approx(2.0 + y_rest, abs=1e-4)
+    assert fits["moved"].u_rest == pytest.approx(13.0 + train.u[0])
+    shifted = [Record(h.u + 13.0, h.y + 2.0, h.fs) for h in held]
+    a = compare(fits["moved"], moved, shifted).rows
+    b = compare(fits["relative"], rel, [Record(h.u - train.u[0], h.y, h.fs) for h in held]).rows
+    for ra, rb in zip(a, b, strict=True):
+        assert ra["model"] == pytest.approx(rb["model"], rel=0.05)
+        assert ra["model"] < 0.7 * min(ra["static_line"], ra["linear"]), ra
+    with pytest.raises(ValueError, match="offset"):
+        PIStageOnline(r, STAGE, offset=np.nan)
+
+
 def test_settings_are_checked():
     r = np.arange(20) / 20.0
     with pytest.raises(ValueError, match="structure"):

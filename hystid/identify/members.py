@@ -138,7 +138,8 @@ class Member:
         The thresholds by the member's rule over the record's fitted samples. The ``pi-stage``
         shape is :class:`~hystid.identify.pi_online.PIStageOnline` (its warm-up follows a
         short record; the model at the end of the record is its last re-solve's,
-        ``settle_at_end``), other PI structures the extended recursion
+        ``settle_at_end``; no offset: the record it is given is already relative), other PI
+        structures the extended recursion
         :class:`~hystid.identify.pi_recursive.PIRecursiveIdentifier` (at rest at 0, no
         offset: the record it is given is already relative).
 
@@ -165,7 +166,7 @@ class Member:
         base = {"thresholds": r, "structure": self.structure, "fs": record.fs}
         if is_stage_structure(self.structure):
             return PIStageOnline(**{**base, "warmup": short_record_warmup(record.u, self.n_params),
-                                    "settle_at_end": True,
+                                    "settle_at_end": True, "offset": 0.0,
                                     **settings})
         return PIRecursiveIdentifier(**{**base, "u_rest": 0.0, "offset": 0.0, **settings})
 

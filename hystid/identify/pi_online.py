@@ -232,6 +232,10 @@ class PIStageOnline(Estimator):
         :meth:`partial_fit` (and :meth:`fit`) end with :meth:`settle`, so that the model at
         the end of a record is the re-solve's over its last window (``identify`` runs it so);
         by default they end as ``update()`` calls would.
+    offset : float, optional
+        The sensor's output at rest, taken off before the recursion and carried by the model;
+        by default the median output over the leading rest (the first output when the record
+        does not start at rest). The input's rest is its first value.
     P0 : float
         Prior variance of every search coordinate (normalised units) before any data.
     forgetting : float
@@ -271,6 +275,7 @@ class PIStageOnline(Estimator):
         iterations: int = 12,
         resolve_rate: float = RESOLVE_RATE,
         settle_at_end: bool = False,
+        offset: float | None = None,
         P0: float = 1.0,
         forgetting: float = 1.0,
         max_step: float = 0.05,
@@ -295,6 +300,8 @@ class PIStageOnline(Estimator):
                              ("fs", fs)):
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{label}: expected a positive finite number, got {value!r}")
+        if offset is not None and not np.isfinite(offset):
+            raise ValueError(f"offset: expected a finite number or None, got {offset!r}")
         if not resolve_rate > 0:  # inf allowed
             raise ValueError(f"resolve_rate: expected a positive number, got {resolve_rate!r}")
         if not 0.0 < forgetting <= 1.0:
@@ -303,6 +310,7 @@ class PIStageOnline(Estimator):
         self.warmup, self.window, self.every = int(warmup), int(window), int(every)
         self.iterations, self.resolve_rate = int(iterations), float(resolve_rate)
         self.settle_at_end = bool(settle_at_end)
+        self.offset = None if offset is None else float(offset)
         self.P0, self.forgetting, self.max_step = float(P0), float(forgetting), float(max_step)
         self.epsilon, self.fs = float(epsilon), float(fs)
         self.reset()
@@ -314,7 +322,7 @@ class PIStageOnline(Estimator):
         return {"thresholds": self.thresholds.tolist(), "n_operators": self.structure.n_operators,
                 "warmup": self.warmup, "window": self.window, "every": self.every,
                 "iterations": self.iterations, "resolve_rate": self.resolve_rate,
-                "settle_at_end": self.settle_at_end,
+                "settle_at_end": self.settle_at_end, "offset": self.offset,
                 "P0": self.P0, "forgetting": self.forgetting, "max_step": self.max_step,
                 "epsilon": self.epsilon, "fs": self.fs}
 
@@ -338,9 +346,11 @@ class PIStageOnline(Estimator):
 
     @property
     def model(self) -> PISandwich:
-        """The current estimate as a :class:`~hystid.pi.PISandwich` (at rest at ``u = 0``)."""
+        """The current estimate as a :class:`~hystid.pi.PISandwich`, at rest at the first input
+        value, its output there the offset."""
         return PISandwich(self.theta, self.thresholds, self.structure, fs=self.fs,
-                          name="identified PI sandwich (on-line)", u_rest=self._u0 or 0.0)
+                          name="identified PI sandwich (on-line)", u_rest=self._u0 or 0.0,
+                          offset=self._y0)
 
     def reset(self) -> PIStageOnline:
         """Forget everything learned: at rest, before the warm-up, at sample 0.
@@ -360,6 +370,7 @@ class PIStageOnline(Estimator):
         self.resolve_seconds_ = 0.0
         self.resolve_work_ = 0.0
         self._u0: float | None = None
+        self._y0 = 0.0 if self.offset is None else self.offset
         self._rest: list[tuple[float, float]] = []
         self._buffer: list[tuple[float, float]] = []
         self._phi: np.ndarray | None = None
@@ -453,7 +464,7 @@ class PIStageOnline(Estimator):
     def _recurse(self, u, y, errors, history) -> None:
         """The per-sample recursion over samples that stay inside the open chunk."""
         m = len(u)
-        un, yn = (u - self._u0) / self._su, y / self._sy
+        un, yn = (u - self._u0) / self._su, (y - self._y0) / self._sy
         yhat, err = np.empty(m), np.empty(m)
         none = self._no_rows
         kept = none if history is None else np.empty((m, len(self._phi)))
@@ -464,7 +475,7 @@ class PIStageOnline(Estimator):
         if errors is not None:
             errors[:] = err * self._sy
         self.k += m
-        self.e, self.yhat = float(err[-1] * self._sy), float(yhat[-1] * self._sy)
+        self.e, self.yhat = float(err[-1] * self._sy), float(yhat[-1] * self._sy + self._y0)
         self._open[0, self._n_open:self._n_open + m] = un
         self._open[1, self._n_open:self._n_open + m] = yn
         self._n_open += m
@@ -483,8 +494,14 @@ class PIStageOnline(Estimator):
         n = self.structure.n_operators
         rest = np.array(self._rest).reshape(-1, 2)
         exc = np.array(self._buffer)
+        if self.offset is None:  # the output at rest: the leading rest's, else the first
+            seen = np.r_[rest[:, 1], exc[:, 1]]
+            seen = seen[np.isfinite(seen)]
+            at_rest = rest[:, 1][np.isfinite(rest[:, 1])]
+            self._y0 = (float(np.median(at_rest)) if at_rest.size else
+                        float(seen[0]) if seen.size else 0.0)
         u = np.r_[rest[:, 0], exc[:, 0]] - (self._u0 or 0.0)
-        y = np.r_[rest[:, 1], exc[:, 1]]
+        y = np.r_[rest[:, 1], exc[:, 1]] - self._y0
         fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
         phi = stage_from_theta(fit.theta, n)
