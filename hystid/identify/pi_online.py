@@ -85,7 +85,7 @@ __all__ = ["PIStageOnline", "admissible_weights", "is_stage_structure", "stage_f
 _REST_KEPT = 200
 #: Default work of the running re-solve per processed sample, in simulated samples (20-35 us a
 #: sample on stage A: 20 operators, 140-250 ns a simulated sample). A re-solve there takes some
-#: 38 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
+#: 37 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
 #: window, most trials refused), so most end within the 500 samples of a chunk; the rest of a
 #: longer one is done at its boundary.
 RESOLVE_RATE = 150.0
