@@ -14,7 +14,16 @@ import pytest
 
 from hystid.baselines import compare, rest_zero, simulate_from_rest
 from hystid.identify import identify
-from hystid.identify.members import AUTO_CANDIDATES, MEMBERS, member, select_member
+from hystid.identify.members import (
+    AUTO_CANDIDATES,
+    HOLDOUT,
+    MEMBERS,
+    REFIT_NFEV,
+    _split,
+    _went_astray,
+    member,
+    select_member,
+)
 from hystid.pi import PISandwich, play_operator
 from hystid.records import Record, load_record
 from hystid.reference import reference_record
@@ -129,19 +138,24 @@ def test_auto_reports_every_candidate_and_beats_both_baselines(bouc_wen_stage):
         assert row["model"] < 0.5 * min(row["static_line"], row["linear"]), row
 
 
-def test_the_whole_record_fit_is_judged_on_the_head_s_own_samples():
-    """The fit of the whole record, started from the head fit, is redone from scratch only
-    when it is far worse on the head's samples: not because the whole record (whose end swings
-    wider here, as on stage A) leaves a larger residual than the head."""
-    from hystid.identify.members import HOLDOUT, REFIT_NFEV, _split, _went_astray
-
-    rec = stage_a_like("prbn", seconds=1.0, seed=0)
+def _head_and_whole(rec):
+    """The choice's head split, the pi-stage fit of the head and the whole-record fit started
+    from it (as :func:`select_member` makes them)."""
     k, _, _ = _split(rec, HOLDOUT)
     m = MEMBERS["pi-stage"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         head = m.fit(rec[:k])
         whole = m.fit(rec, theta0=head.model.theta, max_nfev=REFIT_NFEV)
+    return k, head, whole
+
+
+def test_the_whole_record_fit_is_judged_on_the_head_s_own_samples():
+    """The fit of the whole record, started from the head fit, is redone from scratch only
+    when it is far worse on the head's samples: not because the whole record (whose end swings
+    wider here, as on stage A) leaves a larger residual than the head."""
+    rec = stage_a_like("prbn", seconds=1.0, seed=0)
+    k, head, whole = _head_and_whole(rec)
     assert not _went_astray(whole.model, head.model, rec, k)
     wm = whole.model
     theta = wm.theta.copy()
@@ -156,15 +170,8 @@ def test_on_stage_a_the_whole_record_fit_is_not_redone():
     # its whole-record residual is 1.8x the head's (20.1 against 11.4 nm: the record's end
     # swings wider), which the former test took for a fit gone astray and redid from scratch,
     # to the same optimum (0.6 s of the choice's 2.1 s)
-    from hystid.identify.members import HOLDOUT, REFIT_NFEV, _split, _went_astray
-
     rec = load_record(STAGE_A / "prbn_1.csv")
-    k, _, _ = _split(rec, HOLDOUT)
-    m = MEMBERS["pi-stage"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        head = m.fit(rec[:k])
-        whole = m.fit(rec, theta0=head.model.theta, max_nfev=REFIT_NFEV)
+    k, head, whole = _head_and_whole(rec)
     assert whole.info["rms_residual"] > 1.5 * head.info["rms_residual"]
     assert not _went_astray(whole.model, head.model, rec, k)
 
