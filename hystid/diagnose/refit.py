@@ -43,6 +43,9 @@ __all__ = [
     "simulate_fit_data_sens",
 ]
 
+#: Two effect-only solutions whose free values agree within this share are one minimum (the
+#: screen's starts for a dead time often lead to the same one).
+SAME_START = 1e-3
 #: Condition (8) asks ``alpha |dw1| < 2``; the refits are held below this value.
 MARGIN_LIMIT = 1.9
 
@@ -554,6 +557,21 @@ def _judge(problem: _Problem, z: np.ndarray, message: str) -> RefitResult:
                        problem.par.at_bound(z))
 
 
+def _distinct(phis: list[np.ndarray], slots: Sequence[int],
+              rtol: float = SAME_START) -> list[np.ndarray]:
+    """The effect-only solutions less those that found a minimum found before (every free slot
+    within ``rtol`` of an earlier solution's): a joint stage from the same minimum twice
+    repeats its work."""
+    idx = list(slots)
+    kept: list[np.ndarray] = []
+    for phi in phis:
+        a = phi[idx]
+        if not any(np.all(np.abs(a - b[idx]) <= rtol * np.maximum(np.abs(a), np.abs(b[idx])))
+                   for b in kept):
+            kept.append(phi)
+    return kept
+
+
 def refit(
     model: DuhemSandwich,
     data: FitData,
@@ -639,7 +657,7 @@ def refit(
             return RefitResult(model.theta.copy(), np.array(starts[0], float), np.inf, False,
                                "; ".join(messages) or "every start failed", calls)
         found.sort(key=lambda c: c[0])
-        joint_from = [phi for _, phi in found[:max(joint_starts, 1)]]
+        joint_from = _distinct([phi for _, phi in found], par_e.slots)[:max(joint_starts, 1)]
     else:
         joint_from = [np.array(starts[0], float)]
     par = Parametrisation(model, active, duration, step_scale, w1_scale, widen=widen)
