@@ -16,6 +16,7 @@ until the next one, also as a multiple of the nominal fit). The same as
 from __future__ import annotations
 
 import argparse
+import os
 import time
 import warnings
 
@@ -31,7 +32,8 @@ README_BLOCKS = {"stage-a-diagnosis": "render"}
 COMMAND = "OPENBLAS_NUM_THREADS=1 python benchmarks/bench_stage_a_diagnosis.py"
 
 
-def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS) -> dict:
+def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS,
+            workers: int | None = None) -> dict:
     """Diagnose prbn_1 against each held-out input and keep the final model's figures.
 
     Parameters
@@ -39,7 +41,10 @@ def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS) -> di
     quick : bool
         The triangle only.
     members : tuple of str
-        The members tried as the hysteresis itself (the diagnosis' default by default).
+        The members tried as the hysteresis itself (the diagnosis' default by default), fitted
+        beside the rounds.
+    workers : int, optional
+        The diagnosis' threads (its default, the cores up to 4, by default).
 
     Returns
     -------
@@ -64,7 +69,8 @@ def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS) -> di
             def note(message: str, t0: float = t0, timeline: list = timeline) -> None:
                 timeline.append([time.perf_counter() - t0, message])
 
-            res = diagnose(train, [val], repeats=[rep], progress=note)
+            res = diagnose(train, [val], repeats=[rep], progress=note, members=members,
+                           workers=workers)
             t1 = time.perf_counter()
             note("final model: the members identified, every candidate scored")
             final = final_model(res, train, [val], members=members, progress=note)
@@ -78,7 +84,8 @@ def measure(quick: bool = False, members: tuple[str, ...] = FINAL_MEMBERS) -> di
                      "seconds": {"diagnosis": t1 - t0, "final_model": t2 - t1,
                                  "nominal_fit": res.settings.get("nominal_seconds")},
                      "timeline": timeline})
-    return {"train": train.name, "cases": rows}
+    return {"train": train.name, "cases": rows, "workers": workers,
+            "cores": os.cpu_count()}
 
 
 def render(payload: dict) -> str:
@@ -144,11 +151,13 @@ def main() -> None:
     parser.add_argument("--members", default=",".join(FINAL_MEMBERS),
                         help="members tried as the hysteresis itself, comma-separated (default "
                         f"{','.join(FINAL_MEMBERS)}; the README block is of the default)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="the diagnosis' threads (default: its own, the cores up to 4)")
     parser.add_argument("--breakdown", action="store_true",
                         help="print where the time goes (each progress line with its seconds)")
     args = parser.parse_args()
     members = tuple(m.strip() for m in args.members.split(",") if m.strip())
-    payload = measure(args.quick, members)
+    payload = measure(args.quick, members, args.workers)
     if args.breakdown:
         print(breakdown(payload), end="\n\n")
     print(render(payload))

@@ -37,7 +37,7 @@ __all__ = ["advance", "as_layout", "duhem_sens_row", "duhem_w2", "filter_output"
            "simulate_into", "sensitivities_into", "step", "step_sens", "step_sens_row"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def offsets(layout):
     """Index of each parameter group in ``theta``: (b2, alpha, f0, f1, b1, g0, a1, a2).
 
@@ -55,7 +55,7 @@ def offsets(layout):
     return i_b2, i_alpha, i_f0, i_f1, i_b1, i_g0, i_a1, i_a2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def shape_offsets(layout):
     """Index of the generalised Duhem block's parameters: (f2, g1, ad); -1 where absent."""
     nf, ng, directional = layout[7], layout[8], layout[9]
@@ -398,19 +398,19 @@ def l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc):
         SY[k, ib2 + j] += W2[k - q2 - j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def simulate_into(theta, layout, U, W1, W2, Y, start):
     """Run :func:`step` for every index from ``start`` to the end of ``U``."""
     advance(theta, layout, U, W1, W2, Y, start, U.shape[0])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sensitivities_into(theta, layout, U, W1, W2, Y, S1, S2, SY, start):
     """Run :func:`step_sens` for every index from ``start`` to the end of ``U``."""
     sens_rows(theta, layout, U, W1, W2, Y, S1, S2, SY, start, start, U.shape[0] - start)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def jacobian_block(theta, layout, U, W1, W2, Y, S1, S2, SY, P, k0, dtheta, J):
     """Output sensitivities of one block of samples, in windows of fixed length.
 

@@ -47,7 +47,7 @@ def play(v, p_prev, r):
     return max(v - r, min(v + r, p_prev))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pi_operator_into(v, r, mu, p, out):
     for k in range(v.shape[0]):
         acc = 0.0
@@ -57,7 +57,7 @@ def _pi_operator_into(v, r, mu, p, out):
         out[k] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _play_operator_into(v, r, p, out):
     for k in range(v.shape[0]):
         for i in range(r.shape[0]):
@@ -65,7 +65,7 @@ def _play_operator_into(v, r, p, out):
             out[k, i] = p[i]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pi_simulate_into(a1, b1, q1, mu, r, a2, b2, q2, U, W1, W2, Y, p, start):
     """Eqs. (29)-(31) from index ``start`` to the end of the extended arrays.
 

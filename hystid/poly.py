@@ -32,7 +32,7 @@ STABILITY_MARGIN = 1e-9
 KMAX_STABLE = 1.0 - STABILITY_MARGIN
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def schur_cohn_into(c, start, n, kmax, work):
     """Schur-Cohn test of ``1 + c_1 z^-1 + ... + c_n z^-n`` without allocating.
 
@@ -69,7 +69,7 @@ def schur_cohn_into(c, start, n, kmax, work):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def schur_stable(c, kmax=KMAX_STABLE):
     """True when ``1 + c_1 z^-1 + ... + c_n z^-n`` has its roots inside the unit circle.
 

@@ -115,9 +115,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         "sensor noise")
     parser.add_argument("--time-budget", type=number(0.0), default=None, metavar="S",
                         help="seconds after which no further form is refitted (the best form "
-                        "of every family the screen cannot rule out always is; default: as "
-                        "long as the nominal identification took; 0: only those, the same "
+                        "of every family the screen cannot rule out always is; default: half "
+                        "as long as the nominal identification took; 0: only those, the same "
                         "diagnosis on every machine)")
+    parser.add_argument("--workers", type=integer(1, 64), default=None, metavar="N",
+                        help="threads for the member fits and each round's refits (default: "
+                        "the cores, at most 4); the diagnosis does not depend on it, except "
+                        "through the time budget")
     bind(parser, run)
 
 
@@ -238,13 +242,14 @@ def _write(out: Path, report: dict, result: DiagnosisResult, final: FinalModel, 
 #: :func:`hystid.diagnose.diagnose`'s settings, as the options that set them.
 _OPTIONS = {"train_skip": "--train-skip", "holdout": "--holdout", "alpha": "--alpha",
             "min_reduction": "--min-reduction", "max_rounds": "--max-rounds",
-            "time_budget": "--time-budget", "effects": "--effects", "initial": "--initial"}
+            "time_budget": "--time-budget", "effects": "--effects", "initial": "--initial",
+            "workers": "--workers"}
 
 
 def _diagnose(args: argparse.Namespace) -> None:
     """``hystid diagnose``'s steps (see :func:`run`)."""
     from ..diagnose.diagnosis import DEFAULT_EFFECTS, diagnose
-    from ..diagnose.final_model import final_model
+    from ..diagnose.final_model import FINAL_MEMBERS, final_model
     from ..kernels import is_plain
     from ..model import DuhemSandwich
     from ..validate import check_fit_size, check_magnitudes
@@ -296,7 +301,8 @@ def _diagnose(args: argparse.Namespace) -> None:
                 min_reduction=args.min_reduction, max_rounds=args.max_rounds,
                 train_skip=args.train_skip, initial=args.initial, refit_all=args.refit_all,
                 repeats=repeats, time_budget=args.time_budget,
-                require_excitation=strict, progress=not args.quiet,
+                require_excitation=strict, members=FINAL_MEMBERS, workers=args.workers,
+                progress=not args.quiet,
             )
         except DiagnosisError as err:  # its settings said as the options that set them
             raise DiagnosisError(as_option(str(err), _OPTIONS)) from err

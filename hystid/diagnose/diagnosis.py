@@ -19,8 +19,11 @@ not.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -32,6 +35,7 @@ from ..model import DuhemSandwich, Structure
 from ..records import Record
 from ..validate import check_plain_duhem
 from .effects import EFFECTS, AugmentedSandwich, effect_dict, family_of
+from .final_model import fit_member, member_records
 from .refit import refit
 from .result import DiagnosisResult, EffectOutcome
 from .rounds import (
@@ -94,8 +98,14 @@ MAX_ROUNDS = 20
 #: 2.97-3.04x the nominal fit against 3.29-3.39x at 1.0
 #: (``python benchmarks/bench_stage_a_diagnosis.py``). Since the plain sandwich's kernels run
 #: their sample loop in one compiled function the nominal fit is twice as fast and the ratio
-#: is 4.3-4.8x (5 s in all, 6-7 s before): the refits' augmented kernel did not speed up alike.
+#: was 4.3-4.8x: the refits' augmented kernel did not speed up alike. The refits now run side
+#: by side (:data:`MAX_WORKERS`), so within the budget more of them are started on two cores
+#: than on one.
 BUDGET_FACTOR = 0.5
+#: Most threads a diagnosis takes by default. A round has a handful of refits and the members
+#: one fit each; the compiled kernels release the interpreter, the solver's own Python does
+#: not, so more threads than that gain little.
+MAX_WORKERS = 4
 
 
 @one_blas_thread
@@ -121,6 +131,8 @@ def diagnose(
     time_budget: float | None = None,
     budget_factor: float | None = BUDGET_FACTOR,
     require_excitation: bool = False,
+    members: Sequence[str] = (),
+    workers: int | None = None,
     progress: bool | Callable[[str], None] = True,
 ) -> DiagnosisResult:
     """Diagnose the sim-to-real gap of the Duhem sandwich on measured records.
@@ -191,6 +203,16 @@ def diagnose(
     require_excitation : bool
         Raise :class:`DiagnosisError` when a candidate cannot be shown by the records instead
         of reporting it as not excited.
+    members : sequence of str
+        Members of :data:`hystid.identify.members.MEMBERS` to identify beside the rounds, as
+        candidates for the hysteresis itself (on the train record, or its head without
+        held-out records); the result's ``members`` hold them for
+        :func:`~hystid.diagnose.final_model.final_model` (``hystid diagnose --out`` passes
+        its members). None by default.
+    workers : int, optional
+        Threads the member fits and each round's refits run in (the cores, at most
+        :data:`MAX_WORKERS`, by default). The result does not depend on it, except through
+        the time budget.
     progress : bool or callable
         Periodic progress lines on stderr (True), none (False), or a function taking a line.
 
@@ -226,6 +248,8 @@ def diagnose(
                              f"{refit_samples}")
     if time_budget is not None and not time_budget >= 0:
         raise DiagnosisError(f"time_budget: expected seconds >= 0, got {time_budget}")
+    n_workers = _workers(workers)
+    members = _member_names(members)
     if budget_factor is not None and not budget_factor >= 0:
         raise DiagnosisError(f"budget_factor: expected a multiple >= 0, got {budget_factor}")
     fs = train.fs
@@ -314,139 +338,156 @@ def diagnose(
     floor_rms = max(where0.noise["rms"], repeat or 0.0)
     say(f"noise floor {where0.noise['rms']:.4g}{yu} RMS; " + "; ".join(where0.findings[1:3]))
 
-    # ----------------------------------------------------------------- greedy rounds
-    state = _Greedy(base_model, phi0, nom, where0)
-    outcomes: dict[str, EffectOutcome] = {
-        n: EffectOutcome(n, "screened out", family=family_of(n)) for n in names}
-    rounds: list[dict[str, Any]] = []
-    nf_estimates = [where0.noise["rms"]]
-    promising = 0.25 * (1.0 - (1.0 - min_reduction) ** 2)
-    cand_errs: dict[str, list[np.ndarray]] = {}
-    budget_end = None
-    for rnd in range(1, max_rounds + 1):
-        remaining = [n for n in names if n not in state.active
-                     and (family_of(n) not in state.families or _extends(n, state.active))]
-        if not remaining:
-            break
-        if rnd > 1:
-            later = max(min_gap_share, min_gap_share_later) * max(nom.rms_val - floor_rms, 0.0)
-            if state.ev.rms_val - later < NOISE_REACH * floor_rms:
-                # the reduction a further form needs would take the held-out error below the
-                # noise, which no model of the stage explains
-                rounds[-1]["next_round"] = (
-                    f"not run: a further form must lower the held-out RMS by {later:.4g}, from "
-                    f"{state.ev.rms_val:.4g}, below the floor of {floor_rms:.4g}")
-                say(f"round {rnd}: {rounds[-1]['next_round']}")
+    # ----------------------------------------------------------------- side by side
+    # the members fitted and the candidates refitted in threads (the kernels release the
+    # interpreter): the members beside the rounds, each round's refits beside each other
+    with ThreadPoolExecutor(n_workers, thread_name_prefix="hystid-diagnose") as jobs:
+        fit_on, _ = member_records(train, vals, holdout)
+        member_jobs = {}
+        for name in members:
+            say(f"fitting the {name} member on {fit_on.name!r} beside the rounds (a "
+                "candidate for the hysteresis itself)")
+            member_jobs[name] = jobs.submit(fit_member, name, fit_on)
+        # ----------------------------------------------------------------- greedy rounds
+        state = _Greedy(base_model, phi0, nom, where0)
+        outcomes: dict[str, EffectOutcome] = {
+            n: EffectOutcome(n, "screened out", family=family_of(n)) for n in names}
+        rounds: list[dict[str, Any]] = []
+        nf_estimates = [where0.noise["rms"]]
+        promising = 0.25 * (1.0 - (1.0 - min_reduction) ** 2)
+        cand_errs: dict[str, list[np.ndarray]] = {}
+        budget_end = None
+        for rnd in range(1, max_rounds + 1):
+            remaining = [n for n in names if n not in state.active
+                         and (family_of(n) not in state.families or _extends(n, state.active))]
+            if not remaining:
                 break
-        window = state if tr_c is tr else state.on_window(tr_c, ev_c, say)
-        drift_result, base = None, window
-        if "drift" in remaining:
-            # the drift is a nuisance of every record: refitted with the train record's own
-            # drift, judged with each held-out record's own drift re-estimated
-            drift_result = window.with_drift(tr_c, ev_c, say)
-        others = [n for n in remaining if n != "drift"]
-        say(f"round {rnd}: screening {', '.join(others)}")
-        scr = screen(base.model, base.phi, base.active, tr_c, others,
-                     step_scale=base.ev.scales[0], w1_scale=base.ev.scales[1],
-                     peaks_hz=state.where.frequency["peaks_hz"]
-                     + [state.where.frequency["peak_hz"]])
-        if drift_result is not None:
-            scr["drift"] = drift_result[3]
-        plan, ruled_out = _plan(scr, others, promising, refit_all)
-        if rnd == 1:
-            _record_screen(outcomes, scr, ruled_out, require_excitation)
-            if time_budget is None and budget_factor is not None:
-                time_budget = budget_factor * t_nominal
-            if time_budget is not None:
-                budget_end = time.perf_counter() + time_budget
-        info: dict[str, Any] = {"round": rnd, "rms_val_base": state.ev.rms_val,
-                                "findings": state.where.findings, "accepted": None,
-                                "ruled_out": ruled_out, "candidates": {}}
-        if not plan and drift_result is None:
+            if rnd > 1:
+                later = max(min_gap_share, min_gap_share_later) * max(nom.rms_val - floor_rms, 0.0)
+                if state.ev.rms_val - later < NOISE_REACH * floor_rms:
+                    # the reduction a further form needs would take the held-out error below the
+                    # noise, which no model of the stage explains
+                    rounds[-1]["next_round"] = (
+                        f"not run: a further form must lower the held-out RMS by {later:.4g}, from "
+                        f"{state.ev.rms_val:.4g}, below the floor of {floor_rms:.4g}")
+                    say(f"round {rnd}: {rounds[-1]['next_round']}")
+                    break
+            window = state if tr_c is tr else state.on_window(tr_c, ev_c, say)
+            drift_result, base = None, window
+            drift_job = None
+            if "drift" in remaining:
+                # the drift is a nuisance of every record: refitted with the train record's own
+                # drift, judged with each held-out record's own drift re-estimated (beside the
+                # screen, on workspaces of its own)
+                drift_job = jobs.submit(window.with_drift, replace(tr_c), ev_c.private(), say)
+            others = [n for n in remaining if n != "drift"]
+            say(f"round {rnd}: screening {', '.join(others)}")
+            scr = screen(base.model, base.phi, base.active, tr_c, others,
+                         step_scale=base.ev.scales[0], w1_scale=base.ev.scales[1],
+                         peaks_hz=state.where.frequency["peaks_hz"]
+                         + [state.where.frequency["peak_hz"]], pool=jobs)
+            if drift_job is not None:
+                drift_result = drift_job.result()
+            if drift_result is not None:
+                scr["drift"] = drift_result[3]
+            plan, ruled_out = _plan(scr, others, promising, refit_all)
+            if rnd == 1:
+                _record_screen(outcomes, scr, ruled_out, require_excitation)
+                if time_budget is None and budget_factor is not None:
+                    time_budget = budget_factor * t_nominal
+                if time_budget is not None:
+                    budget_end = time.perf_counter() + time_budget
+            info: dict[str, Any] = {"round": rnd, "rms_val_base": state.ev.rms_val,
+                                    "findings": state.where.findings, "accepted": None,
+                                    "ruled_out": ruled_out, "candidates": {}}
+            if not plan and drift_result is None:
+                rounds.append(info)
+                break
+            results = _refit_round(base, plan, scr, tr_c, ev_c, info, say, rnd, budget_end,
+                                      jobs, n_workers)
+            if drift_result is not None:
+                results["drift"] = drift_result[:3]
+                info["candidates"]["drift"] = _candidate_info("drift", *drift_result[:3])
+            if rnd == 1:
+                for n, (rf, test, ev_n) in results.items():
+                    o = outcomes[n]
+                    o.status = "rejected"
+                    o.params = effect_dict(rf.phi, [n])[n]
+                    o.rms_train_after, o.rms_val_after, o.test = ev_n.rms_train, ev_n.rms_val, test
+                    cand_errs[n] = ev_n.errs
+                for n, c in info["candidates"].items():
+                    if c["status"] in ("failed", "not refitted"):
+                        outcomes[n].status = c["status"]
+                        outcomes[n].message = _join(outcomes[n].message, c["message"])
+                _mark_alike(outcomes, state.ev.errs, cand_errs)
+            level_r = alpha / max(len(results) + sum(
+                c["status"] == "failed" for c in info["candidates"].values()), 1)
+            info["test_level"] = level_r
+            share = min_gap_share if rnd == 1 else max(min_gap_share, min_gap_share_later)
+            needed = share * max(nom.rms_val - floor_rms, 0.0)
+            passing = [n for n, (_, t, _) in results.items()
+                       if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction
+                       and t["rms_base"] - t["rms_cand"] >= needed]
+            info["rms_reduction_needed"] = needed
+            if not passing:
+                rounds.append(info)
+                say(f"round {rnd}: no candidate passes (level {level_r:.2g}, "
+                    f"minimum reduction {100 * min_reduction:.0f} %)")
+                break
+            # a further form of a family already accepted goes first (the first form did not
+            # catch the whole effect), a new family next; a record's own drift (re-estimated on
+            # the held-out records themselves) only when no input-tied form beats it like with
+            # like
+            pool = [n for n in passing if family_of(n) in state.families]
+            if not pool:
+                pool, order = _drift_last(passing, results, level_r, min_reduction)
+                if order:
+                    info["drift_order"] = order
+                    say(f"round {rnd}: {order['text']}")
+                    for n in ("drift", order["form"]):
+                        outcomes[n].message = _join(outcomes[n].message,
+                                                    f"round {rnd}: {order['text']}")
+            chosen = None
+            while pool and chosen is None:
+                best = min(pool, key=lambda n: results[n][1]["rms_cand"])
+                best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
+                                                  for n, r in results.items()}, level_r,
+                                     min_reduction)
+                rf, test, ev_best = results[best]
+                # polished on the whole train part (longer than the screening refits, so that a
+                # later round does not pick up what an unfinished fit left): the model that goes
+                # on must pass the same test again
+                rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
+                if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
+                        and test["rms_base"] - test["rms_cand"] >= needed):
+                    info["candidates"][best].update({
+                        "status": "not confirmed",
+                        "message": f"passed on its screening refit, not once polished on the whole "
+                                   f"train part (held-out RMS {test['rms_cand']:.4g}, p = "
+                                   f"{test['p_value']:.2g})"})
+                    say(f"round {rnd}: {best} not confirmed on the whole train part")
+                    pool.remove(best)
+                    continue
+                chosen = best
+            if chosen is None:
+                rounds.append(info)
+                break
+            best = chosen
+            rms_before = state.ev.rms_val
+            state.accept(best, rf, ev_best, localise(ev_best.segments))
+            nf_estimates.append(state.where.noise["rms"])
+            o = outcomes[best]
+            o.status, o.round = "accepted", rnd
+            o.params = effect_dict(rf.phi, [best])[best]
+            o.at_bound = [b for b in rf.at_bound if b.startswith(f"{best}.")]
+            o.rms_train_after, o.rms_val_after, o.test = ev_best.rms_train, ev_best.rms_val, test
+            o.cumulative = {"rms_val_before": rms_before, "rms_val": ev_best.rms_val,
+                            "p_value": test["p_value"], "rel_reduction": test["rel_reduction"]}
+            info.update({"accepted": best, "rms_val_after": ev_best.rms_val})
             rounds.append(info)
-            break
-        results = _refit_round(base, plan, scr, tr_c, ev_c, info, say, rnd, budget_end)
-        if drift_result is not None:
-            results["drift"] = drift_result[:3]
-            info["candidates"]["drift"] = _candidate_info("drift", *drift_result[:3])
-        if rnd == 1:
-            for n, (rf, test, ev_n) in results.items():
-                o = outcomes[n]
-                o.status = "rejected"
-                o.params = effect_dict(rf.phi, [n])[n]
-                o.rms_train_after, o.rms_val_after, o.test = ev_n.rms_train, ev_n.rms_val, test
-                cand_errs[n] = ev_n.errs
-            for n, c in info["candidates"].items():
-                if c["status"] in ("failed", "not refitted"):
-                    outcomes[n].status = c["status"]
-                    outcomes[n].message = _join(outcomes[n].message, c["message"])
-            _mark_alike(outcomes, state.ev.errs, cand_errs)
-        level_r = alpha / max(len(results) + sum(
-            c["status"] == "failed" for c in info["candidates"].values()), 1)
-        info["test_level"] = level_r
-        share = min_gap_share if rnd == 1 else max(min_gap_share, min_gap_share_later)
-        needed = share * max(nom.rms_val - floor_rms, 0.0)
-        passing = [n for n, (_, t, _) in results.items()
-                   if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction
-                   and t["rms_base"] - t["rms_cand"] >= needed]
-        info["rms_reduction_needed"] = needed
-        if not passing:
-            rounds.append(info)
-            say(f"round {rnd}: no candidate passes (level {level_r:.2g}, "
-                f"minimum reduction {100 * min_reduction:.0f} %)")
-            break
-        # a further form of a family already accepted goes first (the first form did not
-        # catch the whole effect), a new family next; a record's own drift (re-estimated on
-        # the held-out records themselves) only when no input-tied form beats it like with
-        # like
-        pool = [n for n in passing if family_of(n) in state.families]
-        if not pool:
-            pool, order = _drift_last(passing, results, level_r, min_reduction)
-            if order:
-                info["drift_order"] = order
-                say(f"round {rnd}: {order['text']}")
-                for n in ("drift", order["form"]):
-                    outcomes[n].message = _join(outcomes[n].message,
-                                                f"round {rnd}: {order['text']}")
-        chosen = None
-        while pool and chosen is None:
-            best = min(pool, key=lambda n: results[n][1]["rms_cand"])
-            best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
-                                              for n, r in results.items()}, level_r,
-                                 min_reduction)
-            rf, test, ev_best = results[best]
-            # polished on the whole train part (longer than the screening refits, so that a
-            # later round does not pick up what an unfinished fit left): the model that goes
-            # on must pass the same test again
-            rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
-            if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
-                    and test["rms_base"] - test["rms_cand"] >= needed):
-                info["candidates"][best].update({
-                    "status": "not confirmed",
-                    "message": f"passed on its screening refit, not once polished on the whole "
-                               f"train part (held-out RMS {test['rms_cand']:.4g}, p = "
-                               f"{test['p_value']:.2g})"})
-                say(f"round {rnd}: {best} not confirmed on the whole train part")
-                pool.remove(best)
-                continue
-            chosen = best
-        if chosen is None:
-            rounds.append(info)
-            break
-        best = chosen
-        rms_before = state.ev.rms_val
-        state.accept(best, rf, ev_best, localise(ev_best.segments))
-        nf_estimates.append(state.where.noise["rms"])
-        o = outcomes[best]
-        o.status, o.round = "accepted", rnd
-        o.params = effect_dict(rf.phi, [best])[best]
-        o.at_bound = [b for b in rf.at_bound if b.startswith(f"{best}.")]
-        o.rms_train_after, o.rms_val_after, o.test = ev_best.rms_train, ev_best.rms_val, test
-        o.cumulative = {"rms_val_before": rms_before, "rms_val": ev_best.rms_val,
-                        "p_value": test["p_value"], "rel_reduction": test["rel_reduction"]}
-        info.update({"accepted": best, "rms_val_after": ev_best.rms_val})
-        rounds.append(info)
-        say(f"round {rnd}: accepted {best}: held-out RMS {ev_best.rms_val:.4g}{yu}")
+            say(f"round {rnd}: accepted {best}: held-out RMS {ev_best.rms_val:.4g}{yu}")
+
+        fitted = _fitted_members(member_jobs, say)
 
     # ----------------------------------------------------------------- figures of merit
     nf = float(min(nf_estimates))
@@ -500,6 +541,41 @@ def diagnose(
         f"{nom.rms_val:.4g} -> {state.ev.rms_val:.4g} ({floor['kind']} floor "
         f"{floor['rms']:.4g})")
     return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds,
-                           base_placed, aug, state.where, settings, series, floor)
+                           base_placed, aug, state.where, settings, series, floor, fitted)
+
+
+def _workers(workers: int | None) -> int:
+    """Threads for the refits and member fits: ``workers``, else the cores up to
+    :data:`MAX_WORKERS`."""
+    if workers is None:
+        return max(1, min(MAX_WORKERS, os.cpu_count() or 1))
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise DiagnosisError(f"workers: expected a whole number >= 1, got {workers!r}")
+    return int(workers)
+
+
+def _member_names(members: Sequence[str]) -> list[str]:
+    from ..identify.members import MEMBERS
+
+    names = [members] if isinstance(members, str) else list(members)
+    for name in names:
+        if name not in MEMBERS:
+            raise DiagnosisError(f"members: expected names of {', '.join(MEMBERS)}, got "
+                                 f"{name!r}")
+    return names
+
+
+def _fitted_members(member_jobs: dict[str, Future], say: _Progress) -> dict[str, Any]:
+    """The members fitted beside the rounds; one whose fit failed is said and left to
+    :func:`~hystid.diagnose.final_model.final_model` to fit (and report) again."""
+    fitted = {}
+    for name, job in member_jobs.items():
+        try:
+            fitted[name] = job.result()
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
+            say(f"the {name} member's fit failed: {err}")
+            continue
+        say(f"the {name} member fitted")
+    return fitted
 
 

@@ -258,7 +258,7 @@ def effect_dict(phi: np.ndarray, names: Sequence[str] | None = None) -> dict[str
 
 
 # --------------------------------------------------------------------------- compiled kernel
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lag_coefficient(tau, dt):
     return 1.0 - np.exp(-dt / tau) if tau > 0.0 else 1.0
 
@@ -276,7 +276,7 @@ def l2_dc_terms(theta, i_b2, n2b, i_a2, n2a):
     return num2, den2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def augmented_into(theta, layout, phi, U, UD, W1, W2, V, C, YL, M, Y, start, dt):
     """Simulate the augmented sandwich from index ``start`` on (extended arrays, past first).
 

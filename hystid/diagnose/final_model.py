@@ -26,7 +26,7 @@ from ..baselines import rest_zero, simulate_from_rest
 from ..metrics import gap_closed
 from ..records import Record
 
-__all__ = ["FINAL_MEMBERS", "FinalModel", "final_model"]
+__all__ = ["FINAL_MEMBERS", "FinalModel", "final_model", "fit_member", "member_records"]
 
 #: The members tried as the hysteresis itself (besides the nominal Duhem sandwich). ``gduhem``
 #: (the generalised Duhem block) is left out by default: on stage A it closes 57-58 % of the
@@ -135,6 +135,53 @@ def _scores(model: Any, held: Sequence[tuple[Record, int]]) -> list[float]:
     return out
 
 
+def member_records(train: Record, vals: Sequence[Record],
+                   holdout: float = 0.4) -> tuple[Record, list[tuple[Record, int]]]:
+    """The record the members are fitted on and the held-out records they are scored on.
+
+    Parameters
+    ----------
+    train : Record
+        The train record.
+    vals : sequence of Record
+        Held-out records; without them the train record's first ``1 - holdout`` of its
+        excitation is fitted and the rest scored.
+    holdout : float
+        Share of the train record held out when there are no held-out records.
+
+    Returns
+    -------
+    tuple
+        The record to fit on and ``[(record, first scored sample), ...]``.
+    """
+    if vals:
+        return train, [(v, 0) for v in vals]
+    from ..identify.prepare import held_out_from
+
+    k = held_out_from(train.u, holdout)
+    return train[:k], [(train, k)]
+
+
+def fit_member(name: str, record: Record) -> Any:
+    """A member of the family identified on ``record`` with its default options.
+
+    Parameters
+    ----------
+    name : str
+        A member of :data:`hystid.identify.members.MEMBERS`.
+    record : Record
+        The record to fit on (:func:`member_records`).
+
+    Returns
+    -------
+    object
+        The identified model.
+    """
+    from ..identify import identify
+
+    return identify(record, model=name).model
+
+
 def final_model(
     result: Any,
     train: Record,
@@ -152,7 +199,8 @@ def final_model(
     ----------
     result : DiagnosisResult
         From :func:`~hystid.diagnose.diagnosis.diagnose` (its ``model``, ``augmented``,
-        ``accepted`` and ``floor``).
+        ``accepted`` and ``floor``; its ``members``, when the diagnosis fitted them beside its
+        rounds, are taken as they are).
     train : Record
         The train record.
     vals : sequence of Record
@@ -176,29 +224,24 @@ def final_model(
     -------
     FinalModel
     """
-    from ..identify import identify
     from ..identify.members import member
 
     say = progress or (lambda message: None)
-    if vals:
-        fit_on, held = train, [(v, 0) for v in vals]
-    else:
-        from ..identify.prepare import held_out_from
-
-        k = held_out_from(train.u, holdout)
-        fit_on, held = train[:k], [(train, k)]
+    fit_on, held = member_records(train, vals, holdout)
     candidates: list[tuple[str, str, Any]] = [("nominal", "the nominal model", result.model)]
     if given is not None:
         candidates.append((given[0], "the model given", given[1]))
     if result.accepted:
         candidates.append((f"nominal + {' + '.join(result.accepted)}",
                            "the nominal model with the accepted effects", result.augmented))
+    fitted = getattr(result, "members", None) or {}
     for name in members:
-        say(f"final model: fitting the {name} member on {fit_on.name!r}")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            fit = identify(fit_on, model=name)
-        candidates.append((name, member(name).what, fit.model))
+        if name not in fitted:
+            say(f"final model: fitting the {name} member on {fit_on.name!r}")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fitted = {**fitted, name: fit_member(name, fit_on)}
+        candidates.append((name, member(name).what, fitted[name]))
     floor = float(result.floor.get("rms", 0.0))
     rows = []
     for name, what, model in candidates:

@@ -160,6 +160,10 @@ class DiagnosisResult:
     floor : dict
         The floor of the gap: ``noise_floor_rms``, ``repeat_floor_rms`` (None without
         repeats), ``rms`` (the larger) and ``kind``.
+    members : dict
+        The members fitted beside the rounds as candidates for the hysteresis itself
+        (``diagnose(..., members=...)``): name to model, for
+        :func:`~hystid.diagnose.final_model.final_model` to score.
     """
 
     noise_floor_rms: float
@@ -175,6 +179,7 @@ class DiagnosisResult:
     settings: dict[str, Any] = field(default_factory=dict)
     series: dict[str, Any] = field(default_factory=dict, repr=False)
     floor: dict[str, Any] = field(default_factory=dict)
+    members: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def __iter__(self) -> Iterator[Any]:
         yield self.where

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from concurrent.futures import Executor, Future
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -229,6 +231,10 @@ class _Evaluator:
         self.tr, self.vds, self.t0s = tr, vds, t0s
         self.drift_slots = list(EFFECTS["drift"].slots)
 
+    def private(self) -> _Evaluator:
+        """The same evaluator on simulation workspaces of its own (for another thread)."""
+        return _Evaluator(replace(self.tr), [replace(v) for v in self.vds], self.t0s)
+
     def __call__(self, m: DuhemSandwich, phi: np.ndarray, drift: bool) -> _Evaluation:
         tr = self.tr
         w1, _, yh = simulate_fit_data(m, phi, tr)
@@ -447,42 +453,71 @@ def _record_screen(outcomes: dict[str, EffectOutcome], scr: dict[str, ScreenResu
             o.message = _join(o.message, f"screened out: {ruled_out[o.family]}")
 
 
+def _refit_one(state: _Greedy, name: str, scr: ScreenResult,
+               tr: FitData) -> tuple[RefitResult, list[str]]:
+    """One form refitted on top of the current model, on a workspace of its own (refits run
+    side by side); returns the refit and its progress lines, kept for the round to say in
+    order."""
+    own = replace(tr)  # the record's arrays shared, its simulation workspace not
+    lines: list[str] = []
+    rf = refit(state.model, own, state.active + [name], scr.starts, base_phi=state.phi,
+               step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
+               joint_starts=len(scr.starts) if name == "delay" else 1, profile=scr.profile)
+    if name == "delay" and all(a == "drift" for a in state.active):
+        rf = delay_as_structure(state.model, state.phi, state.active, own, rf,
+                                state.ev.scales, lines.append, refit)
+    return rf, lines
+
+
 def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, ScreenResult],
                  tr: FitData, ev: _Evaluator, info: dict, say: _Progress, rnd: int,
-                 budget_end: float | None) -> dict[str, tuple[RefitResult, dict, _Evaluation]]:
+                 budget_end: float | None, pool: Executor,
+                 width: int) -> dict[str, tuple[RefitResult, dict, _Evaluation]]:
     """Refit the planned forms on top of the current model and test each on the held-out
-    part; failures and forms left out by the time budget are recorded in ``info``."""
-    results = {}
+    part; failures and forms left out by the time budget are recorded in ``info``.
+
+    The refits run in ``pool``, at most ``width`` at a time (its workers), started in the
+    plan's order (a form that is not a must is started only while the budget lasts) and
+    judged in that order: the results do not depend on the number of workers."""
+    results: dict[str, tuple[RefitResult, dict, _Evaluation]] = {}
+    running: deque[tuple[str, Future]] = deque()
     for n, must in plan:
+        while len(running) >= width:
+            _judge_refit(state, *running.popleft(), ev, info, say, rnd, results)
         if not must and budget_end is not None and time.perf_counter() > budget_end:
             info["candidates"][n] = {"status": "not refitted",
                                      "message": "not refitted: the time budget was spent on "
                                                 "more promising forms"}
             continue
         say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
-        rf = refit(state.model, tr, state.active + [n], scr[n].starts, base_phi=state.phi,
-                   step_scale=state.ev.scales[0], w1_scale=state.ev.scales[1],
-                   joint_starts=len(scr[n].starts) if n == "delay" else 1,
-                   profile=scr[n].profile)
-        if n == "delay" and all(a == "drift" for a in state.active):
-            rf = delay_as_structure(state.model, state.phi, state.active, tr, rf,
-                                    state.ev.scales, say, refit)
-        ev_n = None
-        if rf.ok:
-            ev_n = ev(DuhemSandwich(rf.theta, state.model.structure, fs=state.model.fs),
-                      rf.phi, drift=state.drift or n == "drift")
-            if not ev_n.finite:
-                rf.ok, rf.message = False, "the refitted model diverges on the held-out records"
-        if not rf.ok:
-            info["candidates"][n] = {"status": "failed", "message": f"refit failed: {rf.message}"}
-            say(f"round {rnd}: {n}: refit failed ({rf.message})")
-            continue
-        test = _held_out_test(state, n, ev_n)
-        results[n] = (rf, test, ev_n)
-        info["candidates"][n] = _candidate_info(n, rf, test, ev_n)
-        say(f"round {rnd}: {n}: held-out RMS {test['rms_cand']:.4g} "
-            f"({100 * test['rel_reduction']:+.1f} %), p = {test['p_value']:.2g}")
+        running.append((n, pool.submit(_refit_one, state, n, scr[n], tr)))
+    while running:
+        _judge_refit(state, *running.popleft(), ev, info, say, rnd, results)
     return results
+
+
+def _judge_refit(state: _Greedy, n: str, job: Future, ev: _Evaluator, info: dict,
+                 say: _Progress, rnd: int,
+                 results: dict[str, tuple[RefitResult, dict, _Evaluation]]) -> None:
+    """A finished refit's progress lines, held-out test and record in ``info``."""
+    rf, lines = job.result()
+    for line in lines:
+        say(line)
+    ev_n = None
+    if rf.ok:
+        ev_n = ev(DuhemSandwich(rf.theta, state.model.structure, fs=state.model.fs),
+                  rf.phi, drift=state.drift or n == "drift")
+        if not ev_n.finite:
+            rf.ok, rf.message = False, "the refitted model diverges on the held-out records"
+    if not rf.ok:
+        info["candidates"][n] = {"status": "failed", "message": f"refit failed: {rf.message}"}
+        say(f"round {rnd}: {n}: refit failed ({rf.message})")
+        return
+    test = _held_out_test(state, n, ev_n)
+    results[n] = (rf, test, ev_n)
+    info["candidates"][n] = _candidate_info(n, rf, test, ev_n)
+    say(f"round {rnd}: {n}: held-out RMS {test['rms_cand']:.4g} "
+        f"({100 * test['rel_reduction']:+.1f} %), p = {test['p_value']:.2g}")
 
 
 def _drift_last(passing: list[str], results: dict, level: float,

@@ -20,8 +20,9 @@ The larger of the two one-sided p-values is used.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats
@@ -157,6 +158,7 @@ def screen(
     w1_scale: float = 1.0,
     peaks_hz: Sequence[float] = (),
     n_starts: int = 2,
+    pool: Executor | None = None,
 ) -> dict[str, ScreenResult]:
     """Screen candidate effects against the train residual of the current model.
 
@@ -180,6 +182,9 @@ def screen(
         Frequencies where the localisation found narrow-band excess (mode grid seeds).
     n_starts : int
         Refit starts kept per candidate.
+    pool : Executor, optional
+        Threads to screen the candidates in, side by side (in this thread by default); the
+        result is the same.
 
     Returns
     -------
@@ -195,8 +200,10 @@ def screen(
     ee = float(e @ e)
     Q = _orth(_jacobian(model, phi, active, data, step_scale, w1_scale))
 
-    def sim(ph):
-        return simulate_fit_data(model, ph, data)[2][data.weight].copy()
+    def simulation_on(own: FitData):
+        def sim(ph):
+            return simulate_fit_data(model, ph, own)[2][own.weight].copy()
+        return sim
 
     def with_(**slots):
         ph = np.array(phi, float)
@@ -204,7 +211,7 @@ def screen(
             ph[int(k[1:])] = v
         return ph
 
-    def grid(name: str):
+    def grid(name: str, sim: Callable[[np.ndarray], np.ndarray]):
         """Yield (directions N x k, function beta -> effect vector start)."""
         h = 1e-4
         if name in ("creep", "creep_2tau", "creep_log"):
@@ -293,12 +300,11 @@ def screen(
         else:  # pragma: no cover - names are checked by the caller
             raise ValueError(name)
 
-    out: dict[str, ScreenResult] = {}
-    best_dirs: dict[str, np.ndarray] = {}
-    for name in candidates:
+    def screen_one(name: str, own: FitData) -> tuple[ScreenResult, np.ndarray | None]:
+        """The candidate's best score over its grid, its starts and best directions."""
         scored = []
         sep = 0.0
-        for D, start in grid(name):
+        for D, start in grid(name, simulation_on(own)):
             D = np.where(np.isfinite(D), D, 0.0)
             Dp = D - Q @ (Q.T @ D)
             nD = np.linalg.norm(D, axis=0)
@@ -315,18 +321,24 @@ def screen(
             # by Frisch-Waugh-Lovell, b is also the effect's coefficient in the joint step
             scored.append((score, start(b), Dp))
         if not scored:
-            out[name] = ScreenResult(name, 0.0, 0.0, False, [],
-                                     f"{name}: its parameters do not change the simulated "
-                                     f"output on these records; {_HINTS[name]}")
-            continue
+            return ScreenResult(name, 0.0, 0.0, False, [],
+                                f"{name}: its parameters do not change the simulated output "
+                                f"on these records; {_HINTS[name]}"), None
         scored.sort(key=lambda s: -s[0])
         excited = sep >= MIN_SEPARATION
         msg = "" if excited else (
             f"{name}: the records cannot show it: the model absorbs "
             f"{100 * (1 - sep):.2f} % of its signature; {_HINTS[name]}")
         starts = [s[1] for s in scored[:n_starts + (1 if name == "delay" else 0)]]
-        out[name] = ScreenResult(name, scored[0][0], sep, excited, starts, msg, Q)
-        best_dirs[name] = scored[0][2]
+        return ScreenResult(name, scored[0][0], sep, excited, starts, msg, Q), scored[0][2]
+
+    if pool is None:
+        found = [screen_one(name, data) for name in candidates]
+    else:  # each candidate on a simulation workspace of its own
+        jobs = [pool.submit(screen_one, name, replace(data)) for name in candidates]
+        found = [job.result() for job in jobs]
+    out = {r.name: r for r, _ in found}
+    best_dirs = {r.name: d for r, d in found if d is not None}
     # creep and drift are told apart only by input level changes
     if ("creep" in best_dirs and "drift" in best_dirs
             and max(out["creep"].score, out["drift"].score) > 0.01):

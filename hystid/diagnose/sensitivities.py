@@ -62,7 +62,7 @@ def _add(S, k, c, v):
         S[k, c] += v
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def augmented_sens_into(theta, layout, phi, cols, ntc, U, UD, W1, W2, V, C, YL, M, Y,
                         S1, S2, SV, SYL, SY, start, dt):
     """Simulate the augmented sandwich and its output sensitivities from index ``start`` on.

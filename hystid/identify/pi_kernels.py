@@ -59,7 +59,7 @@ def _operators_step(w1, r, p, SP, S1, k, n1):
                 SP[i, m] = S1[k, m]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _layout_offsets(layout):
     # layout = [n1a, n1b, N, n2a, n2b, q1, q2]; full coefficient vector
     # c = [a1 (n1a), b1 (n1b), mu (N), a2 (n2a), b2 (n2b)]
@@ -67,7 +67,7 @@ def _layout_offsets(layout):
     return 0, n1a, n1a + n1b, n1a + n1b + n, n1a + n1b + n + n2a
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def full_coefficients(theta, layout, c):
     """Full coefficients ``c`` from the free ``theta`` (unit DC gains: b11, b21 derived)."""
     n1a, n1b, n, n2a, n2b = layout[0], layout[1], layout[2], layout[3], layout[4]
@@ -94,7 +94,7 @@ def full_coefficients(theta, layout, c):
                 t += 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def free_gradient(psi_c, layout, psi):
     """Chain rule ``d/dtheta = T' d/dc`` for the unit-DC-gain parametrisation."""
     n1a, n1b, n, n2a, n2b = layout[0], layout[1], layout[2], layout[3], layout[4]
@@ -117,7 +117,7 @@ def free_gradient(psi_c, layout, psi):
                 t += 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k):
     """Eqs. (29)-(31) at index ``k`` with the sensitivities to the full coefficients ``c``.
 
@@ -128,7 +128,7 @@ def pi_step_sens(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k):
     pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, k, k + 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start, stop):
     """:func:`pi_step_sens` for every index ``start <= k < stop``: the one writing of the
     recursion, with what it reads of ``layout`` read once before the loop."""
@@ -153,13 +153,13 @@ def pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start, stop):
         l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pi_sensitivities_into(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start):
     """Run :func:`pi_step_sens` from ``start`` to the end of the extended arrays."""
     pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start, U.shape[0])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _admissible(theta, layout, c):
     full_coefficients(theta, layout, c)
     ia1, ib1, imu, ia2, ib2 = _layout_offsets(layout)
@@ -167,7 +167,7 @@ def _admissible(theta, layout, c):
             and schur_stable(c[ia2:ib2], KMAX_STABLE))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _eria_update(theta, U, D, lam, rho_prev, rho, psi, e, K, f, ia1, n1a, ia2, n2a):
     """Eqs. (16)-(19) given the regressor ``psi`` and the error ``e``; returns Lambda^-1(k).
 
@@ -221,7 +221,7 @@ def _eria_update(theta, U, D, lam, rho_prev, rho, psi, e, K, f, ia1, n1a, ia2, n
     return lam
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _minimal_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP,
                   k, y_meas, equation_error, c, psi_c, psi, K, f):
     # regressor: gradient of yhat(k) w.r.t. the model's own (free) parameters
@@ -246,7 +246,7 @@ def _minimal_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, W2, Y, S1,
     return e, lam, yhat
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _l1_operators(theta, layout, r, U, W1, S1, PH, SPH, p, SP, k, c1):
     # eqs. (29)-(30) at index k with d w1 / d c1 and d p_i / d c1 (c1 = full L1 coefficients);
     # theta starts with the free L1 parameters [a1.., b12..]; b11 gives unit DC gain
@@ -268,7 +268,7 @@ def _l1_operators(theta, layout, r, U, W1, S1, PH, SPH, p, SP, k, c1):
             SPH[k, i, m] = SP[i, m]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _keyterm_regressor(beta, ib, layout, PH, SPH, k, phi, psi1):
     # phi[ib + j N + i] = p_i(k - q2 - j); psi1 = sum_j sum_i beta_ji d p_i(k-q2-j) / d c1;
     # returns sum_j sum_i beta_ji p_i(k - q2 - j)
@@ -288,7 +288,7 @@ def _keyterm_regressor(beta, ib, layout, PH, SPH, k, phi, psi1):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _l1_chain(psi1, n1a, n1b, psi):
     # d/d(free L1 parameters) from d/d(full L1 coefficients): b11 = 1 + sum a1 - sum b1j
     for i in range(n1a):
@@ -297,7 +297,7 @@ def _l1_chain(psi1, n1a, n1b, psi):
         psi[n1a + j - 1] = psi1[n1a + j] - psi1[n1a]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _keyterm_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, Y, S1, PH, SPH, p, SP, k,
                   y_meas, c1, psi1, psi, K, f):
     # the paper-like regressor: eq. (31) with w2 = sum_i mu_i p_i substituted is linear in a2
@@ -320,13 +320,13 @@ def _keyterm_step(theta, U_, D, lam, rho_prev, rho, layout, r, U, W1, Y, S1, PH,
     return e, lam, yhat
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rho(n, gamma):
     # convergence factor rho(k) = (k+1)^-gamma, with rho(0) = 1
     return float(n + 1) ** (-gamma)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _recursion_step(mode, theta, U_, D, lam, gamma, n, layout, r, U, W1, W2, Y, S1, SW2, SY, PH,
                     SPH, p, SP, k, y_k, K, c, c1, psi_c, psi1, psi, f):
     # one sample at index k, the n-th of the recursion; returns (e, yhat), updates lam[0]
@@ -342,14 +342,14 @@ def _recursion_step(mode, theta, U_, D, lam, gamma, n, layout, r, U, W1, W2, Y, 
     return e, yhat
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _scratch(npar, nc, n1):
     # work arrays of one recursion step: c, c1, psi_c, psi1, psi, f
     return (np.empty(max(nc, n1)), np.empty(n1), np.empty(nc), np.empty(n1), np.empty(npar),
             np.empty(npar))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def recursion_run(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, PH, SPH,
                   p, SP, start, ymeas, history, errors, yhats, K):
     """Run the recursion from index ``start`` to the end of the extended arrays.
@@ -368,14 +368,14 @@ def recursion_run(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S
         yhats[k - start] = yhat
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _shift(a):
     # drop the oldest row of a signal window (a one-row placeholder is left as it is)
     for i in range(a.shape[0] - 1):
         a[i] = a[i + 1]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def recursion_one(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S1, SW2, SY, PH,
                   SPH, p, SP, u_k, y_k, K, out):
     """One sample on the windows themselves: the same step as :func:`recursion_run` on a chunk

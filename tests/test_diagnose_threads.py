@@ -1,0 +1,106 @@
+"""The diagnosis side by side: its refits, screen and member fits in threads.
+
+Records from hystid.testing's independent stage simulator (a pure dead time written apart from
+the diagnosis' delay form, and a Bouc-Wen stage). The threads must not change the diagnosis:
+with the time budget off, one thread and two give the same result to the last bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hystid import testing
+from hystid.diagnose import diagnose
+from hystid.diagnose.final_model import final_model
+from hystid.diagnose.refit import FitData, _distinct, refit
+from hystid.diagnose.screen import zero_vector
+from hystid.errors import DiagnosisError
+from hystid.records import Record
+from hystid.reference import paper_excitation, reference_model
+
+FS = 30_000.0
+N = 6000
+
+
+def _records(effect: str | None, form: str | None, strength: float | None, seed: int,
+             hysteresis: str = "duhem") -> tuple[Record, Record]:
+    rng = np.random.default_rng(seed)
+    recs = []
+    for label in ("train", "val"):
+        u = paper_excitation(N, FS, seed=int(rng.integers(1 << 30)),
+                             offset=rng.uniform(4.8, 5.6))
+        sim = testing.simulate_stage(u, FS, effect=effect, form=form, strength=strength,
+                                     hysteresis=hysteresis, seed=int(rng.integers(1 << 30)))
+        recs.append(Record(u, sim["y"] + 1e-3 * rng.standard_normal(N), FS, name=label))
+    return recs[0], recs[1]
+
+
+def _figures(res) -> dict:
+    """Everything a diagnosis decides and every figure it gives, per round and candidate."""
+    rounds = [{n: (c["status"], c.get("rms_val_after"), c.get("p_value"))
+               for n, c in r["candidates"].items()} | {"accepted": r["accepted"]}
+              for r in res.rounds]
+    return {"accepted": list(res.accepted), "final": res.final["rms_val"],
+            "phi": res.final["effects"], "rounds": rounds,
+            "nominal": res.nominal["rms_val"]}
+
+
+def test_one_thread_and_two_give_the_same_diagnosis():
+    """A pure dead time (the refit with several joint starts, the screen, the drift beside the
+    screen, a member beside the rounds): the same decisions and figures, bit for bit, and the
+    same member model."""
+    train, val = _records("delay", "pure", 4.0, seed=11)
+    runs = [diagnose(train, val, budget_factor=None, members=("pi-stage",), workers=w,
+                     progress=False) for w in (1, 2)]
+    assert _figures(runs[0]) == _figures(runs[1])
+    assert runs[0].accepted, "the dead time should be found (the comparison would be empty)"
+    a, b = (r.members["pi-stage"] for r in runs)
+    np.testing.assert_array_equal(a.theta, b.theta)
+
+
+def test_members_fitted_beside_the_rounds_are_the_final_model_s():
+    """A Bouc-Wen stage: the member the diagnosis fitted beside its rounds is the one the final
+    model scores (no second fit), with the figures a fit after the rounds gives."""
+    train, val = _records(None, None, None, seed=3, hysteresis="bouc_wen")
+    res = diagnose(train, val, members=("pi-stage",), workers=2, progress=False)
+    lines: list[str] = []
+    beside = final_model(res, train, [val], progress=lines.append)
+    assert not any("fitting" in line for line in lines), lines
+    res.members = {}
+    after = final_model(res, train, [val], progress=lines.append)
+    assert any("fitting the pi-stage member" in line for line in lines)
+    assert [r["mean_rms"] for r in beside.rows] == [r["mean_rms"] for r in after.rows]
+    assert beside.chosen == after.chosen
+
+
+@pytest.mark.parametrize("option, value, said", [
+    ("workers", 0, "workers"), ("workers", 1.5, "workers"), ("workers", True, "workers"),
+    ("members", ("pi-stage", "nope"), "members"),
+])
+def test_bad_threads_or_members_are_refused_before_any_fit(option, value, said):
+    train, val = _records(None, None, None, seed=5)
+    with pytest.raises(DiagnosisError, match=said):
+        diagnose(train, val, progress=False, **{option: value})
+
+
+def test_a_minimum_found_twice_is_one_joint_start():
+    """Effect-only solutions that agree within the tolerance are one start: the refit from a
+    start given twice is the refit from it given once (its joint stage is not run twice)."""
+    kept = _distinct([np.array([2.0, 0.0]), np.array([2.0005, 1.0]), np.array([3.0, 0.0])],
+                     [0])
+    assert [k[0] for k in kept] == [2.0, 3.0]
+    train, _ = _records("delay", "pure", 3.0, seed=7)
+    model = reference_model(FS)
+    data = FitData(train.u - train.u[0], train.y - train.y[0], FS)
+    start = zero_vector()
+    starts = []
+    for d in (3.0, 3.0, 6.0):
+        s = start.copy()
+        s[7] = d
+        starts.append(s)
+    twice = refit(model, data, ["delay"], starts, joint_starts=3)
+    once = refit(model, data, ["delay"], [starts[0], starts[2]], joint_starts=2)
+    np.testing.assert_array_equal(twice.theta, once.theta)
+    np.testing.assert_array_equal(twice.phi, once.phi)
+    assert twice.ok
