@@ -343,11 +343,16 @@ def diagnose(
     # interpreter): the members beside the rounds, each round's refits beside each other
     with ThreadPoolExecutor(n_workers, thread_name_prefix="hystid-diagnose") as jobs:
         fit_on, _ = member_records(train, vals, holdout)
-        member_jobs = {}
-        for name in members:
-            say(f"fitting the {name} member on {fit_on.name!r} beside the rounds (a "
-                "candidate for the hysteresis itself)")
-            member_jobs[name] = jobs.submit(fit_member, name, fit_on)
+        member_jobs: dict[str, Future] = {}
+
+        def start_members() -> None:
+            # queued behind the first round's refits: the rounds' critical path (screen,
+            # refits, polish) goes first, the member fit takes the cores they leave idle
+            for name in members:
+                if name not in member_jobs:
+                    say(f"fitting the {name} member on {fit_on.name!r} beside the rounds (a "
+                        "candidate for the hysteresis itself)")
+                    member_jobs[name] = jobs.submit(fit_member, name, fit_on)
         # ----------------------------------------------------------------- greedy rounds
         state = _Greedy(base_model, phi0, nom, where0)
         outcomes: dict[str, EffectOutcome] = {
@@ -404,7 +409,7 @@ def diagnose(
                 rounds.append(info)
                 break
             results = _refit_round(base, plan, scr, tr_c, ev_c, info, say, rnd, budget_end,
-                                      jobs, n_workers)
+                                      jobs, n_workers, then=start_members)
             if drift_result is not None:
                 results["drift"] = drift_result[:3]
                 info["candidates"]["drift"] = _candidate_info("drift", *drift_result[:3])
@@ -487,6 +492,7 @@ def diagnose(
             rounds.append(info)
             say(f"round {rnd}: accepted {best}: held-out RMS {ev_best.rms_val:.4g}{yu}")
 
+        start_members()
         fitted = _fitted_members(member_jobs, say)
 
     # ----------------------------------------------------------------- figures of merit

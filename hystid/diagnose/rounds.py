@@ -471,14 +471,16 @@ def _refit_one(state: _Greedy, name: str, scr: ScreenResult,
 
 def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, ScreenResult],
                  tr: FitData, ev: _Evaluator, info: dict, say: _Progress, rnd: int,
-                 budget_end: float | None, pool: Executor,
-                 width: int) -> dict[str, tuple[RefitResult, dict, _Evaluation]]:
+                 budget_end: float | None, pool: Executor, width: int,
+                 then: Callable[[], None] | None = None,
+                 ) -> dict[str, tuple[RefitResult, dict, _Evaluation]]:
     """Refit the planned forms on top of the current model and test each on the held-out
     part; failures and forms left out by the time budget are recorded in ``info``.
 
     The refits run in ``pool``, at most ``width`` at a time (its workers), started in the
     plan's order (a form that is not a must is started only while the budget lasts) and
-    judged in that order: the results do not depend on the number of workers."""
+    judged in that order: the results do not depend on the number of workers. ``then`` is
+    called once every refit is started (to queue more work behind them)."""
     results: dict[str, tuple[RefitResult, dict, _Evaluation]] = {}
     running: deque[tuple[str, Future]] = deque()
     for n, must in plan:
@@ -491,6 +493,8 @@ def _refit_round(state: _Greedy, plan: list[tuple[str, bool]], scr: dict[str, Sc
             continue
         say(f"round {rnd}: refitting {n} (screen score {scr[n].score:.3g})")
         running.append((n, pool.submit(_refit_one, state, n, scr[n], tr)))
+    if then is not None:
+        then()
     while running:
         _judge_refit(state, *running.popleft(), ev, info, say, rnd, results)
     return results
