@@ -104,3 +104,41 @@ def test_a_minimum_found_twice_is_one_joint_start():
     np.testing.assert_array_equal(twice.theta, once.theta)
     np.testing.assert_array_equal(twice.phi, once.phi)
     assert twice.ok
+
+
+def test_an_error_in_a_refit_thread_reaches_the_caller(monkeypatch):
+    """A refit that raises in its thread raises from ``diagnose`` itself (the work still
+    queued is dropped), not a hang or a result without it."""
+    import hystid.diagnose.rounds as rounds
+
+    real = rounds.refit
+
+    def broken(model, data, active, *args, **kwargs):
+        if active and active[-1] == "creep_2tau":
+            raise RuntimeError("creep_2tau refit broke")
+        return real(model, data, active, *args, **kwargs)
+
+    monkeypatch.setattr(rounds, "refit", broken)
+    train, val = _records(None, None, None, seed=2)
+    with pytest.raises(RuntimeError, match="creep_2tau refit broke"):
+        diagnose(train, val, budget_factor=None, effects=("saturation", "creep"), workers=2,
+                 refit_all=True,
+                 progress=False)
+
+
+def test_a_member_fit_that_fails_beside_the_rounds_is_said_and_left_out(monkeypatch):
+    """The member's fit fails in its thread: the diagnosis says so and goes on; the final
+    model then fits it itself (and would report that failure as its own)."""
+    import hystid.diagnose.diagnosis as diagnosis
+
+    def failing(name, record):
+        raise ValueError("no fit today")
+
+    monkeypatch.setattr(diagnosis, "fit_member", failing)
+    train, val = _records(None, None, None, seed=4)
+    lines: list[str] = []
+    res = diagnose(train, val, members=("pi-stage",), workers=2, progress=lines.append)
+    assert res.members == {}
+    assert any("pi-stage member's fit failed: no fit today" in line for line in lines)
+    final = final_model(res, train, [val])
+    assert "pi-stage" in [r["candidate"] for r in final.rows]

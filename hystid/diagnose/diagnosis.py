@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import replace
 from typing import Any
 
@@ -341,7 +342,7 @@ def diagnose(
     # ----------------------------------------------------------------- side by side
     # the members fitted and the candidates refitted in threads (the kernels release the
     # interpreter): the members beside the rounds, each round's refits beside each other
-    with ThreadPoolExecutor(n_workers, thread_name_prefix="hystid-diagnose") as jobs:
+    with _side_by_side(n_workers) as jobs:
         fit_on, _ = member_records(train, vals, holdout)
         member_jobs: dict[str, Future] = {}
 
@@ -548,6 +549,17 @@ def diagnose(
         f"{floor['rms']:.4g})")
     return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds,
                            base_placed, aug, state.where, settings, series, floor, fitted)
+
+
+@contextmanager
+def _side_by_side(n_workers: int) -> Iterator[ThreadPoolExecutor]:
+    """The diagnosis' threads; on the way out (an error, Ctrl-C) the work not yet started is
+    dropped instead of run to the end."""
+    jobs = ThreadPoolExecutor(n_workers, thread_name_prefix="hystid-diagnose")
+    try:
+        yield jobs
+    finally:
+        jobs.shutdown(wait=True, cancel_futures=True)
 
 
 def _workers(workers: int | None) -> int:
