@@ -317,7 +317,8 @@ def _diagnose_row(train, vals, settings: dict[str, Any]) -> dict[str, Any]:
     from .diagnose import diagnose
 
     opts = {k: settings[k] for k in ("effects", "initial", "holdout") if k in settings}
-    res = diagnose(train, vals or None, progress=False, **opts)
+    # one thread a record: the fleet's own workers are the parallelism
+    res = diagnose(train, vals or None, progress=False, workers=1, **opts)
     fit_on, held, label = _split(train, vals, settings)
     return {"method": "diagnose", "held_out": label, **_model_columns(res.model, fit_on),
             **_held_out_columns(res.model, fit_on, held),
