@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -35,9 +35,10 @@ from ..metrics import gap_closed
 from ..model import DuhemSandwich, Structure
 from ..records import Record
 from ..validate import check_plain_duhem
-from .effects import EFFECTS, AugmentedSandwich, effect_dict, family_of
+from .effects import EFFECTS, AugmentedSandwich, effect_dict
 from .final_model import fit_member, member_records
-from .refit import refit
+from .greedy import GreedyRounds, Settings, Start
+from .refit import FitData, refit
 from .result import DiagnosisResult, EffectOutcome
 from .rounds import (
     ALIKE,
@@ -45,31 +46,20 @@ from .rounds import (
     IN_NOMINAL,
     MIN_TRAIN_SAMPLES,
     MIN_VAL_SAMPLES,
-    NOISE_REACH,
     DiagnosisError,
     _admissibility,
     _as_records,
-    _candidate_info,
     _check_inputs,
     _cost_mask,
-    _drift_last,
     _Evaluator,
     _expand_families,
-    _extends,
-    _Greedy,
-    _join,
-    _mark_alike,
-    _parsimonious,
-    _plan,
     _Progress,
     _rank,
-    _record_screen,
-    _refit_round,
     _repeat_floor,
     _split,
     describe_unexplained,
 )
-from .screen import effect_names_check, screen, zero_vector
+from .screen import effect_names_check, zero_vector
 from .structure import head as _head
 from .structure import identify_nominal as _identify
 from .where import localise
@@ -230,6 +220,77 @@ def diagnose(
     say = _Progress(progress)
     vals = _as_records(val)
     _check_inputs(train, vals, holdout, transient)
+    s = _checked(train, vals, model, structure, effects, initial=initial, alpha=alpha,
+                 max_rounds=max_rounds, min_reduction=min_reduction, refit_all=refit_all,
+                 refit_samples=refit_samples, time_budget=time_budget,
+                 budget_factor=budget_factor, require_excitation=require_excitation,
+                 min_gap_share=min_gap_share, min_gap_share_later=min_gap_share_later,
+                 workers=workers)
+    members = _member_names(members)
+    model = model.model if isinstance(model, IdentificationResult) else model
+    skip_tr = _checked_skip(train, vals, holdout, train_skip)
+    repeat = _repeat_floor(train, vals, repeats)
+    split = _Split(train, vals, holdout, transient, skip_tr, initial)
+    start, nominal, data = _nominal_stage(split, model, structure, refit_samples, repeat,
+                                          s.names, effects, say)
+
+    # the members fitted and the candidates refitted in threads (the kernels release the
+    # interpreter): the members beside the rounds, each round's refits beside each other
+    with _side_by_side(s.workers) as jobs:
+        members_beside = _MembersBeside(members, member_records(train, vals, holdout)[0],
+                                        jobs, say)
+        greedy = GreedyRounds(s, start, jobs, say, members_beside.start).run()
+        fitted = members_beside.fitted()
+    settings = {"alpha": alpha, "min_reduction": min_reduction, "min_gap_share": min_gap_share,
+                "min_gap_share_later": min_gap_share_later,
+                "refit_samples": refit_samples, "max_rounds": max_rounds,
+                "holdout": None if vals else holdout, "transient_s": transient,
+                "train_skip_s": train_skip, "initial": initial, "candidates": list(s.names),
+                "fs": train.fs, "train_samples": len(start.tr.u), "time_budget_s": s.time_budget,
+                "budget_factor": budget_factor,
+                "val_samples": int(sum(len(v.u[v.weight]) for v in data.vds)),
+                "units": dict(train.units), "u_rest": data.u_rest,
+                "nominal_seconds": start.t_nominal}
+    return _result(train, start, nominal, data, greedy, repeat, settings, fitted, say)
+
+
+@dataclass
+class _Split:
+    """How the records are split into the train and held-out parts (:func:`_split`)."""
+
+    train: Record
+    vals: list[Record]
+    holdout: float
+    transient: float
+    skip_tr: int
+    initial: str
+
+    def at(self, u_rest: float) -> tuple:
+        """The parts for a stage resting at input ``u_rest``."""
+        return _split(self.train, self.vals, self.holdout, self.transient, self.skip_tr,
+                      self.initial, u_rest)
+
+
+@dataclass
+class _Data:
+    """The held-out parts, their start times, how they were taken, the rest input, and the
+    nominal model as given or identified (and its figures before its refit, if refitted)."""
+
+    vds: list[FitData]
+    t0s: list[float]
+    held: str
+    u_rest: float
+    first_fit: dict[str, Any] | None
+    admissibility: list[str]
+
+
+def _checked(train: Record, vals: list[Record], model: Any, structure: Structure | None,
+             effects: Sequence[str], *, initial: str, alpha: float, max_rounds: int,
+             min_reduction: float, refit_all: bool, refit_samples: int | None,
+             time_budget: float | None, budget_factor: float | None,
+             require_excitation: bool, min_gap_share: float, min_gap_share_later: float,
+             workers: int | None) -> Settings:
+    """The options checked before any fit; each error names the option."""
     try:
         names = effect_names_check(_expand_families(effects))
     except ValueError as err:
@@ -250,14 +311,9 @@ def diagnose(
     if time_budget is not None and not time_budget >= 0:
         raise DiagnosisError(f"time_budget: expected seconds >= 0, got {time_budget}")
     n_workers = _workers(workers)
-    members = _member_names(members)
     if budget_factor is not None and not budget_factor >= 0:
         raise DiagnosisError(f"budget_factor: expected a multiple >= 0, got {budget_factor}")
     fs = train.fs
-    skip_tr = int(round(train_skip * fs))
-    if train_skip < 0 or skip_tr > 0.5 * train.n * (1 if vals else 1 - holdout):
-        raise DiagnosisError(f"train_skip: expected 0 <= train_skip <= half the train part, got "
-                             f"{train_skip} s")
     if isinstance(model, IdentificationResult):
         model = model.model
     if model is not None and not isinstance(model, DuhemSandwich):
@@ -274,21 +330,38 @@ def diagnose(
     if model is not None and not np.isclose(model.fs, fs, rtol=1e-9):
         raise DiagnosisError(f"model: sampling rate {model.fs:g} Hz differs from the records' "
                              f"{fs:g} Hz")
-    repeat = _repeat_floor(train, vals, repeats)
     for label, v in (("min_gap_share", min_gap_share),
                      ("min_gap_share_later", min_gap_share_later)):
         if not 0 <= v < 1:
             raise DiagnosisError(f"{label}: expected a fraction in [0, 1), got {v}")
+    return Settings(names, alpha, min_reduction, max_rounds, min_gap_share,
+                    min_gap_share_later, refit_all, require_excitation, time_budget,
+                    budget_factor, n_workers)
 
-    # ----------------------------------------------------------------- data
+
+def _checked_skip(train: Record, vals: list[Record], holdout: float, train_skip: float) -> int:
+    """``train_skip`` in samples, checked."""
+    skip_tr = int(round(train_skip * train.fs))
+    if train_skip < 0 or skip_tr > 0.5 * train.n * (1 if vals else 1 - holdout):
+        raise DiagnosisError(f"train_skip: expected 0 <= train_skip <= half the train part, got "
+                             f"{train_skip} s")
+    return skip_tr
+
+
+def _nominal_stage(split: _Split, model: DuhemSandwich | None, structure: Structure | None,
+                   refit_samples: int | None, repeat: float | None, names: list[str],
+                   effects: Sequence[str], say: _Progress) -> tuple[Start, Any, _Data]:
+    """The records split, the nominal model identified (or taken) and refitted with the
+    candidates' cost and initial state, its held-out figures, where its error lies and the
+    floor: what the rounds start from."""
+    train = split.train
+    fs = train.fs
     u_rest = model.u_rest if model is not None else 0.0
-    tr, vds, t0s, held = _split(train, vals, holdout, transient, skip_tr, initial, u_rest)
+    tr, vds, t0s, held = split.at(u_rest)
     say(f"{len(tr.u)} train samples, {sum(len(v.u[v.weight]) for v in vds)} held-out samples "
         f"({held}) at {fs:g} Hz; candidates: {', '.join(names)}")
     if any(n in IN_NOMINAL for n in effects):
         say("offset: the sensor offset is a parameter of the nominal model, not a candidate")
-
-    # ----------------------------------------------------------------- nominal model
     t_nominal = time.perf_counter()
     if model is None:
         say("identifying the nominal sandwich (hystid.identify, batch: offset and rest level "
@@ -296,8 +369,7 @@ def diagnose(
         nominal = _identify(tr, structure)
         if nominal.u_rest != 0.0:
             u_rest = nominal.u_rest
-            tr, vds, t0s, held = _split(train, vals, holdout, transient, skip_tr, initial,
-                                        u_rest)
+            tr, vds, t0s, held = split.at(u_rest)
     else:
         nominal = model
     left_out = _cost_mask(tr, u_rest)
@@ -338,217 +410,93 @@ def diagnose(
     where0 = localise(nom.segments)
     floor_rms = max(where0.noise["rms"], repeat or 0.0)
     say(f"noise floor {where0.noise['rms']:.4g}{yu} RMS; " + "; ".join(where0.findings[1:3]))
+    start = Start(tr, tr_c, ev, ev_c, base_model, phi0, nom, where0, floor_rms, t_nominal, yu)
+    return start, nominal, _Data(vds, t0s, held, u_rest, first_fit, admissibility)
 
-    # ----------------------------------------------------------------- side by side
-    # the members fitted and the candidates refitted in threads (the kernels release the
-    # interpreter): the members beside the rounds, each round's refits beside each other
-    with _side_by_side(n_workers) as jobs:
-        fit_on, _ = member_records(train, vals, holdout)
-        member_jobs: dict[str, Future] = {}
 
-        def start_members() -> None:
-            # queued behind the first round's refits: the rounds' critical path (screen,
-            # refits, polish) goes first, the member fit takes the cores they leave idle
-            for name in members:
-                if name not in member_jobs:
-                    say(f"fitting the {name} member on {fit_on.name!r} beside the rounds (a "
-                        "candidate for the hysteresis itself)")
-                    member_jobs[name] = jobs.submit(fit_member, name, fit_on)
-        # ----------------------------------------------------------------- greedy rounds
-        state = _Greedy(base_model, phi0, nom, where0)
-        outcomes: dict[str, EffectOutcome] = {
-            n: EffectOutcome(n, "screened out", family=family_of(n)) for n in names}
-        rounds: list[dict[str, Any]] = []
-        nf_estimates = [where0.noise["rms"]]
-        promising = 0.25 * (1.0 - (1.0 - min_reduction) ** 2)
-        cand_errs: dict[str, list[np.ndarray]] = {}
-        budget_end = None
-        for rnd in range(1, max_rounds + 1):
-            remaining = [n for n in names if n not in state.active
-                         and (family_of(n) not in state.families or _extends(n, state.active))]
-            if not remaining:
-                break
-            if rnd > 1:
-                later = max(min_gap_share, min_gap_share_later) * max(nom.rms_val - floor_rms, 0.0)
-                if state.ev.rms_val - later < NOISE_REACH * floor_rms:
-                    # the reduction a further form needs would take the held-out error below the
-                    # noise, which no model of the stage explains
-                    rounds[-1]["next_round"] = (
-                        f"not run: a further form must lower the held-out RMS by {later:.4g}, from "
-                        f"{state.ev.rms_val:.4g}, below the floor of {floor_rms:.4g}")
-                    say(f"round {rnd}: {rounds[-1]['next_round']}")
-                    break
-            window = state if tr_c is tr else state.on_window(tr_c, ev_c, say)
-            drift_result, base = None, window
-            drift_job = None
-            if "drift" in remaining:
-                # the drift is a nuisance of every record: refitted with the train record's own
-                # drift, judged with each held-out record's own drift re-estimated (beside the
-                # screen, on workspaces of its own)
-                drift_job = jobs.submit(window.with_drift, replace(tr_c), ev_c.private(), say)
-            others = [n for n in remaining if n != "drift"]
-            say(f"round {rnd}: screening {', '.join(others)}")
-            scr = screen(base.model, base.phi, base.active, tr_c, others,
-                         step_scale=base.ev.scales[0], w1_scale=base.ev.scales[1],
-                         peaks_hz=state.where.frequency["peaks_hz"]
-                         + [state.where.frequency["peak_hz"]], pool=jobs)
-            if drift_job is not None:
-                drift_result = drift_job.result()
-            if drift_result is not None:
-                scr["drift"] = drift_result[3]
-            plan, ruled_out = _plan(scr, others, promising, refit_all)
-            if rnd == 1:
-                _record_screen(outcomes, scr, ruled_out, require_excitation)
-                if time_budget is None and budget_factor is not None:
-                    time_budget = budget_factor * t_nominal
-                if time_budget is not None:
-                    budget_end = time.perf_counter() + time_budget
-            info: dict[str, Any] = {"round": rnd, "rms_val_base": state.ev.rms_val,
-                                    "findings": state.where.findings, "accepted": None,
-                                    "ruled_out": ruled_out, "candidates": {}}
-            if not plan and drift_result is None:
-                rounds.append(info)
-                break
-            results = _refit_round(base, plan, scr, tr_c, ev_c, info, say, rnd, budget_end,
-                                      jobs, n_workers, then=start_members)
-            if drift_result is not None:
-                results["drift"] = drift_result[:3]
-                info["candidates"]["drift"] = _candidate_info("drift", *drift_result[:3])
-            if rnd == 1:
-                for n, (rf, test, ev_n) in results.items():
-                    o = outcomes[n]
-                    o.status = "rejected"
-                    o.params = effect_dict(rf.phi, [n])[n]
-                    o.rms_train_after, o.rms_val_after, o.test = ev_n.rms_train, ev_n.rms_val, test
-                    cand_errs[n] = ev_n.errs
-                for n, c in info["candidates"].items():
-                    if c["status"] in ("failed", "not refitted"):
-                        outcomes[n].status = c["status"]
-                        outcomes[n].message = _join(outcomes[n].message, c["message"])
-                _mark_alike(outcomes, state.ev.errs, cand_errs)
-            level_r = alpha / max(len(results) + sum(
-                c["status"] == "failed" for c in info["candidates"].values()), 1)
-            info["test_level"] = level_r
-            share = min_gap_share if rnd == 1 else max(min_gap_share, min_gap_share_later)
-            needed = share * max(nom.rms_val - floor_rms, 0.0)
-            passing = [n for n, (_, t, _) in results.items()
-                       if t["p_value"] < level_r and t["rel_reduction"] >= min_reduction
-                       and t["rms_base"] - t["rms_cand"] >= needed]
-            info["rms_reduction_needed"] = needed
-            if not passing:
-                rounds.append(info)
-                say(f"round {rnd}: no candidate passes (level {level_r:.2g}, "
-                    f"minimum reduction {100 * min_reduction:.0f} %)")
-                break
-            # a further form of a family already accepted goes first (the first form did not
-            # catch the whole effect), a new family next; a record's own drift (re-estimated on
-            # the held-out records themselves) only when no input-tied form beats it like with
-            # like
-            pool = [n for n in passing if family_of(n) in state.families]
-            if not pool:
-                pool, order = _drift_last(passing, results, level_r, min_reduction)
-                if order:
-                    info["drift_order"] = order
-                    say(f"round {rnd}: {order['text']}")
-                    for n in ("drift", order["form"]):
-                        outcomes[n].message = _join(outcomes[n].message,
-                                                    f"round {rnd}: {order['text']}")
-            chosen = None
-            while pool and chosen is None:
-                best = min(pool, key=lambda n: results[n][1]["rms_cand"])
-                best = _parsimonious(best, pool, {n: (r[0], r[1], r[2].errs)
-                                                  for n, r in results.items()}, level_r,
-                                     min_reduction)
-                rf, test, ev_best = results[best]
-                # polished on the whole train part (longer than the screening refits, so that a
-                # later round does not pick up what an unfinished fit left): the model that goes
-                # on must pass the same test again
-                rf, test, ev_best = state.refit_whole(best, rf, tr, ev, results[best], say)
-                if not (test["p_value"] < level_r and test["rel_reduction"] >= min_reduction
-                        and test["rms_base"] - test["rms_cand"] >= needed):
-                    info["candidates"][best].update({
-                        "status": "not confirmed",
-                        "message": f"passed on its screening refit, not once polished on the whole "
-                                   f"train part (held-out RMS {test['rms_cand']:.4g}, p = "
-                                   f"{test['p_value']:.2g})"})
-                    say(f"round {rnd}: {best} not confirmed on the whole train part")
-                    pool.remove(best)
-                    continue
-                chosen = best
-            if chosen is None:
-                rounds.append(info)
-                break
-            best = chosen
-            rms_before = state.ev.rms_val
-            state.accept(best, rf, ev_best, localise(ev_best.segments))
-            nf_estimates.append(state.where.noise["rms"])
-            o = outcomes[best]
-            o.status, o.round = "accepted", rnd
-            o.params = effect_dict(rf.phi, [best])[best]
-            o.at_bound = [b for b in rf.at_bound if b.startswith(f"{best}.")]
-            o.rms_train_after, o.rms_val_after, o.test = ev_best.rms_train, ev_best.rms_val, test
-            o.cumulative = {"rms_val_before": rms_before, "rms_val": ev_best.rms_val,
-                            "p_value": test["p_value"], "rel_reduction": test["rel_reduction"]}
-            info.update({"accepted": best, "rms_val_after": ev_best.rms_val})
-            rounds.append(info)
-            say(f"round {rnd}: accepted {best}: held-out RMS {ev_best.rms_val:.4g}{yu}")
+class _MembersBeside:
+    """The members' fits, queued behind the first round's refits: the rounds' critical path
+    (screen, refits, polish) goes first, the member fits take the cores they leave idle."""
 
-        start_members()
-        fitted = _fitted_members(member_jobs, say)
+    def __init__(self, members: list[str], fit_on: Record, jobs: ThreadPoolExecutor,
+                 say: _Progress) -> None:
+        self.members, self.fit_on, self.jobs, self.say = members, fit_on, jobs, say
+        self.running: dict[str, Future] = {}
 
-    # ----------------------------------------------------------------- figures of merit
-    nf = float(min(nf_estimates))
+    def start(self) -> None:
+        """Queue every member's fit not queued yet."""
+        for name in self.members:
+            if name not in self.running:
+                self.say(f"fitting the {name} member on {self.fit_on.name!r} beside the "
+                         "rounds (a candidate for the hysteresis itself)")
+                self.running[name] = self.jobs.submit(fit_member, name, self.fit_on)
+
+    def fitted(self) -> dict[str, Any]:
+        """The members fitted; one whose fit failed is said and left to
+        :func:`~hystid.diagnose.final_model.final_model` to fit (and report) again."""
+        self.start()
+        fitted = {}
+        for name, job in self.running.items():
+            try:
+                fitted[name] = job.result()
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
+                self.say(f"the {name} member's fit failed: {err}")
+                continue
+            self.say(f"the {name} member fitted")
+        return fitted
+
+
+def _result(train: Record, start: Start, nominal: DuhemSandwich, data: _Data,
+            greedy: GreedyRounds, repeat: float | None, settings: dict[str, Any],
+            fitted: dict[str, Any], say: _Progress) -> DiagnosisResult:
+    """The figures of merit against the floor, the models placed in record units, the
+    report."""
+    state, nom = greedy.state, start.nom
+    nf = float(min(greedy.noise_estimates))
     floor = {"noise_floor_rms": nf, "repeat_floor_rms": repeat,
              "rms": max(nf, repeat) if repeat is not None else nf,
              "kind": "repeatability" if repeat is not None and repeat > nf else "sensor noise"}
+
     def closed(rms):
         return gap_closed(nom.rms_val, rms, floor["rms"])
 
-    for o in outcomes.values():
+    for o in greedy.outcomes.values():
         if o.rms_val_after is not None:
             o.gap_closed = closed(o.rms_val_after)
         if o.cumulative is not None:
             o.cumulative["gap_closed"] = closed(o.cumulative["rms_val"])
     accepted = list(state.active)
-    ranked = _rank(outcomes, accepted)
+    ranked = _rank(greedy.outcomes, accepted)
     final_effects = effect_dict(state.phi, accepted) if accepted else {}
     offset_slot = EFFECTS["offset"].slots[0]
 
     def placed(m: DuhemSandwich, phi: np.ndarray) -> DuhemSandwich:
         # the model in record units: its rest level, the fitted sensor offset, its envelope
-        return DuhemSandwich(m.theta, m.structure, fs=fs, name=nominal.name, u_rest=u_rest,
-                             offset=float(phi[offset_slot]),
+        return DuhemSandwich(m.theta, m.structure, fs=train.fs, name=nominal.name,
+                             u_rest=data.u_rest, offset=float(phi[offset_slot]),
                              envelope=getattr(nominal, "envelope", None), units=train.units)
 
-    base_placed = placed(base_model, phi0)
+    base_placed = placed(start.model, start.phi)
     aug = AugmentedSandwich(placed(state.model, state.phi), final_effects)
     nominal_info = {"rms_val": nom.rms_val, "rms_train": nom.rms_train,
                     "gap": nom.rms_val - floor["rms"],
-                    "params": base_model.params, "name": nominal.name,
-                    "admissibility": admissibility, "margin_val": nom.margin_val}
-    if first_fit is not None:
-        nominal_info["first_fit"] = first_fit
+                    "params": start.model.params, "name": nominal.name,
+                    "admissibility": data.admissibility, "margin_val": nom.margin_val}
+    if data.first_fit is not None:
+        nominal_info["first_fit"] = data.first_fit
     final = {"rms_val": state.ev.rms_val, "rms_train": state.ev.rms_train,
              "gap_closed": closed(state.ev.rms_val), "effects": final_effects,
              "params": state.model.params,
              "unexplained": describe_unexplained(state.where, floor["rms"])}
-    settings = {"alpha": alpha, "min_reduction": min_reduction, "min_gap_share": min_gap_share,
-                "min_gap_share_later": min_gap_share_later,
-                "refit_samples": refit_samples, "max_rounds": max_rounds,
-                "holdout": None if vals else holdout, "transient_s": transient,
-                "train_skip_s": train_skip, "initial": initial, "candidates": list(names),
-                "fs": fs, "train_samples": len(tr.u), "time_budget_s": time_budget,
-                "budget_factor": budget_factor,
-                "val_samples": int(sum(len(v.u[v.weight]) for v in vds)),
-                "units": dict(train.units), "u_rest": u_rest,
-                "nominal_seconds": t_nominal, "elapsed_s": time.perf_counter() - say.t0}
+    settings = {**settings, "elapsed_s": time.perf_counter() - say.t0}
     series = {"errs_nominal": nom.errs, "errs_final": state.ev.errs,
-              "candidate_errs": cand_errs, "t0s": t0s}
+              "candidate_errs": greedy.cand_errs, "t0s": data.t0s}
     say(f"done: {', '.join(accepted) if accepted else 'none'} accepted; held-out RMS "
         f"{nom.rms_val:.4g} -> {state.ev.rms_val:.4g} ({floor['kind']} floor "
         f"{floor['rms']:.4g})")
-    return DiagnosisResult(nf, nominal_info, where0, ranked, accepted, final, rounds,
-                           base_placed, aug, state.where, settings, series, floor, fitted)
+    return DiagnosisResult(nf, nominal_info, start.where, ranked, accepted, final,
+                           greedy.rounds, base_placed, aug, state.where, settings, series,
+                           floor, fitted)
 
 
 @contextmanager
@@ -581,19 +529,5 @@ def _member_names(members: Sequence[str]) -> list[str]:
             raise DiagnosisError(f"members: expected names of {', '.join(MEMBERS)}, got "
                                  f"{name!r}")
     return names
-
-
-def _fitted_members(member_jobs: dict[str, Future], say: _Progress) -> dict[str, Any]:
-    """The members fitted beside the rounds; one whose fit failed is said and left to
-    :func:`~hystid.diagnose.final_model.final_model` to fit (and report) again."""
-    fitted = {}
-    for name, job in member_jobs.items():
-        try:
-            fitted[name] = job.result()
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
-            say(f"the {name} member's fit failed: {err}")
-            continue
-        say(f"the {name} member fitted")
-    return fitted
 
 
