@@ -208,19 +208,29 @@ class _PIOutputError:
         if self._cache.get("z") is None or not np.array_equal(self._cache["z"], z):
             theta, dtheta = self.rp.to_theta(z[: self.n])
             with np.errstate(over="ignore", invalid="ignore"):
-                yhat, Jz = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
-                                                   self.un, chain=dtheta)
+                yhat, S, D = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
+                                                     self.un, chain=dtheta, raw=True)
             y0 = z[self.n] if self.fit_offset else 0.0
             data = yhat[self.kept] + y0 - self.target
-            # [J | r] written in place: the data rows (sensitivities in z, the offset's ones),
-            # the ridge rows, the residuals last
-            m, width = len(self.rows), self.n + int(self.fit_offset)
-            A = np.empty((m + len(self.mu), width + 1))
-            A[:m, :self.n] = Jz[self.kept]
-            A[:m, self.n:width] = self.ones
-            A[m:, :width] = self.ridge_rows
-            A[:m, width] = data
-            A[m:, width] = self.ridge * theta[self.mu]
+            # the data rows [S | 1 | r] (sensitivities to the full coefficients, the offset's
+            # ones, the residuals) reduced to their triangle first; its columns then mapped to
+            # z (J = S D folds to R_S D: a square product, not a tall one) and folded again
+            # with the ridge rows
+            m, nc, fo = len(self.rows), S.shape[1], int(self.fit_offset)
+            B = np.empty((m, nc + fo + 1))
+            B[:, :nc] = S[self.kept]
+            B[:, nc:nc + fo] = self.ones
+            B[:, -1] = data
+            width = self.n + fo
+            A = np.empty((nc + fo + 1 + len(self.mu), width + 1))
+            if np.all(np.isfinite(B)):
+                R = triangle_of(B)
+                A[:nc + fo + 1, :self.n] = R[:, :nc] @ D
+                A[:nc + fo + 1, self.n:] = R[:, nc:]
+            else:
+                A[:nc + fo + 1] = np.nan  # a failed step (see _fold)
+            A[nc + fo + 1:, :width] = self.ridge_rows
+            A[nc + fo + 1:, width] = self.ridge * theta[self.mu]
             self._cache = {"z": z.copy(), "data": data, **_fold(A)}
         return self._cache
 

@@ -411,8 +411,8 @@ def _n_full(s: PIStructure) -> int:
 
 def pi_output_sensitivities(
     model: PISandwich, u: np.ndarray, x0: InitialCondition | None = None,
-    chain: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+    chain: np.ndarray | None = None, raw: bool = False,
+) -> tuple[np.ndarray, ...]:
     """Simulated output and its Jacobian ``d yhat / d theta`` (``N x n_params``) from rest/x0.
 
     Parameters
@@ -426,11 +426,16 @@ def pi_output_sensitivities(
     chain : ndarray, optional
         ``d theta / d z`` (``n_params x n_z``): the Jacobian is then ``d yhat / d z``, formed
         in one product with the sensitivities (a search in other coordinates).
+    raw : bool
+        Return the sensitivities to the full coefficients (``N x n_full``) and the map from
+        them to the Jacobian's columns instead of their product (a caller that reduces the
+        rows first multiplies a square matrix instead of a tall one).
 
     Returns
     -------
     tuple of ndarray
-        ``yhat`` (N) and its Jacobian (N x n_params, or N x n_z with ``chain``).
+        ``yhat`` (N) and its Jacobian (N x n_params, or N x n_z with ``chain``); with ``raw``,
+        ``yhat``, the full sensitivities and the map (their product is the Jacobian).
     """
     s = model.structure
     x0 = x0 or InitialCondition()
@@ -451,6 +456,8 @@ def pi_output_sensitivities(
     SP = np.zeros((s.n_operators, nc))
     pi_sensitivities_into(c, layout, model.thresholds, U, W1, W2, Y, S1, SW2, SY, p, SP, P)
     T = _free_map(layout, len(model.theta), nc)
+    if raw:
+        return Y[P:], SY[P:], T if chain is None else T @ chain
     return Y[P:], SY[P:] @ (T if chain is None else T @ chain)
 
 
