@@ -46,17 +46,18 @@ def _figures(res) -> dict:
             "nominal": res.nominal["rms_val"]}
 
 
-def test_one_thread_and_two_give_the_same_diagnosis():
+def test_one_thread_two_or_four_give_the_same_diagnosis():
     """A pure dead time (the refit with several joint starts, the screen, the drift beside the
     screen, a member beside the rounds): the same decisions and figures, bit for bit, and the
     same member model."""
     train, val = _records("delay", "pure", 4.0, seed=11)
     runs = [diagnose(train, val, budget_factor=None, members=("pi-stage",), workers=w,
-                     progress=False) for w in (1, 2)]
-    assert _figures(runs[0]) == _figures(runs[1])
+                     progress=False) for w in (1, 2, 4)]
+    assert _figures(runs[0]) == _figures(runs[1]) == _figures(runs[2])
     assert runs[0].accepted, "the dead time should be found (the comparison would be empty)"
-    a, b = (r.members["pi-stage"] for r in runs)
+    a, b, c = (r.members["pi-stage"] for r in runs)
     np.testing.assert_array_equal(a.theta, b.theta)
+    np.testing.assert_array_equal(a.theta, c.theta)
 
 
 def test_members_fitted_beside_the_rounds_are_the_final_model_s():
