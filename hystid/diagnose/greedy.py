@@ -140,7 +140,7 @@ class GreedyRounds:
     jobs : Executor
         Threads for the refits, the screen and the drift refit.
     say : _Progress
-        Progress lines.
+        Progress lines (said from the calling thread only).
     after_first_refits : callable
         Called once the first round's refits are all started (the member fits queue behind
         them).
@@ -266,8 +266,9 @@ class GreedyRounds:
             # the drift is a nuisance of every record: refitted with the train record's own
             # drift, judged with each held-out record's own drift re-estimated (beside the
             # screen, on workspaces of its own)
-            drift_job = self.jobs.submit(base.with_drift, replace(st.tr_c), st.ev_c.private(),
-                                         self.say)
+            self.say("refitting with the train record's own drift (a nuisance of every "
+                     "record)")
+            drift_job = self.jobs.submit(base.with_drift, replace(st.tr_c), st.ev_c.private())
         others = [n for n in remaining if n != "drift"]
         self.say(f"round {rnd}: screening {', '.join(others)}")
         scr = screen(base.model, base.phi, base.active, st.tr_c, others,

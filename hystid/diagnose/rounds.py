@@ -334,11 +334,10 @@ class _Greedy:
         out.active, out.families = list(self.active), list(self.families)
         return out
 
-    def with_drift(self, tr_c: FitData, ev_c: _Evaluator, say: _Progress) -> tuple | None:
+    def with_drift(self, tr_c: FitData, ev_c: _Evaluator) -> tuple | None:
         """The drift candidate: the current model refitted with the train record's own drift,
         judged with each held-out record's own drift re-estimated. Returns ``(refit, test,
         evaluation, screen entry)``, or None when the refit fails."""
-        say("refitting with the train record's own drift (a nuisance of every record)")
         w1, _, yh = simulate_fit_data(self.model, self.phi, tr_c)
         sl = tr_c.weight
         t = np.arange(len(tr_c.u))[sl] / tr_c.fs
