@@ -143,3 +143,22 @@ def test_a_member_fit_that_fails_beside_the_rounds_is_said_and_left_out(monkeypa
     assert any("pi-stage member's fit failed: no fit today" in line for line in lines)
     final = final_model(res, train, [val])
     assert "pi-stage" in [r["candidate"] for r in final.rows]
+
+
+def test_progress_is_called_from_the_calling_thread_only():
+    """A progress callback (a GUI's, say) is never called from a worker thread, though the
+    drift's refit, the screen and the refits run there."""
+    import threading
+
+    train, val = _records("drift", None, 1.0, seed=5)
+    seen: set[int] = set()
+    lines: list[str] = []
+
+    def note(line: str) -> None:
+        seen.add(threading.get_ident())
+        lines.append(line)
+
+    diagnose(train, val, members=("pi-stage",), workers=2, progress=note)
+    assert seen == {threading.get_ident()}
+    assert any("own drift" in line for line in lines)
+    assert any("refitting" in line for line in lines)
