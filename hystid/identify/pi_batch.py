@@ -112,6 +112,7 @@ class _NormalisedFit(NamedTuple):
 def _solve_normalised(
     un: np.ndarray, yn: np.ndarray, weight: np.ndarray, r: np.ndarray, structure: PIStructure,
     theta0: np.ndarray | None, fit_offset: bool, max_nfev: int, tol: float,
+    screen_nfev: int = SCREEN_NFEV,
 ) -> _NormalisedFit:
     """Output-error least squares on normalised signals, from several starts.
 
@@ -119,7 +120,8 @@ def _solve_normalised(
     free run from rest on ``un``, thresholds ``r`` in normalised input units) with
     :func:`scipy.optimize.least_squares` in reflection coefficients of L1 and L2 and, with
     ``fit_offset``, the normalised sensor offset ``y0``. The starts (:func:`_starts`) are run
-    for :data:`SCREEN_NFEV` evaluations each; the :data:`POLISHED` best are polished.
+    for ``screen_nfev`` evaluations each; the :data:`POLISHED` best are polished (``max_nfev``
+    evaluations).
 
     Returns
     -------
@@ -132,7 +134,7 @@ def _solve_normalised(
     screened = []
     for label, (theta, y0) in starts.items():
         sol = problem.solve(problem.to_z(theta, y0),
-                            SCREEN_NFEV if len(starts) > 1 else max_nfev, tol)
+                            screen_nfev if len(starts) > 1 else max_nfev, tol)
         screened.append((sol.cost, label, sol))
     screened.sort(key=lambda item: item[0])
     polished = []
@@ -394,7 +396,7 @@ def _zero_scales(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 
 def _fit_normalised_from_zero(
     u: np.ndarray, y: np.ndarray, r: np.ndarray, structure: PIStructure, *,
-    max_nfev: int = 200, tol: float = 1e-8,
+    max_nfev: int = 200, tol: float = 1e-8, screen_nfev: int = SCREEN_NFEV,
 ) -> tuple[_NormalisedFit, float, float]:
     """:func:`_solve_normalised` at rest at ``u = 0`` without offset, on ``u / su`` and
     ``y / sy`` (:func:`_zero_scales`); samples with a non-finite ``y`` are left out of the cost.
@@ -409,7 +411,7 @@ def _fit_normalised_from_zero(
     su, sy = _zero_scales(u, y)
     with np.errstate(invalid="ignore"):
         fit = _solve_normalised(u / su, y / sy, np.isfinite(y), r / su, structure, None, False,
-                                max_nfev, tol)
+                                max_nfev, tol, screen_nfev)
     return fit, su, sy
 
 
