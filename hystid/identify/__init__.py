@@ -108,9 +108,25 @@ def identify(
                         f"{type(progress).__name__} {progress!r:.40}")
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    from .output_jumps import CHECKING
     from .prepare import without_input_glitches
 
     record, mended = without_input_glitches(record)
+    if not CHECKING.get():  # a fit inside another identify(): the outermost one checks
+        return _identify_record(record, method, structure, model, progress, settings, mended)
+    token = CHECKING.set(False)
+    try:
+        result = _identify_record(record, method, structure, model, progress, settings, mended)
+        return _after_output_jump(record, result, method, structure, model, progress, settings,
+                                  mended)
+    finally:
+        CHECKING.reset(token)
+
+
+def _identify_record(record: Record, method: str, structure: Any, model: str | None,
+                     progress: Callable[[int, int], None] | None, settings: dict,
+                     mended: list[str]) -> IdentificationResult:
+    """:func:`identify` on a record whose input glitches are mended (``mended`` says what)."""
     model, notes = _resolved_model(record, method, structure, model, settings)
     mended = notes + mended
     if model != "duhem":
@@ -119,6 +135,25 @@ def identify(
         result = _identify_duhem(record, method, structure, progress, settings)
     if mended:
         result.info["warnings"] = mended + list(result.info.get("warnings", []))
+    return result
+
+
+def _after_output_jump(record: Record, result: IdentificationResult, method: str,
+                       structure: Any, model: str | None,
+                       progress: Callable[[int, int], None] | None, settings: dict,
+                       mended: list[str]) -> IdentificationResult:
+    """The result, or, when its residual shows a step of the measured output that the input
+    does not cause (:mod:`hystid.identify.output_jumps`), the identification again on the
+    record with the step taken off, said first among its warnings."""
+    from .output_jumps import find_output_jump, residual_after_rest, without_jump
+
+    jump = find_output_jump(residual_after_rest(record, result.model), record.u, record.fs)
+    if jump is None:
+        return result
+    result = _identify_record(without_jump(record, jump), method, structure, model, progress,
+                              settings, mended)
+    result.info["warnings"] = [jump.note(record)] + list(result.info.get("warnings", []))
+    result.info["output_jump"] = jump.to_dict()
     return result
 
 
