@@ -2,38 +2,21 @@
 
 Records from hystid.testing's independent stage simulator (a pure dead time written apart from
 the diagnosis' delay form, and a Bouc-Wen stage). The threads must not change the diagnosis:
-with the time budget off, one thread and two give the same result to the last bit.
+with the time budget off, one thread, two or four give the same result to the last bit.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_diagnose_final import FS, _records
 
-from hystid import testing
 from hystid.diagnose import diagnose
 from hystid.diagnose.final_model import final_model
 from hystid.diagnose.refit import FitData, _distinct, refit
 from hystid.diagnose.screen import zero_vector
 from hystid.errors import DiagnosisError
-from hystid.records import Record
-from hystid.reference import paper_excitation, reference_model
-
-FS = 30_000.0
-N = 6000
-
-
-def _records(effect: str | None, form: str | None, strength: float | None, seed: int,
-             hysteresis: str = "duhem") -> tuple[Record, Record]:
-    rng = np.random.default_rng(seed)
-    recs = []
-    for label in ("train", "val"):
-        u = paper_excitation(N, FS, seed=int(rng.integers(1 << 30)),
-                             offset=rng.uniform(4.8, 5.6))
-        sim = testing.simulate_stage(u, FS, effect=effect, form=form, strength=strength,
-                                     hysteresis=hysteresis, seed=int(rng.integers(1 << 30)))
-        recs.append(Record(u, sim["y"] + 1e-3 * rng.standard_normal(N), FS, name=label))
-    return recs[0], recs[1]
+from hystid.reference import reference_model
 
 
 def _figures(res) -> dict:
