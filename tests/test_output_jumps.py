@@ -37,8 +37,7 @@ def _identify(rec: Record, method: str = "batch"):
         return identify(rec, method=method)
 
 
-@pytest.mark.parametrize("method, size, seed", [("batch", 0.3, 0), ("batch", -0.2, 3),
-                                                ("online", 0.3, 0)])
+@pytest.mark.parametrize("method, size, seed", [("batch", 0.3, 0), ("online", -0.2, 3)])
 def test_a_sensor_zero_that_moves_is_found_said_and_taken_off(method, size, seed):
     """The step is found at its sample, said first, and the model identified on the record
     with it taken off is as good held out as the one identified without it (within 5 %; the
@@ -66,7 +65,7 @@ def test_a_sensor_zero_that_moves_is_found_said_and_taken_off(method, size, seed
 
 def _quiet_cases() -> dict[str, Record]:
     cases = {f"look-alike {k}": stage_a_like(k, seconds=1.0, seed=31)
-             for k in ("sine50", "tri50", "large_sine")}
+             for k in ("tri50", "large_sine")}
     cases["stage-B look-alike (starts mid-swing)"] = stage_b_like(seed=2)
     for rec in as_measured_suite(3, seconds=0.5):
         if rec.name in ("10kHz", "outlier", "end_glitch", "mid_motion"):
@@ -86,8 +85,7 @@ def test_no_step_is_found_where_there_is_none(name):
 
 SHARED = STAGE_A.parents[1]
 MEASURED = {
-    **{f"stage A {n}": (STAGE_A / f"{n}.csv", None)
-       for n in ("prbn_1", "prbn_2", "sine50_1", "sine50_2", "tri50_1", "tri50_2")},
+    **{f"stage A {n}": (STAGE_A / f"{n}.csv", None) for n in ("prbn_1", "tri50_1")},
     "piezo": (SHARED / "real" / "piezo_sine_150V_1Hz" / "hysteresis_v_150_1hz.csv",
               {"t": 1, "u": 3, "y": 2}),
     "Bouc-Wen benchmark": (SHARED / "benchmarks" / "bouc_wen" / "train.h5", None),
