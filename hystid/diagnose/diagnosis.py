@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -339,6 +339,11 @@ def _checked(train: Record, vals: list[Record], model: Any, structure: Structure
                     budget_factor, n_workers)
 
 
+def _unit_said(record: Record) -> str:
+    """The output's unit as the progress lines say it (" um")."""
+    return (" " + str(record.units.get("y", ""))).rstrip()
+
+
 def _checked_skip(train: Record, vals: list[Record], holdout: float, train_skip: float) -> int:
     """``train_skip`` in samples, checked."""
     skip_tr = int(round(train_skip * train.fs))
@@ -366,10 +371,17 @@ def _nominal_stage(split: _Split, model: DuhemSandwich | None, structure: Struct
     if model is None:
         say("identifying the nominal sandwich (hystid.identify, batch: offset and rest level "
             "estimated)")
-        nominal = _identify(tr, structure)
+        jumps: list[dict] = []
+        nominal = _identify(tr, structure, jumps)
         if nominal.u_rest != 0.0:
             u_rest = nominal.u_rest
             tr, vds, t0s, held = split.at(u_rest)
+        for jump in jumps:  # the rounds see the train part as the nominal model was fitted
+            tr = replace(tr, y=np.r_[tr.y[:jump["sample"]],
+                                     tr.y[jump["sample"]:] - jump["size"]])
+            say(f"the train part's output steps by {jump['size']:+.4g}{_unit_said(train)} at its "
+                f"sample {jump['sample']} where the input does not (a sensor zero that "
+                "moved?): taken off the samples after it, as the identification did")
     else:
         nominal = model
     left_out = _cost_mask(tr, u_rest)
@@ -386,7 +398,7 @@ def _nominal_stage(split: _Split, model: DuhemSandwich | None, structure: Struct
     if not first.finite:
         raise DiagnosisError("the nominal model's simulation diverges on these records (the "
                              "Duhem stability condition (8) fails): scale the input down")
-    yu = (" " + str(train.units.get("y", ""))).rstrip()  # the unit of every RMS said
+    yu = _unit_said(train)  # the unit of every RMS said
     say(f"nominal model: train RMS {first.rms_train:.4g}{yu}, held-out RMS {first.rms_val:.4g}{yu}")
     base_model, first_fit = nominal, None
     # the candidates are refitted with this cost and initial state: so is the base

@@ -64,7 +64,8 @@ def head(data: FitData, n: int) -> FitData:
     return FitData(data.u[:n], data.y[:n], data.fs, data.level, weight)
 
 
-def identify_nominal(tr: FitData, structure: Structure | None) -> DuhemSandwich:
+def identify_nominal(tr: FitData, structure: Structure | None,
+                     jumps: list[dict] | None = None) -> DuhemSandwich:
     """The nominal identification: :func:`hystid.identify.identify` (batch) on the train part,
     which places the model at the record's rest level and sensor offset.
 
@@ -77,6 +78,9 @@ def identify_nominal(tr: FitData, structure: Structure | None) -> DuhemSandwich:
         The train part.
     structure : Structure or None
         Orders and delays; the identification's default when None.
+    jumps : list, optional
+        Receives the step of the measured output the identification found and took off
+        (:mod:`hystid.identify.output_jumps`), if any.
 
     Returns
     -------
@@ -84,7 +88,10 @@ def identify_nominal(tr: FitData, structure: Structure | None) -> DuhemSandwich:
         The identified model, named ``nominal sandwich``.
     """
     rec = Record(tr.u, tr.y, tr.fs, name="train")
-    model = identify(rec, "batch", structure, model="duhem").model
+    result = identify(rec, "batch", structure, model="duhem")
+    if jumps is not None and "output_jump" in result.info:
+        jumps.append(result.info["output_jump"])
+    model = result.model
     model.name = "nominal sandwich"
     return model
 
