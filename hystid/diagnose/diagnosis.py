@@ -220,6 +220,7 @@ def diagnose(
     say = _Progress(progress)
     vals = _as_records(val)
     _check_inputs(train, vals, holdout, transient)
+    model = model.model if isinstance(model, IdentificationResult) else model
     s = _checked(train, vals, model, structure, effects, initial=initial, alpha=alpha,
                  max_rounds=max_rounds, min_reduction=min_reduction, refit_all=refit_all,
                  refit_samples=refit_samples, time_budget=time_budget,
@@ -227,7 +228,6 @@ def diagnose(
                  min_gap_share=min_gap_share, min_gap_share_later=min_gap_share_later,
                  workers=workers)
     members = _member_names(members)
-    model = model.model if isinstance(model, IdentificationResult) else model
     skip_tr = _checked_skip(train, vals, holdout, train_skip)
     repeat = _repeat_floor(train, vals, repeats)
     split = _Split(train, vals, holdout, transient, skip_tr, initial)
@@ -314,8 +314,6 @@ def _checked(train: Record, vals: list[Record], model: Any, structure: Structure
     if budget_factor is not None and not budget_factor >= 0:
         raise DiagnosisError(f"budget_factor: expected a multiple >= 0, got {budget_factor}")
     fs = train.fs
-    if isinstance(model, IdentificationResult):
-        model = model.model
     if model is not None and not isinstance(model, DuhemSandwich):
         raise DiagnosisError(
             f"model: expected a DuhemSandwich, got {type(model).__name__} (the effects extend "

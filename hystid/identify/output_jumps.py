@@ -141,8 +141,8 @@ def find_output_jump(e: np.ndarray, u: np.ndarray, fs: float) -> OutputJump | No
 
 
 def residual_after_rest(record: Record, model) -> np.ndarray:
-    """The model's free run from rest less the record's output, zeroed on the record's rest
-    (as the accuracy tables score it), NaN over the leading rest.
+    """The record's output less the model's free run from rest, NaN over the leading rest
+    (a constant between them moves neither a step nor a level, so none is taken off).
 
     Parameters
     ----------
@@ -156,11 +156,10 @@ def residual_after_rest(record: Record, model) -> np.ndarray:
     ndarray
         Measured less simulated output.
     """
-    from ..baselines import rest_zero, simulate_from_rest
+    from ..baselines import simulate_from_rest
 
     with np.errstate(all="ignore"):
-        yhat = simulate_from_rest(model, record.u, check=False)
-        e = record.y - (yhat + rest_zero(yhat, record))
+        e = record.y - simulate_from_rest(model, record.u, check=False)
     e[:rest_level(record.u)[2]] = np.nan
     return e
 
