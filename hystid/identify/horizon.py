@@ -34,8 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SLICE", "HorizonResult", "HorizonSolve", "drain", "fold_steps", "normal_steps",
-           "run_steps"]
+from ..spd import spd_inverse, spd_solve
+
+__all__ = ["SLICE", "HorizonResult", "HorizonSolve", "covariance", "drain", "fold_steps",
+           "normal_steps", "run_steps", "solve_information"]
 
 #: Samples simulated (or rows added to the normal equations) in one step of the job.
 SLICE = 100
@@ -80,6 +82,43 @@ def drain(steps: _Steps):
             next(steps)
         except StopIteration as stop:
             return stop.value
+
+
+def solve_information(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``A x = b`` for an information matrix ``A`` (symmetric, positive definite): compiled
+    Cholesky (:func:`hystid.spd.spd_solve`), numpy's LU when that finds it not positive
+    definite.
+
+    Parameters
+    ----------
+    A : ndarray
+        Square matrix.
+    b : ndarray
+        Right-hand side.
+
+    Returns
+    -------
+    ndarray
+    """
+    x = spd_solve(A, b)
+    return np.linalg.solve(A, b) if x is None else x
+
+
+def covariance(information: np.ndarray) -> np.ndarray:
+    """The inverse of an information matrix (symmetric, positive definite): compiled Cholesky
+    (:func:`hystid.spd.spd_inverse`), numpy's when that finds it not positive definite.
+
+    Parameters
+    ----------
+    information : ndarray
+        Square matrix.
+
+    Returns
+    -------
+    ndarray
+    """
+    P = spd_inverse(information)
+    return np.linalg.inv(information) if P is None else P
 
 
 def run_steps(simulate: Simulate, phi: np.ndarray, state: np.ndarray, u: np.ndarray,
@@ -170,7 +209,7 @@ def fold_steps(simulate: Simulate, phi: np.ndarray, state: np.ndarray,
     err, J, st = yield from run_steps(simulate, phi, state, u, y)
     JJ, Je = yield from normal_steps(J, err, np.zeros_like(R_a), np.zeros(len(phi)))
     R = R_a + JJ
-    return (np.linalg.solve(R, R_a @ phi_a + JJ @ phi + Je), R), st
+    return (solve_information(R, R_a @ phi_a + JJ @ phi + Je), R), st
 
 
 @dataclass
@@ -401,7 +440,7 @@ class HorizonSolve:
             for _ in range(self.iterations):
                 if A is None:  # the normal equations at phi, kept while trials are refused
                     A, g = yield from self._normal(phi, J, err)
-                d = np.linalg.solve(A + damping * np.diag(np.diag(A)), g)
+                d = solve_information(A + damping * np.diag(np.diag(A)), g)
                 yield TRIAL
                 if 2.0 * (g @ d) - d @ A @ d <= RTOL * f:
                     break  # the step, and any more damped one, would gain next to nothing

@@ -66,11 +66,10 @@ import numpy as np
 from ..pi import PISandwich, PIStructure
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
-from .horizon import HorizonSolve, drain, run_steps
+from .horizon import HorizonSolve, covariance, drain, run_steps
 from .pi_online_kernels import (
     _KMAX,
     _STATE_ROWS,
-    _inverse,
     _l2_stable,
     _run,
     _slope,
@@ -531,7 +530,7 @@ class PIStageOnline(Estimator):
         self._open[0, :left], self._open[1, :left] = un[nr + done:], yn[nr + done:]
         self._n_open = left
         self._phi, self._st, self._solved = phi, st, phi.copy()
-        self._P = np.linalg.inv(J[seen].T @ J[seen] + self._arrival[1])
+        self._P = covariance(J[seen].T @ J[seen] + self._arrival[1])
         self._buffer, self._rest = [], []
         if self._chunks and not self._n_open:  # a first re-solve, in the warm-up's time
             self._launch((phi, phi))
@@ -592,7 +591,7 @@ class PIStageOnline(Estimator):
         del self._chunks[:len(self._job.leaving)]
         self._arrival, self._wstate = res.arrival, res.start
         self._phi, self._st, self._solved = res.phi.copy(), res.state, res.phi.copy()
-        self._P = _inverse(res.information)
+        self._P = covariance(res.information)
         self._job = None
         self.n_resolves += 1
         self.resolve_seconds_ += time.perf_counter() - t0

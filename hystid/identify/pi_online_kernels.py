@@ -156,13 +156,6 @@ def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
 
 
 @njit(cache=True)
-def _inverse(A):
-    # the covariance of an information matrix (compiled: numpy's call costs more than the
-    # 25 x 25 inversion itself)
-    return np.linalg.inv(A)
-
-
-@njit(cache=True)
 def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err, kept):
     """Run the branches over ``u`` from the state ``st`` (updated in place).
 
