@@ -145,8 +145,11 @@ class LinearModel:
             return _filter(np.r_[1.0, p[:na]], p[na:na + nb + 1], q, vn) + p[-1]
 
         def residual(p):
+            # a trial whose filter runs away (not finite, or beyond any scale of the
+            # normalised output) costs the same large constant: its sum of squares stays finite
             r = simulate(p) - yn
-            return r if np.all(np.isfinite(r)) else np.full_like(yn, 1e6)
+            ok = np.all(np.isfinite(r)) and np.max(np.abs(r), initial=0.0) < _RUNAWAY
+            return r if ok else np.full_like(yn, _RUNAWAY)
 
         p0 = np.r_[a[1:], b, c]
         cost0 = np.sum(residual(p0) ** 2)
@@ -170,6 +173,11 @@ class LinearModel:
         u = np.asarray(u, float)
         steady = (u[0] - self.u_rest) * np.sum(self.b) / np.sum(self.a)
         return _filter(self.a, self.b, self.q, u - u[0]) + steady + self.offset
+
+
+#: A residual of the linear model's output-error fit (normalised units) beyond which the trial
+#: has run away (an unstable filter); such trials cost this much on every sample.
+_RUNAWAY = 1e6
 
 
 def _filter(a: np.ndarray, b: np.ndarray, q: int, v: np.ndarray) -> np.ndarray:
