@@ -4,7 +4,9 @@ Records: the shared measured piezo (identify on the first 60 %, score the held-o
 simulated on from the identification part), the as-measured suite of the independent
 simulator (``hystid.testing.as_measured_suite``: offset, units, not at rest, 10 kHz, outlier,
 end glitch, each with a held-out record of another seed), a stage-A look-alike (10 kHz, Bouc-Wen
-hysteresis, -100..+74 V, offset, rest at a level, flexure mode) and the Bouc-Wen benchmark
+hysteresis, -100..+74 V, offset, rest at a level, flexure mode), a stage-B look-alike (200 Hz,
+Preisach hysteresis, a 1 Hz sine of random phase: every record begins in motion) and the
+Bouc-Wen benchmark
 (train.h5 -> each test signal). Methods: ``auto`` (the member of the model family that
 ``hystid identify`` chooses by default), ``batch`` and ``online`` (the Duhem sandwich). Time per
 fit is compared with the single-start fit in the same
@@ -26,6 +28,7 @@ from figures import fit_and_compare
 from hystid.identify.offline import fit_output_error
 from hystid.records import load_record
 from hystid.testing import as_measured_suite, stage_a_like
+from hystid.testing.measured import stage_b_like
 
 #: The README blocks this script renders (see ``benchmarks/readme.py``).
 README_BLOCKS = {"real-records": "render"}
@@ -52,6 +55,8 @@ def cases(quick: bool) -> list[tuple[str, object, list]]:
         held = [stage_a_like(kind, seconds=1.0, rest_seconds=0.5, seed=1)
                 for kind in ("sine50", "tri100", "large_sine")]
         out.append(("stage A look-alike (PRBN -> sines)", train, held))
+        out.append(("stage B look-alike", stage_b_like(seed=0),
+                    [stage_b_like(seed=s) for s in (1, 2, 3, 4)]))
         if BOUC_WEN.exists():
             si = {"u": "N", "y": "m"}  # the benchmark's units (its README)
             train = load_record(f"{BOUC_WEN / 'train.h5'}:multisine", units=si)
@@ -74,6 +79,8 @@ LABELS = {
     "stage A look-alike (PRBN -> sines)": "stage-A look-alike (Bouc-Wen loop, 10 kHz, "
                                           "-100..+74 V), PRBN -> 50 Hz sine / 100 Hz triangle "
                                           "/ large sine",
+    "stage B look-alike": "stage-B look-alike (Preisach loop, 200 Hz, 1 Hz sine of random "
+                          "phase), seed 0 -> seeds 1 / 2 / 3 / 4",
     "Bouc-Wen benchmark": "Bouc-Wen benchmark, train multisine -> test multisine / sine sweep",
 }
 

@@ -202,6 +202,10 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
     80-100 nm off those records with its identified offset, against 52-67 nm started this way
     (its slow pole, a memory of about 1 s, then follows the move to the level as the stage did:
     the level is reached at the record's start); the Duhem members give the same either way.
+    A record that starts in motion (no leading rest, :func:`~hystid.identify.prepare.rest_level`)
+    starts the PI sandwiches settled at ``u[0]`` instead (``settled_state``): the step from
+    their rest to ``u[0]`` rang their L2 for a second or more on a 200 Hz look-alike of stage B
+    (``tests/test_pi_start.py``).
 
     Parameters
     ----------
@@ -217,7 +221,13 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
     ndarray
         The simulated output.
     """
-    x0 = model.rest_state(float(u[0])) if hasattr(model, "rest_state") else None
+    from .identify.prepare import rest_level
+
+    x0 = None
+    if hasattr(model, "rest_state"):
+        x0 = model.rest_state(float(u[0]))
+    elif hasattr(model, "settled_state") and not rest_level(np.asarray(u, float))[1]:
+        x0 = model.settled_state(float(u[0]))  # a record that starts in motion
     return model.simulate(u, x0, check=check).y
 
 

@@ -286,6 +286,31 @@ class PISandwich(UnitGainSandwich):
         w1 = (x0 or InitialCondition()).window("w1", 1)[0]
         return np.maximum(w1 - self.thresholds, np.minimum(w1 + self.thresholds, 0.0))
 
+    def settled_state(self, u0: float) -> InitialCondition:
+        """The past of a stage that moved monotonically from its rest to input ``u0`` and is
+        held there: L1 and L2 (unit DC gains) at their steady state, the plays where that move
+        leaves them (:meth:`operator_state`).
+
+        :func:`hystid.baselines.simulate_from_rest` starts a record that begins in motion
+        from it; a record that begins at rest at another level starts from the model's own
+        rest instead (its slow dynamics then follow the move as the stage's did).
+
+        Parameters
+        ----------
+        u0 : float
+            Input level.
+
+        Returns
+        -------
+        InitialCondition
+            Relative to the model's rest (see :meth:`simulate`).
+        """
+        P = self.structure.history + 1
+        v = float(u0) - self.u_rest
+        p = np.maximum(v - self.thresholds, np.minimum(v + self.thresholds, 0.0))
+        w2 = float(self.mu @ p)
+        return InitialCondition(*(np.full(P, x) for x in (v, v, w2, w2)))
+
     def _h_state(self, x0: InitialCondition, **state: Any) -> np.ndarray:
         unknown = set(state) - {"p0"}
         if unknown:
