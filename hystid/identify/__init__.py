@@ -117,8 +117,11 @@ def identify(
     token = CHECKING.set(False)
     try:
         result = _identify_record(record, method, structure, model, progress, settings, mended)
-        return _after_output_jump(record, result, method, structure, model, progress, settings,
-                                  mended)
+        result = _after_output_jump(record, result, method, structure, model, progress,
+                                    settings, mended)
+        result.info["warnings"] = list(result.info.get("warnings", [])) + _rate_notes(
+            record, result.model)
+        return result
     finally:
         CHECKING.reset(token)
 
@@ -136,6 +139,14 @@ def _identify_record(record: Record, method: str, structure: Any, model: str | N
     if mended:
         result.info["warnings"] = mended + list(result.info.get("warnings", []))
     return result
+
+
+def _rate_notes(record: Record, model: Any) -> list[str]:
+    """On a record driven at one rate, what the model's dependence on the rate says of it
+    (:func:`hystid.identify.rates.rate_note`); nothing on any other record."""
+    from .rates import rate_note
+
+    return rate_note(model, record.u, record.y, record.fs)
 
 
 def _after_output_jump(record: Record, result: IdentificationResult, method: str,

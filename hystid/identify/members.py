@@ -360,6 +360,70 @@ def _heldout_rms(model: Any, record: Record, k: int, stop: int, scored: np.ndarr
     return rms if np.isfinite(rms) else float("inf")
 
 
+def _whole_fit(name: str, record: Record, head_fit: IdentificationResult, k: int,
+               settings: dict) -> IdentificationResult:
+    """A member fitted on the whole record, a PI member started from its head fit (again from
+    its own starts when that went astray, :func:`_went_astray`)."""
+    start = ({"theta0": head_fit.model.theta, "max_nfev": REFIT_NFEV}
+             if MEMBERS[name].kind == "pi" else {})
+    result = MEMBERS[name].fit(record, **{**start, **settings})
+    if start and _went_astray(result.model, head_fit.model, record, k):
+        result = MEMBERS[name].fit(record, **settings)
+    return result
+
+
+def _rate_checked(record: Record, name: str, result: IdentificationResult, chosen: dict,
+                  eligible: list[dict], fits: dict, k: int, settings: dict,
+                  progress: Callable[[int, int], None] | None,
+                  ) -> tuple[str, IdentificationResult, dict]:
+    """On a record at one rate: when the chosen member's whole-record fit moves with the rate
+    (its head fit did not), the next eligible candidate by held-out RMS whose whole-record fit
+    does not, if any; the chosen row records its whole fit's figure."""
+    from .rates import RATE_LIMIT, rate_dependence
+
+    chosen["rate_dependence_whole"] = rate_dependence(result.model, record.u, record.y)
+    if chosen["rate_dependence_whole"] <= RATE_LIMIT:
+        return name, result, chosen
+    for r in sorted(eligible, key=lambda r: r["heldout_rms"]):
+        if r is chosen:
+            continue
+        _say(progress, f"model choice: {name} fitted on the whole record moves with the rate "
+             f"({chosen['rate_dependence_whole']:.2g}); trying {r['member']}")
+        other = _whole_fit(r["member"], record, fits[r["member"]], k, settings)
+        r["rate_dependence_whole"] = rate_dependence(other.model, record.u, record.y)
+        if r["rate_dependence_whole"] <= RATE_LIMIT:
+            chosen["left_out"] = (f"fitted on the whole record, its output moves by "
+                                  f"{chosen['rate_dependence_whole']:.2g} times the record's "
+                                  "spread at twice or half the rate")
+            return r["member"], other, r
+    return name, result, chosen
+
+
+def _rate_eligible(record: Record, rows: list[dict], fits: dict,
+                   progress: Callable[[int, int], None] | None) -> list[dict]:
+    """The candidates the choice is made among: all of them, except, on a record driven at one
+    rate (:func:`~hystid.identify.rates.one_rate`), those whose output moves with the rate
+    (:func:`~hystid.identify.rates.rate_dependence` above
+    :data:`~hystid.identify.rates.RATE_LIMIT`) while another's does not: the held-out end, at
+    the same rate, cannot tell them apart. Each row gets its figure and, when left out, why."""
+    from .rates import RATE_LIMIT, one_rate, rate_dependence
+
+    if one_rate(record.u, record.fs) is None:
+        return rows
+    for r in rows:
+        r["rate_dependence"] = rate_dependence(fits[r["member"]].model, record.u, record.y)
+    eligible = [r for r in rows if r["rate_dependence"] <= RATE_LIMIT]
+    if not eligible:
+        return rows
+    for r in rows:
+        if r["rate_dependence"] > RATE_LIMIT:
+            r["left_out"] = (f"the input runs at one rate and its output moves by "
+                             f"{r['rate_dependence']:.2g} times the record's spread at twice "
+                             "or half that rate")
+            _say(progress, f"model choice: {r['member']} left out: {r['left_out']}")
+    return eligible
+
+
 @one_blas_thread
 def select_member(
     record: Record,
@@ -377,7 +441,9 @@ def select_member(
     1. hold out the last ``holdout`` of the samples after the leading rest;
     2. fit every candidate (batch) on the rest of the record;
     3. score each on the held-out end (free run of the whole record from rest), beside the
-       static line and the linear model fitted on the same head;
+       static line and the linear model fitted on the same head; on a record driven at one
+       rate, leave out a candidate whose output moves with the rate while another's does not
+       (the held-out end cannot tell them apart; :mod:`hystid.identify.rates`);
     4. keep the simplest candidate (fewest parameters) whose held-out RMS is within
        ``1 + margin`` of the best;
     5. fit it on the whole record, started from its head fit (a PI member; again from its own
@@ -433,19 +499,20 @@ def select_member(
     baselines = {"static_line": StaticLine.fit(head).predict(record.u)[k:stop][scored],
                  "linear": LinearModel.fit(head, 3, 3, 1).predict(record.u)[k:stop][scored]}
     baseline_rms = {b: float(np.sqrt(np.mean((p - y) ** 2))) for b, p in baselines.items()}
-    best = min(r["heldout_rms"] for r in rows)
-    chosen = min((r for r in rows if r["heldout_rms"] <= (1.0 + margin) * best),
+    eligible = _rate_eligible(record, rows, fits, progress)
+    best = min(r["heldout_rms"] for r in eligible)
+    chosen = min((r for r in eligible if r["heldout_rms"] <= (1.0 + margin) * best),
                  key=lambda r: r["n_params"])
     for r in rows:
         r["chosen"] = r is chosen
     name = chosen["member"]
     _say(progress, f"model choice: {name}; fitting it on the whole record")
-    head_fit = fits[name]
-    start = ({"theta0": head_fit.model.theta, "max_nfev": REFIT_NFEV}
-             if MEMBERS[name].kind == "pi" else {})
-    result = MEMBERS[name].fit(record, **{**start, **settings})
-    if start and _went_astray(result.model, head_fit.model, record, k):
-        result = MEMBERS[name].fit(record, **settings)
+    result = _whole_fit(name, record, fits[name], k, settings)
+    if "rate_dependence" in chosen:
+        name, result, chosen = _rate_checked(record, name, result, chosen, eligible, fits, k,
+                                             settings, progress)
+        for r in rows:
+            r["chosen"] = r is chosen
     result.info["member_selection"] = {
         "chosen": name, "holdout_from": int(k), "holdout_to": int(stop), "margin": margin,
         "candidates": rows, "baselines": baseline_rms,
