@@ -324,3 +324,33 @@ def test_two_files_holding_records_of_one_name_are_told_apart(capsys, tmp_path):
                         "--out", tmp_path / "d"], capsys)
     assert code == 2
     assert "b0.csv" in err and "b1.csv" not in err, err
+
+
+def test_a_validation_record_in_motion_is_drawn_from_where_it_is_scored(tmp_path, capsys,
+                                                                         monkeypatch):
+    # a --val record that does not start at rest is scored after its burn-in; the figure drew
+    # it from sample 0 (an error panel of 866 nm RMS under a reported 121 nm, its zoom on the
+    # burn-in): it now gets the sample the figures start at
+    from hystid.cli import identify as command
+    from hystid.identify.prepare import burn_in, rest_level
+    from hystid.testing.measured import stage_b_like
+
+    for name, seed in (("train.csv", 0), ("val.csv", 1)):
+        r = stage_b_like(seed=seed, noise_rms=0.1)
+        np.savetxt(tmp_path / name, np.column_stack([np.arange(r.n) / r.fs, r.u, r.y]),
+                   delimiter=",", header="t,u,y", comments="")
+    seen = {}
+
+    def capture(out, report, target, yhat, result, **kw):
+        seen.update(kw, n=target.n)
+
+    monkeypatch.setattr(command, "write_outputs", capture)
+    code, out, _ = run(["identify", str(tmp_path / "train.csv"), "--val",
+                        str(tmp_path / "val.csv"), "--out", str(tmp_path / "rep"), "--json"],
+                       capsys)
+    assert code == 0
+    report = json.loads(out)
+    val = stage_b_like(seed=1, noise_rms=0.1)
+    k = burn_in(val.u, rest_level(val.u)[1])
+    assert k > 0 and report["scored_from"] == k == seen["scored_from"]
+    assert f"from sample {k}" in report["validated_on"]

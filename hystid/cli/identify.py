@@ -364,6 +364,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         "units": dict(rec.units),
         "structure": getattr(result.model.structure, "__dict__", {}),
         "validation": validation.to_dict() if finite else None,
+        "scored_from": int(k),
         "validated_on": (("validation record" + (f" from sample {k}: it does not start at "
                                                   "rest, its start is a burn-in" if k else ""))
                          if getattr(args, "val", None) else
@@ -447,7 +448,7 @@ def _identify(args: argparse.Namespace) -> int:
 
         provenance = make_provenance(result.method, args.record, result.settings)
         write_outputs(Path(args.out), report, target, yhat, result, provenance=provenance,
-                      scored_from=scored_from or 0)
+                      scored_from=report["scored_from"])
     if args.history:
         _write_history(args.history, result)
     if args.json:
@@ -483,13 +484,17 @@ def _print_choice(selection: dict | None, unit: str) -> None:
     if not selection:
         return
     rows = [[c["member"], str(c["n_params"]), f"{c['heldout_rms']:.4g} {unit}",
-             "chosen" if c["chosen"] else ""] for c in selection["candidates"]]
+             "chosen" if c["chosen"] else ("left out" if c.get("left_out") else "")]
+            for c in selection["candidates"]]
     rows += [[b.replace("_", " "), "", f"{v:.4g} {unit}", "baseline"]
              for b, v in selection["baselines"].items()]
     print(f"\nmodel choice (held-out samples {selection['holdout_from']}.."
           f"{selection['holdout_to'] - 1} of the identification record; a richer member must "
           f"be {100 * selection['margin']:.0f} % better):")
     print(table(rows, ["member", "parameters", "held-out RMS", ""]))
+    for c in selection["candidates"]:
+        if c.get("left_out"):
+            print(f"{c['member']} left out: {c['left_out']}")
 
 
 def write_outputs(out: Path, report: dict, target: Record, yhat: np.ndarray, result: Any,
