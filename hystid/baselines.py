@@ -203,9 +203,13 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
     (its slow pole, a memory of about 1 s, then follows the move to the level as the stage did:
     the level is reached at the record's start); the Duhem members give the same either way.
     A record that starts in motion (no leading rest, :func:`~hystid.identify.prepare.rest_level`)
-    starts the PI sandwiches settled at ``u[0]`` instead (``settled_state``): the step from
-    their rest to ``u[0]`` rang their L2 for a second or more on a 200 Hz look-alike of stage B
-    (``tests/test_pi_start.py``).
+    at another input than the model's rest (the identification record's first input, which its
+    fit takes as its rest: there it starts at rest, as fitted) starts the PI sandwiches settled
+    at the record's mean input level and brought to ``u[0]``
+    along a ramp at the record's median slew: the step from their rest to ``u[0]`` rang their
+    L2 for a second or more on a 200 Hz look-alike of stage B, and a start settled at ``u[0]``
+    itself put stage A's slow branch at the level of a carrier's peak, 0.37-1.3 um off pieces
+    of its records cut mid-motion (``tests/test_pi_start.py``).
 
     Parameters
     ----------
@@ -226,9 +230,23 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
     x0 = None
     if hasattr(model, "rest_state"):
         x0 = model.rest_state(float(u[0]))
-    elif hasattr(model, "settled_state") and not rest_level(np.asarray(u, float))[1]:
-        x0 = model.settled_state(float(u[0]))  # a record that starts in motion
+    elif (hasattr(model, "settled_state") and not rest_level(np.asarray(u, float))[1]
+          and float(u[0]) != model.u_rest):  # not the record the model's rest was taken from
+        return _from_its_mean(model, np.asarray(u, float), check)
     return model.simulate(u, x0, check=check).y
+
+
+def _from_its_mean(model: Any, u: np.ndarray, check: bool) -> np.ndarray:
+    """A record that starts in motion, cut from a longer excitation: the model settled at the
+    record's mean input level (``settled_state``), then brought to ``u[0]`` along a ramp at the
+    record's median slew (samples before the record, not returned)."""
+    m = float(np.mean(u))
+    du = np.abs(np.diff(u))
+    moving = du[du > 0]
+    slew = float(np.median(moving)) if moving.size else 1.0
+    n = int(min(len(u), max(2, np.ceil(abs(float(u[0]) - m) / slew))))
+    approach = np.linspace(m, float(u[0]), n + 1)[:-1]
+    return model.simulate(np.r_[approach, u], model.settled_state(m), check=check).y[n:]
 
 
 def repeat_floor(records: Sequence[Record]) -> float:

@@ -292,8 +292,9 @@ class PISandwich(UnitGainSandwich):
         leaves them (:meth:`operator_state`).
 
         :func:`hystid.baselines.simulate_from_rest` starts a record that begins in motion
-        from it; a record that begins at rest at another level starts from the model's own
-        rest instead (its slow dynamics then follow the move as the stage's did).
+        from it at the record's mean input level (then a ramp to the first input); a record
+        that begins at rest at another level starts from the model's own rest instead (its
+        slow dynamics then follow the move as the stage's did).
 
         Parameters
         ----------
