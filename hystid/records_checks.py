@@ -7,21 +7,36 @@ their cost, :func:`burst_spans`):
 * :func:`output_bursts` -- the output leaps away and back within a short stretch while the
   input moves smoothly (a sensor glitch, a loose connector);
 * :func:`output_is_drift` -- the output is a straight line in time, whatever the input did
-  (the sensor is not recording the stage, or the stage is not driven).
+  (the sensor is not recording the stage, or the stage is not driven);
+* :func:`one_rate` -- the input is one sine: at one rate the loop's width from the hysteresis
+  and a phase lag of the linear blocks cannot be told apart (what a model does about it:
+  :mod:`hystid.identify.rates`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BURST_SIGMAS", "DRIFT_SHARE", "burst_spans", "output_bursts", "output_is_drift",
-           "record_warnings"]
+__all__ = ["BAND", "BURST_SIGMAS", "DRIFT_SHARE", "ONE_RATE_SHARE", "burst_spans", "one_rate",
+           "one_rate_note", "output_bursts", "output_is_drift", "record_warnings"]
 
 #: A leap of the output is this many robust standard deviations of its sample-to-sample steps.
 BURST_SIGMAS = 20.0
 #: The output is "only drift" when a straight line in time leaves less than this share of its
 #: spread.
 DRIFT_SHARE = 0.02
+#: Share of the excited input's variance within the band of its strongest frequency from which
+#: a record is driven at one rate: the rest carries less than 1 % of its RMS. A sine gives
+#: 0.99999-1.0 (the stage-B look-alike, stage-A look-alike sines); measured stage A's records
+#: 0.9970-0.9987 (a 5 Hz carrier, the PRBN, 50 Hz sine or triangle on it: 3.6-5.5 % of the
+#: RMS), the measured piezo's 1 Hz sine 0.9993 (its distortion), a triangle 0.986 (its
+#: harmonics), the paper's excitation and the Bouc-Wen multisine below 0.05. Only an input
+#: that is one sine is caught.
+ONE_RATE_SHARE = 0.9999
+#: Half-width of the strongest frequency's band, relative to it (at least three bins).
+BAND = 0.02
+#: Half-width of the strongest frequency's band, relative to it (at least three bins).
+BAND = 0.02
 
 
 def _robust_sigma(x: np.ndarray) -> float:
@@ -136,3 +151,68 @@ def record_warnings(u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
     list of str
     """
     return output_bursts(u, y) + output_is_drift(np.arange(len(y)) / fs, y)
+
+
+def one_rate(u: np.ndarray, fs: float) -> tuple[float, float] | None:
+    """Whether an input runs at one rate: its fundamental and the share of its variance there.
+
+    The samples given (pass the input after its leading rest), their mean removed and a Hann
+    window applied: the share of their power within :data:`BAND` of the strongest frequency.
+
+    Parameters
+    ----------
+    u : ndarray
+        Input samples after the leading rest.
+    fs : float
+        Sampling rate in Hz.
+
+    Returns
+    -------
+    tuple of float or None
+        ``(f0, share)`` in Hz and as a fraction when the share is at least
+        :data:`ONE_RATE_SHARE`; None otherwise (or for fewer than 16 samples).
+    """
+    x = np.asarray(u, dtype=float)
+    if len(x) < 16 or not np.ptp(x) > 0:
+        return None
+    x = (x - np.mean(x)) * np.hanning(len(x))
+    power = np.abs(np.fft.rfft(x)) ** 2
+    power[0] = 0.0
+    total = float(power.sum())
+    if not total > 0:
+        return None
+    df = fs / len(x)
+    f = np.arange(len(power)) * df
+    k0 = int(np.argmax(power))
+    f0 = f[k0]
+    if f0 <= 0:
+        return None
+    near = np.abs(f - f0) <= max(BAND * f0, 3.0 * df)
+    share = float(power[near].sum() / total)
+    return (float(f0), share) if share >= ONE_RATE_SHARE else None
+
+
+def one_rate_note(u: np.ndarray, fs: float) -> list[str]:
+    """The identification's warning for an input at one rate (empty otherwise).
+
+    Parameters
+    ----------
+    u : ndarray
+        Input samples after the leading rest.
+    fs : float
+        Sampling rate in Hz.
+
+    Returns
+    -------
+    list of str
+        One sentence, or none.
+    """
+    found = one_rate(u, fs)
+    if found is None:
+        return []
+    f0, share = found
+    return [f"the input runs at one rate (a sine: {100 * share:.3f} % of its variance at "
+            f"{f0:.4g} Hz): at one rate the loop's width from the hysteresis and a phase "
+            "lag of L1 or L2 cannot be told apart, so the model may be far off at other rates "
+            "or levels; validate it on another input, or identify on one with several rates "
+            "(a multisine, PRBN, a chirp)"]

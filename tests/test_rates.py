@@ -14,8 +14,9 @@ import pytest
 
 from hystid.baselines import compare
 from hystid.identify import identify
-from hystid.identify.rates import RATE_LIMIT, one_rate, rate_dependence
+from hystid.identify.rates import RATE_LIMIT, rate_dependence, runs_at_one_rate
 from hystid.records import Record
+from hystid.records_checks import one_rate
 from hystid.reference import paper_excitation
 from hystid.testing import stage_a_like
 from hystid.testing.measured import stage_b, stage_b_like
@@ -36,12 +37,14 @@ def held_out(kind, f, amp, mean, seed, seconds=4.0):
 
 
 def test_only_an_input_that_is_one_sine_runs_at_one_rate():
-    assert one_rate(stage_b_like(seed=0).u, 200.0)[0] == pytest.approx(1.0, rel=0.01)
-    sine = stage_a_like("sine50", seconds=1.0, seed=0)
-    assert one_rate(sine.u, sine.fs)[0] == pytest.approx(50.0, rel=0.01)
+    b = stage_b_like(seed=0)  # in motion from its first sample
+    assert one_rate(b.u, b.fs)[0] == pytest.approx(1.0, rel=0.01)
+    sine = stage_a_like("sine50", seconds=1.0, seed=0)  # a rest, then the sine
+    assert runs_at_one_rate(sine.u, sine.fs)
+    assert one_rate(sine.u, sine.fs) is None  # the rest's step counts when not taken off
     for rec in (stage_a_like("prbn", seconds=1.0, seed=0),
                 stage_a_like("tri50", seconds=1.0, seed=0)):
-        assert one_rate(rec.u, rec.fs) is None, rec.name
+        assert not runs_at_one_rate(rec.u, rec.fs), rec.name
     assert one_rate(paper_excitation(15_000, 30_000.0, seed=0), 30_000.0) is None
     # a sine with 2 % of its RMS in a second one is no longer at one rate
     t = np.arange(20_000) / 10_000.0

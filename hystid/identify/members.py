@@ -402,13 +402,13 @@ def _rate_checked(record: Record, name: str, result: IdentificationResult, chose
 def _rate_eligible(record: Record, rows: list[dict], fits: dict,
                    progress: Callable[[int, int], None] | None) -> list[dict]:
     """The candidates the choice is made among: all of them, except, on a record driven at one
-    rate (:func:`~hystid.identify.rates.one_rate`), those whose output moves with the rate
+    rate (:func:`~hystid.identify.rates.runs_at_one_rate`), those whose output moves with the rate
     (:func:`~hystid.identify.rates.rate_dependence` above
     :data:`~hystid.identify.rates.RATE_LIMIT`) while another's does not: the held-out end, at
     the same rate, cannot tell them apart. Each row gets its figure and, when left out, why."""
-    from .rates import RATE_LIMIT, one_rate, rate_dependence
+    from .rates import RATE_LIMIT, rate_dependence, runs_at_one_rate
 
-    if one_rate(record.u, record.fs) is None:
+    if not runs_at_one_rate(record.u, record.fs):
         return rows
     for r in rows:
         r["rate_dependence"] = rate_dependence(fits[r["member"]].model, record.u, record.y)

@@ -35,8 +35,7 @@ import numpy as np
 from ..errors import IdentificationDataError
 from ..operating import Envelope
 from ..records import Record
-from ..records_checks import burst_spans, record_warnings
-from .rates import one_rate_note
+from ..records_checks import burst_spans, one_rate_note, record_warnings
 
 __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "check_excitation",
            "held_out_from", "input_glitches", "prepare", "rest_level", "scales",
@@ -460,7 +459,7 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     u_scale, y_med, y_scale = scales(u, y, u_rest)
     _check_scales(record, u_scale)
     bad, notes = bad_samples(y)
-    notes += record_warnings(u, y, record.fs) + one_rate_note(u, record.fs)
+    notes += record_warnings(u, y, record.fs) + one_rate_note(u[n_lead:], record.fs)
     for first, stop in burst_spans(u, y):
         bad[first:stop] = True
     y_ref = float(np.median(y[:n_lead][~bad[:n_lead]])) if at_rest and (~bad[:n_lead]).any() \

@@ -10,7 +10,8 @@ hysteresis, 200 Hz, a 1 Hz sine; one-off script), the Duhem sandwich fitted on o
 line is 1.9-3.1 um off and ``pi-stage`` 0.16-1.5 um: its output moved by 0.6-1.1 times the
 record's spread when the same input ran at twice the rate, ``pi-stage``'s by 0.015-0.03.
 
-:func:`one_rate` finds such a record (the identification then warns); :func:`rate_dependence`
+:func:`hystid.records_checks.one_rate` finds such a record (the identification then warns);
+:func:`rate_dependence`
 measures how much a model's output moves when the record's input runs at twice or half its
 rate, which ``model="auto"`` uses on such a record to leave out a member whose loop is made by
 its linear dynamics (:func:`hystid.identify.members.select_member`) and the identification
@@ -23,19 +24,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ONE_RATE_SHARE", "RATE_LIMIT", "one_rate", "one_rate_note", "rate_dependence",
-           "rate_note"]
+from ..records_checks import one_rate
 
-#: Share of the excited input's variance within the band of its strongest frequency from which
-#: a record is driven at one rate: the rest carries less than 1 % of its RMS. A sine gives
-#: 0.99999-1.0 (the stage-B look-alike, stage-A look-alike sines); measured stage A's records
-#: 0.9970-0.9987 (a 5 Hz carrier, the PRBN, 50 Hz sine or triangle on it: 3.6-5.5 % of the
-#: RMS), the measured piezo's 1 Hz sine 0.9993 (its distortion), a triangle 0.986 (its
-#: harmonics), the paper's excitation and the Bouc-Wen multisine below 0.05. Only an input
-#: that is one sine is caught.
-ONE_RATE_SHARE = 0.9999
-#: Half-width of the strongest frequency's band, relative to it (at least three bins).
-BAND = 0.02
+__all__ = ["RATE_LIMIT", "rate_dependence", "rate_note", "runs_at_one_rate"]
+
 #: Largest :func:`rate_dependence` of a model taken as the record's own on a record at one rate.
 #: Measured (one-off): ``pi-stage`` 0.015-0.03 on stage-B look-alike sines, the Duhem sandwich
 #: 0.64-1.13 there; every member 0.07-0.18 on a stage-A look-alike 50 Hz sine (its 740 Hz mode
@@ -43,11 +35,9 @@ BAND = 0.02
 RATE_LIMIT = 0.25
 
 
-def one_rate(u: np.ndarray, fs: float) -> tuple[float, float] | None:
-    """Whether an input runs at one rate: its fundamental and the share of its variance there.
-
-    The input after its leading rest, its mean removed and a Hann window applied: the share of
-    its power within :data:`BAND` of its strongest frequency.
+def runs_at_one_rate(u: np.ndarray, fs: float) -> bool:
+    """Whether a record's input, after its leading rest, is one sine
+    (:func:`hystid.records_checks.one_rate`).
 
     Parameters
     ----------
@@ -58,57 +48,12 @@ def one_rate(u: np.ndarray, fs: float) -> tuple[float, float] | None:
 
     Returns
     -------
-    tuple of float or None
-        ``(f0, share)`` in Hz and as a fraction when the share is at least
-        :data:`ONE_RATE_SHARE`; None otherwise (or for fewer than 16 excited samples).
+    bool
     """
-    from .prepare import rest_level  # prepare warns with this module's note
+    from .prepare import rest_level
 
     u = np.asarray(u, dtype=float)
-    x = u[rest_level(u)[2]:] if len(u) else u
-    if len(x) < 16 or not np.ptp(x) > 0:
-        return None
-    x = (x - np.mean(x)) * np.hanning(len(x))
-    power = np.abs(np.fft.rfft(x)) ** 2
-    power[0] = 0.0
-    total = float(power.sum())
-    if not total > 0:
-        return None
-    df = fs / len(x)
-    f = np.arange(len(power)) * df
-    k0 = int(np.argmax(power))
-    f0 = f[k0]
-    if f0 <= 0:
-        return None
-    near = np.abs(f - f0) <= max(BAND * f0, 3.0 * df)
-    share = float(power[near].sum() / total)
-    return (float(f0), share) if share >= ONE_RATE_SHARE else None
-
-
-def one_rate_note(u: np.ndarray, fs: float) -> list[str]:
-    """The identification's warning for an input at one rate (empty otherwise).
-
-    Parameters
-    ----------
-    u : ndarray
-        Input samples.
-    fs : float
-        Sampling rate in Hz.
-
-    Returns
-    -------
-    list of str
-        One sentence, or none.
-    """
-    found = one_rate(u, fs)
-    if found is None:
-        return []
-    f0, share = found
-    return [f"the input runs at one rate (a sine: {100 * share:.3f} % of its variance at "
-            f"{f0:.4g} Hz): at one rate the loop's width from the hysteresis and a phase "
-            "lag of L1 or L2 cannot be told apart, so the model may be far off at other rates "
-            "or levels; validate it on another input, or identify on one with several rates "
-            "(a multisine, PRBN, a chirp)"]
+    return len(u) > 0 and one_rate(u[rest_level(u)[2]:], fs) is not None
 
 
 def rate_dependence(model: Any, u: np.ndarray, y: np.ndarray) -> float:
@@ -170,7 +115,7 @@ def rate_note(model: Any, u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
     list of str
         One sentence, or none.
     """
-    if one_rate(u, fs) is None:
+    if not runs_at_one_rate(u, fs):
         return []
     change = rate_dependence(model, u, y)
     if change <= RATE_LIMIT:
