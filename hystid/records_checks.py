@@ -35,8 +35,6 @@ DRIFT_SHARE = 0.02
 ONE_RATE_SHARE = 0.9999
 #: Half-width of the strongest frequency's band, relative to it (at least three bins).
 BAND = 0.02
-#: Half-width of the strongest frequency's band, relative to it (at least three bins).
-BAND = 0.02
 
 
 def _robust_sigma(x: np.ndarray) -> float:

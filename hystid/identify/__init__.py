@@ -120,7 +120,7 @@ def identify(
         result = _after_output_jump(record, result, method, structure, model, progress,
                                     settings, mended)
         result.info["warnings"] = list(result.info.get("warnings", [])) + _rate_notes(
-            record, result.model)
+            record, result)
         return result
     finally:
         CHECKING.reset(token)
@@ -141,12 +141,14 @@ def _identify_record(record: Record, method: str, structure: Any, model: str | N
     return result
 
 
-def _rate_notes(record: Record, model: Any) -> list[str]:
+def _rate_notes(record: Record, result: IdentificationResult) -> list[str]:
     """On a record driven at one rate, what the model's dependence on the rate says of it
-    (:func:`hystid.identify.rates.rate_note`); nothing on any other record."""
+    (:func:`hystid.identify.rates.rate_note`; the member choice's figure of the model it
+    returned, when it measured one); nothing on any other record."""
     from .rates import rate_note
 
-    return rate_note(model, record.u, record.y, record.fs)
+    return rate_note(result.model, record.u, record.y, record.fs,
+                     result.info.get("rate_dependence"))
 
 
 def _after_output_jump(record: Record, result: IdentificationResult, method: str,

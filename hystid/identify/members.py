@@ -513,6 +513,7 @@ def select_member(
                                              settings, progress)
         for r in rows:
             r["chosen"] = r is chosen
+        result.info["rate_dependence"] = chosen["rate_dependence_whole"]
     result.info["member_selection"] = {
         "chosen": name, "holdout_from": int(k), "holdout_to": int(stop), "margin": margin,
         "candidates": rows, "baselines": baseline_rms,

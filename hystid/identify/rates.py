@@ -1,5 +1,5 @@
-"""What one record says about rates: whether its input runs at one rate only, and how a model's
-gain on a slow ramp compares with the record's.
+"""What one record says about rates: whether its input runs at one rate only, and how much a
+model's output moves when that input runs faster or slower.
 
 Driven at one rate (a sine), a stage shows one loop. Its width can come from the hysteresis
 (rate-independent) or from a phase lag of L1 or L2 (rate-dependent), and the record cannot tell
@@ -97,7 +97,8 @@ def rate_dependence(model: Any, u: np.ndarray, y: np.ndarray) -> float:
     return worst if np.isfinite(worst) else float("inf")
 
 
-def rate_note(model: Any, u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
+def rate_note(model: Any, u: np.ndarray, y: np.ndarray, fs: float,
+              change: float | None = None) -> list[str]:
     """On a record at one rate, what :func:`rate_dependence` says of a model when it exceeds
     :data:`RATE_LIMIT` (empty otherwise, and on any other record).
 
@@ -109,6 +110,9 @@ def rate_note(model: Any, u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
         The record's input and output.
     fs : float
         Sampling rate in Hz.
+    change : float, optional
+        The model's :func:`rate_dependence` on this record when already measured (the
+        member choice measures the model it returns).
 
     Returns
     -------
@@ -117,7 +121,8 @@ def rate_note(model: Any, u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
     """
     if not runs_at_one_rate(u, fs):
         return []
-    change = rate_dependence(model, u, y)
+    if change is None:
+        change = rate_dependence(model, u, y)
     if change <= RATE_LIMIT:
         return []
     return [f"the model's output moves by {change:.2g} times the record's spread when the same "
