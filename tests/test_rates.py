@@ -101,3 +101,21 @@ def test_a_record_at_several_rates_is_chosen_on_as_before():
     assert not any("one rate" in w for w in res.info["warnings"])
     for r in res.info["member_selection"]["candidates"]:
         assert "rate_dependence" not in r and "left_out" not in r
+
+
+def test_an_output_outlier_does_not_switch_the_rate_check_off(fits):
+    # the rate figure was scaled by the output's standard deviation: one 1e6 um sample made
+    # every model look rate-independent (duhem 0.0008) and the Duhem sandwich was chosen
+    from dataclasses import replace
+
+    train, clean, _, held = fits
+    y = train.y.copy()
+    y[300] = 1e6
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = identify(replace(train, y=y))
+    sel = res.info["member_selection"]
+    assert sel["chosen"] == "pi-stage"
+    assert [r["member"] for r in sel["candidates"] if r.get("left_out")] == ["duhem"]
+    for r in compare(res.model, train, held).rows:
+        assert r["model"] < r["linear"] and r["model"] < r["static_line"], r
