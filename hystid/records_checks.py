@@ -117,14 +117,23 @@ def output_is_drift(t: np.ndarray, y: np.ndarray) -> list[str]:
     -------
     list of str
         One sentence when the line leaves less than :data:`DRIFT_SHARE` of the output's
-        spread, else none.
+        spread (both measured on the samples between its 1st and 99th percentiles, so that a
+        few wild samples do not decide), else none.
     """
-    if len(y) < 8:
-        return []
+    y = np.asarray(y, dtype=float)
     k = np.arange(len(y), dtype=float)  # in samples: a line in any time unit is one in k
-    coef = np.polyfit(k, y, 1)
-    rest = y - np.polyval(coef, k)
-    spread = float(np.ptp(y))
+    seen = np.isfinite(y)
+    if np.count_nonzero(seen) < 8:
+        return []
+    # the spread and the line from the 1st-99th percentiles: a few wild samples (a 1e6 um
+    # spike) neither make a stage's output look flat nor hide a drift
+    low, high = np.quantile(y[seen], [0.01, 0.99])
+    inner = seen & (y >= low) & (y <= high)
+    if np.count_nonzero(inner) < 8:
+        return []
+    coef = np.polyfit(k[inner], y[inner], 1)
+    rest = y[inner] - np.polyval(coef, k[inner])
+    spread = float(high - low)
     left = float(np.quantile(np.abs(rest), 0.98))
     if spread > 0 and left < DRIFT_SHARE * spread:
         per_second = coef[0] * (len(t) - 1) / (t[-1] - t[0]) if t[-1] > t[0] else coef[0]

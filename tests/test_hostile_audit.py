@@ -399,6 +399,17 @@ def test_output_burst_and_drift_are_warned_about():
     assert any("straight line in time" in w for w in result.info["warnings"])
 
 
+def test_the_drift_check_is_not_decided_by_a_few_wild_samples():
+    rec = reference_record(0.2, seed=1, noise=1e-3)
+    spiked = rec.y.copy()
+    spiked[3000] = 1e6  # one wild sample made the stage's output look flat beside it
+    assert output_is_drift(rec.t, spiked) == []
+    drift = np.linspace(0.0, 3.0, rec.n) + 1e-3 * np.random.default_rng(1).standard_normal(rec.n)
+    drift[3000], drift[100] = 1e6, np.nan  # nor do they hide a drift (a gap made it silent)
+    said = output_is_drift(rec.t, drift)
+    assert said and f"({3.0 / (rec.t[-1] - rec.t[0]):.4g} per second)" in said[0]
+
+
 def test_records_of_huge_values_are_refused(tmp_path, capsys):
     k = np.arange(2000)
     rec = Record(np.sin(k / 50.0) * 1e300, np.sin(k / 50.0 - 0.2) * 1e299, 1000.0, name="huge")
