@@ -7,6 +7,9 @@ The record: 4 s of a 1 Hz sine over 0-3.6 V on the 200 Hz stage-B look-alike
 over the same range, a 1 Hz sine of two thirds the amplitude, and a 1 Hz sine started from rest
 at 0 V. Each member is identified with defaults and scored like every accuracy table of the
 project (:func:`hystid.baselines.compare`), beside the static line and the linear model.
+A second table: ``auto`` identified on the look-alike's sine of seeds 0-4, held out on 1 Hz
+sines of 1 V amplitude at other mean levels (1 V and 2.6 V): the minor loops inside the one
+loop a sine shows.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_narrowband.py
 """
@@ -35,16 +38,21 @@ HELD_OUT = (("0.5 Hz", 0.5, 1.8, 8.0, False), ("2 Hz", 2.0, 1.8, 4.0, False),
             ("1 Hz from rest at 0 V", 1.0, 1.8, 6.0, True))
 
 
+#: Mean levels [V] of the second table's held-out sines (1 V amplitude, 1 Hz, 4 s).
+LEVELS = (1.0, 2.6)
+
+
 def held_out_record(freq: float, amp: float, seconds: float, from_rest: bool,
-                    seed: int) -> Record:
-    """The stage-B look-alike driven by a sine (its phase from ``seed``), as measured."""
+                    seed: int, mean: float = 1.8) -> Record:
+    """The stage-B look-alike driven by a sine about ``mean`` (its phase from ``seed``), as
+    measured."""
     fs = 200.0
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(seconds * fs))) / fs
     if from_rest:
         u = np.r_[np.zeros(int(fs)), 1.8 - amp * np.cos(2 * np.pi * freq * t)]
     else:
-        u = 1.8 + amp * np.sin(2 * np.pi * freq * t + rng.uniform(0, 2 * np.pi))
+        u = mean + amp * np.sin(2 * np.pi * freq * t + rng.uniform(0, 2 * np.pi))
     y = stage_b().simulate(u)["y"] - 111.2 + 0.02 * rng.standard_normal(u.size)
     return Record(u=u, y=y, fs=fs, units={"u": "V", "y": "um"}, name=f"{freq:g} Hz")
 
@@ -71,7 +79,37 @@ def measure() -> dict:
                      "rms": [r["model"] for r in c.rows],
                      "static_line": [r["static_line"] for r in c.rows],
                      "linear": [r["linear"] for r in c.rows]})
-    return {"held_out": [h[0] for h in HELD_OUT], "rows": rows}
+    return {"held_out": [h[0] for h in HELD_OUT], "rows": rows, "levels": measure_levels()}
+
+
+def measure_levels(seeds: range = range(5)) -> list[dict]:
+    """``auto`` identified on the sine of each seed, scored on sines at :data:`LEVELS`.
+
+    Parameters
+    ----------
+    seeds : range
+        Seeds of the identification record (the held-out records' are ``10 * (i + 1) +
+        seed`` for the ``i``-th level).
+
+    Returns
+    -------
+    list of dict
+        Per seed: the member chosen and, per level, the model's, the linear model's and the
+        static line's held-out RMS [um].
+    """
+    out = []
+    for seed in seeds:
+        train = stage_b_like(seed=seed)
+        held = [held_out_record(1.0, 1.0, 4.0, False, 10 * (i + 1) + seed, mean=m)
+                for i, m in enumerate(LEVELS)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            result = identify(train)
+            c = compare(result.model, train, held)
+        out.append({"seed": seed, "member": result.info.get("model"),
+                    "rms": [r["model"] for r in c.rows], "linear": [r["linear"] for r in c.rows],
+                    "static_line": [r["static_line"] for r in c.rows]})
+    return out
 
 
 def render(payload: dict) -> str:
@@ -93,7 +131,15 @@ def render(payload: dict) -> str:
     base = payload["rows"][0]
     body.append(["static line", *(f"{v:.3g}" for v in base["static_line"])])
     body.append(["linear (duhem orders)", *(f"{v:.3g}" for v in base["linear"])])
-    return table(body, head)
+    levels = payload["levels"]
+    head2 = ["seed", "`auto` chose",
+             *(f"{m:g} V mean: model / linear / line" for m in LEVELS)]
+    body2 = [[r["seed"], f"`{r['member']}`",
+              *(f"{a:.3g} / {b:.3g} / {c:.3g}" + (" (loses)" if a > min(b, c) else "")
+                for a, b, c in zip(r["rms"], r["linear"], r["static_line"], strict=True))]
+             for r in levels]
+    return table(body, head) + "\n\nother mean levels (1 Hz, 1 V amplitude) [um]\n\n" + \
+        table(body2, head2)
 
 
 def main() -> None:

@@ -39,7 +39,7 @@ from ..records_checks import burst_spans, one_rate_note, record_warnings
 
 __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "check_excitation",
            "held_out_from", "input_glitches", "prepare", "rest_level", "scales",
-           "without_input_glitches"]
+           "shows_rest", "without_input_glitches"]
 
 #: Samples of a leading constant segment needed to call a record "at rest".
 REST_SAMPLES = 10
@@ -184,13 +184,37 @@ def rest_level(u: np.ndarray) -> tuple[float, bool, int]:
     n_lead : int
         Length of the leading constant segment.
     """
+    span, n_lead = _lead(u)
+    at_end = min(float(u[0] - np.min(u)), float(np.max(u) - u[0])) <= 1e-9 * span
+    return (float(np.median(u[:max(n_lead, 1)])), shows_rest(u) or at_end, n_lead)
+
+
+def shows_rest(u: np.ndarray) -> bool:
+    """Whether a record shows its stage at rest before it moves: it starts with at least
+    :data:`REST_SAMPLES` constant samples, or at exactly zero (a generator's own zero).
+
+    A start at an end of the input's range without either (which :func:`rest_level` also
+    takes as a rest, for the fit) is as well the peak of a sine cut from a longer run: seen
+    alone, the input cannot tell them apart.
+
+    Parameters
+    ----------
+    u : ndarray
+        Input samples.
+
+    Returns
+    -------
+    bool
+    """
+    span, n_lead = _lead(u)
+    return n_lead >= REST_SAMPLES or abs(float(u[0])) <= 1e-12 * span
+
+
+def _lead(u: np.ndarray) -> tuple[float, int]:
+    """The input's span and the length of its leading constant segment."""
     span = float(np.ptp(u))
     moved = np.flatnonzero(np.abs(u - u[0]) > 1e-6 * span)
-    n_lead = int(moved[0]) if len(moved) else len(u)
-    from_zero = abs(float(u[0])) <= 1e-12 * span
-    at_end = min(float(u[0] - np.min(u)), float(np.max(u) - u[0])) <= 1e-9 * span
-    return (float(np.median(u[:max(n_lead, 1)])), n_lead >= REST_SAMPLES or from_zero or at_end,
-            n_lead)
+    return span, int(moved[0]) if len(moved) else len(u)
 
 
 def held_out_from(u: np.ndarray, share: float, stop: int | None = None) -> int:
