@@ -100,10 +100,6 @@ class LinearModel:
         Delay in samples.
     u_rest, offset : float
         Input rest level and output offset.
-    level : StaticLine or None
-        The least-squares line through its identification record's ``(u, y)`` points: the gain
-        the record shows, which stands in for a DC gain the record leaves free
-        (:attr:`dc_gain`).
     """
 
     a: np.ndarray
@@ -111,7 +107,6 @@ class LinearModel:
     q: int
     u_rest: float
     offset: float
-    level: StaticLine | None = None
 
     @classmethod
     def fit(cls, record: Record, na: int, nb: int, q: int, max_nfev: int = 200) -> LinearModel:
@@ -161,21 +156,18 @@ class LinearModel:
         sol = least_squares(residual, p0, max_nfev=max_nfev, x_scale="jac")
         p = sol.x if sol.cost * 2 <= cost0 and roots_inside(np.r_[1.0, sol.x[:na]]) else p0
         return cls(np.r_[1.0, p[:na]], p[na:na + nb + 1] * scale_y / scale_v, q, u0,
-                   float(p[-1] * scale_y + y[0]), StaticLine.fit(record))
+                   float(p[-1] * scale_y + y[0]))
 
     def predict(self, u: np.ndarray) -> np.ndarray:
         """Output for input ``u``, from rest at ``u[0]``.
 
-        Settled at ``u[0]`` by :attr:`dc_gain`: the filter's DC gain, unless it is more than
-        :data:`DC_AGREE` times off the gain of :attr:`level` (the gain the identification
-        record shows; a record that fixes the filter at one frequency leaves its DC gain free).
         A record that starts in motion away from :attr:`u_rest` (:func:`starts_in_motion`)
         starts as the PI sandwiches do (:func:`simulate_from_rest`): settled at the record's
-        mean input level and brought to ``u[0]`` along a ramp at its median slew. The
-        fourth-order baseline identified on the measured piezo's first 60 % (a 1 Hz sine, DC
-        gain 1.0 um/V against the record's 0.13) was 80 um off its last 40 %, which begins
-        mid-swing at 70 V; 25 um with the record's gain but settled at 70 V (its slow pole
-        then integrates the input's swing about 70 V); 3.6 um now, the static line 2.0.
+        mean input level and brought to ``u[0]`` along a ramp at its median slew. Settled at
+        ``u[0]`` itself, the fourth-order baseline identified on the measured piezo's first
+        60 % (a 1 Hz sine, which fixes the filter at 1 Hz only: DC gain 1.0 um/V against the
+        record's 0.13) was 80 um off its last 40 %, which begins mid-swing at 70 V; 3.6 um now,
+        the static line 2.0.
 
         Parameters
         ----------
@@ -187,28 +179,14 @@ class LinearModel:
         ndarray
         """
         u = np.asarray(u, float)
+        dc = np.sum(self.b) / np.sum(self.a)
         if starts_in_motion(u, self.u_rest):
             m, approach = _approach(u)
             n = len(approach)
             moved = _filter(self.a, self.b, self.q, np.r_[approach, u] - m)[n:]
-            return moved + (m - self.u_rest) * self.dc_gain + self.offset
-        steady = (u[0] - self.u_rest) * self.dc_gain
+            return moved + (m - self.u_rest) * dc + self.offset
+        steady = (u[0] - self.u_rest) * dc
         return _filter(self.a, self.b, self.q, u - u[0]) + steady + self.offset
-
-    @property
-    def dc_gain(self) -> float:
-        """The gain a held input settles at: the filter's, or :attr:`level`'s where the
-        filter's is more than :data:`DC_AGREE` times off it (see :meth:`predict`)."""
-        own = float(np.sum(self.b) / np.sum(self.a))
-        if self.level is None or not self.level.gain:
-            return own
-        ratio = own / self.level.gain
-        return own if 1.0 / DC_AGREE <= ratio <= DC_AGREE else float(self.level.gain)
-
-
-#: The linear baseline settles a held input by its filter's DC gain while that gain is within
-#: this factor of the gain its identification record shows (:attr:`LinearModel.level`).
-DC_AGREE = 2.0
 
 
 #: A residual of the linear model's output-error fit (normalised units) beyond which the trial
