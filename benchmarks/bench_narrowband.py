@@ -9,7 +9,9 @@ at 0 V. Each member is identified with defaults and scored like every accuracy t
 project (:func:`hystid.baselines.compare`), beside the static line and the linear model.
 A second table: ``auto`` identified on the look-alike's sine of seeds 0-4, held out on 1 Hz
 sines of 1 V amplitude at other mean levels (1 V and 2.6 V): the minor loops inside the one
-loop a sine shows.
+loop a sine shows. A third: the look-alike's sensor zero drifting by 0.3 um/s through every
+record (and, second row, also starting up to 1 um off on each record), identified with
+defaults batch and on-line on seed 0, held out on seeds 1-3.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_narrowband.py
 """
@@ -79,7 +81,54 @@ def measure() -> dict:
                      "rms": [r["model"] for r in c.rows],
                      "static_line": [r["static_line"] for r in c.rows],
                      "linear": [r["linear"] for r in c.rows]})
-    return {"held_out": [h[0] for h in HELD_OUT], "rows": rows, "levels": measure_levels()}
+    return {"held_out": [h[0] for h in HELD_OUT], "rows": rows, "levels": measure_levels(),
+            "drift": measure_drift()}
+
+
+#: The third table's drift of the sensor zero [um/s].
+DRIFT = 0.3
+
+
+def drifting_record(seed: int, zero: float = 0.0) -> Record:
+    """The look-alike's 1 Hz sine (phase from ``seed``), its sensor zero drifting by
+    :data:`DRIFT` from ``zero`` at the record's start."""
+    fs = 200.0
+    rng = np.random.default_rng(seed)
+    t = np.arange(800) / fs
+    u = 1.8 + 1.8 * np.sin(2 * np.pi * t + rng.uniform(0, 2 * np.pi))
+    y = (stage_b().simulate(u)["y"] - 111.2 + zero + DRIFT * t
+         + 0.05 * rng.standard_normal(t.size))
+    return Record(u=u, y=y, fs=fs, units={"u": "V", "y": "um"}, name=f"drift {seed}")
+
+
+def measure_drift() -> list[dict]:
+    """``auto`` batch and on-line on a drifting record, scored on three more.
+
+    Returns
+    -------
+    list of dict
+        Per case (the zero drifting from 0, or from a random start up to 1 um off): the
+        drift the batch fit estimated [um/s] and the held-out RMS [um] of the batch and the
+        on-line models and of the baselines.
+    """
+    out = []
+    for case, off in (("drifting from 0", 0.0), ("and up to 1 um off at the start", 1.0)):
+        def rec(seed: int, off: float = off) -> Record:
+            return drifting_record(seed, off * np.random.default_rng(100 + seed).uniform(-1, 1))
+
+        train, held = rec(0), [rec(s) for s in (1, 2, 3)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            batch = identify(train)
+            online = identify(train, method="online")
+            c = compare(batch.model, train, held)
+            c_on = compare(online.model, train, held)
+        out.append({"case": case, "drift_per_second": batch.info.get("drift_per_second"),
+                    "batch": [r["model"] for r in c.rows],
+                    "online": [r["model"] for r in c_on.rows],
+                    "linear": [r["linear"] for r in c.rows],
+                    "static_line": [r["static_line"] for r in c.rows]})
+    return out
 
 
 def measure_levels(seeds: range = range(5)) -> list[dict]:
@@ -138,8 +187,14 @@ def render(payload: dict) -> str:
               *(f"{a:.3g} / {b:.3g} / {c:.3g}" + (" (loses)" if a > min(b, c) else "")
                 for a, b, c in zip(r["rms"], r["linear"], r["static_line"], strict=True))]
              for r in levels]
-    return table(body, head) + "\n\nother mean levels (1 Hz, 1 V amplitude) [um]\n\n" + \
-        table(body2, head2)
+    head3 = ["sensor zero", "drift found [um/s]", "batch", "on-line", "linear", "static line"]
+    body3 = [[r["case"], f"{r['drift_per_second']:.3g}",
+              *(" / ".join(f"{v:.2g}" for v in r[k])
+                for k in ("batch", "online", "linear", "static_line"))]
+             for r in payload["drift"]]
+    return (table(body, head) + "\n\nother mean levels (1 Hz, 1 V amplitude) [um]\n\n"
+            + table(body2, head2) + f"\n\na sensor zero drifting by {DRIFT} um/s, seed 0 -> "
+            "seeds 1 / 2 / 3 [um]\n\n" + table(body3, head3))
 
 
 def main() -> None:
