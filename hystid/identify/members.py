@@ -138,7 +138,9 @@ class Member:
         The thresholds by the member's rule over the record's fitted samples. The ``pi-stage``
         shape is :class:`~hystid.identify.pi_online.PIStageOnline` (its warm-up follows a
         short record; the model at the end of the record is its last re-solve's,
-        ``settle_at_end``; no offset: the record it is given is already relative), other PI
+        ``settle_at_end``; no offset: the record it is given is already relative, and its
+        estimate corrects it; the burn-in the batch fit leaves out of its cost, ``skip``, is
+        run but not learned from), other PI
         structures the extended recursion
         :class:`~hystid.identify.pi_recursive.PIRecursiveIdentifier` (at rest at 0, no
         offset: the record it is given is already relative).
@@ -162,11 +164,12 @@ class Member:
         if self.kind != "pi":
             raise ValueError(f"model: the {self.name} member has no PI on-line identifier")
         rule = self.settings.get("thresholds", "range")
-        r = RULES[rule](record.u[prepare(record).fitted], self.structure.n_operators)
+        prep = prepare(record)
+        r = RULES[rule](record.u[prep.fitted], self.structure.n_operators)
         base = {"thresholds": r, "structure": self.structure, "fs": record.fs}
         if is_stage_structure(self.structure):
             return PIStageOnline(**{**base, "warmup": short_record_warmup(record.u, self.n_params),
-                                    "settle_at_end": True, "offset": 0.0,
+                                    "settle_at_end": True, "offset": 0.0, "skip": prep.skip,
                                     **settings})
         return PIRecursiveIdentifier(**{**base, "u_rest": 0.0, "offset": 0.0, **settings})
 

@@ -459,9 +459,11 @@ def _zero_scales(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 def _fit_normalised_from_zero(
     u: np.ndarray, y: np.ndarray, r: np.ndarray, structure: PIStructure, *,
     max_nfev: int = 200, tol: float = 1e-8, screen_nfev: int = SCREEN_NFEV,
+    offset: bool = False,
 ) -> tuple[_NormalisedFit, float, float]:
-    """:func:`_solve_normalised` at rest at ``u = 0`` without offset, on ``u / su`` and
-    ``y / sy`` (:func:`_zero_scales`); samples with a non-finite ``y`` are left out of the cost.
+    """:func:`_solve_normalised` at rest at ``u = 0`` (with an offset when ``offset``), on
+    ``u / su`` and ``y / sy`` (:func:`_zero_scales`); samples with a non-finite ``y`` are left
+    out of the cost.
 
     Returns
     -------
@@ -472,7 +474,7 @@ def _fit_normalised_from_zero(
     y = np.ascontiguousarray(y, dtype=float)
     su, sy = _zero_scales(u, y)
     with np.errstate(invalid="ignore"):
-        fit = _solve_normalised(u / su, y / sy, np.isfinite(y), r / su, structure, None, False,
+        fit = _solve_normalised(u / su, y / sy, np.isfinite(y), r / su, structure, None, offset,
                                 max_nfev, tol, screen_nfev)
     return fit, su, sy
 

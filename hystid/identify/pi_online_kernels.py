@@ -45,7 +45,8 @@ def _theta_rows(phi, n, out):
 @njit(cache=True)
 def _step(phi, r, u_k, st, psi):
     # one sample: branch states at k from p(k-1), p(k-2), the prediction and its gradient
-    # psi = d yhat / d phi; then the operators move with u(k). Returns yhat(k).
+    # psi = d yhat / d phi; then the operators move with u(k). Returns yhat(k). A coordinate
+    # phi[n + 5], when there is one, corrects the output's offset.
     n = r.shape[0]
     g = phi[n]
     tp, t1, t2 = np.tanh(phi[n + 1]), np.tanh(phi[n + 2]), np.tanh(phi[n + 3])
@@ -54,7 +55,8 @@ def _step(phi, r, u_k, st, psi):
     c1 = k1 * (1.0 + c2)
     m1 = phi[n + 4]
     m0 = 1.0 + c1 + c2 - m1
-    yhat = 0.0
+    offset = phi.shape[0] > n + 5
+    yhat = phi[n + 5] if offset else 0.0
     dg = 0.0
     sp = 0.0
     s0 = 0.0
@@ -93,6 +95,8 @@ def _step(phi, r, u_k, st, psi):
     psi[n + 2] = dc1 * dk1 * (1.0 + c2)
     psi[n + 3] = (dc1 * k1 + dc2) * dk2
     psi[n + 4] = (1.0 - g) * s2
+    if offset:
+        psi[n + 5] = 1.0
     return yhat
 
 
