@@ -74,3 +74,10 @@ def test_a_record_that_starts_at_rest_is_fitted_without_a_drift():
     result = fit(rec, model="pi-stage")
     assert result.info["drift_per_second"] == 0.0
     assert result.settings["drift"] is False
+
+
+def test_a_drift_without_an_offset_is_refused():
+    from hystid.identify.pi_batch import fit_pi_output_error
+
+    with pytest.raises(ValueError, match="drift: .*offset=True"):
+        fit_pi_output_error(record(0), offset=False, drift=True)

@@ -60,3 +60,11 @@ def test_the_offset_is_estimated_only_where_no_rest_pins_it():
 def test_skip_is_checked():
     with pytest.raises(ValueError, match="skip"):
         PIStageOnline(np.linspace(0.0, 1.0, 20), skip=-1)
+    rec = stage_b_like(seed=0)
+    est = member("pi-stage").online_estimator(rec, skip=5000)  # more than the record
+    with pytest.raises(ValueError, match="skip: 5000 samples not learned from cover"):
+        est.fit(rec)
+    est = member("pi-stage").online_estimator(rec, skip=5000)
+    with pytest.raises(ValueError, match="all skipped"):  # sample by sample
+        for u, y in zip(rec.u, rec.y, strict=True):
+            est.update(u, y)

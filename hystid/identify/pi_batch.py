@@ -389,6 +389,9 @@ def fit_pi_output_error(
         estimated) and ``warnings`` (what the preparation found, and a drift larger than
         :data:`DRIFT_SAID` times the RMS residual over the fitted samples).
     """
+    if drift and not offset:
+        raise ValueError("drift: a drift is estimated beside the offset; pass offset=True or "
+                         "drift=False")
     prep = prepare(record, skip=skip)
     drift = bool(offset and (not prep.at_rest if drift is None else drift))
     s, r = _structure_and_thresholds(record.u[prep.fitted], thresholds, structure, n_operators)

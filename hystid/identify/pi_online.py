@@ -529,6 +529,10 @@ class PIStageOnline(Estimator):
         n = self.structure.n_operators
         rest = np.array(self._rest).reshape(-1, 2)
         exc = np.array(self._buffer)
+        if not np.isfinite(exc[:, 1]).any():
+            raise ValueError(f"the warm-up's {len(exc)} outputs are all skipped (skip={self.skip}) "
+                             "or not finite: nothing to fit; expected a skip shorter than the "
+                             "samples before the warm-up ends")
         if self.offset is None:  # the output at rest: the leading rest's, else the first
             seen = np.r_[rest[:, 1], exc[:, 1]]
             seen = seen[np.isfinite(seen)]
@@ -647,6 +651,10 @@ class PIStageOnline(Estimator):
             raise ValueError(f"record {name!r}: {len(u) - (moved[0] if len(moved) else len(u))}"
                              f" excited samples are too few for the on-line PI identifier "
                              f"(expected more than the warm-up, {self.warmup})")
+        if self.skip >= moved[0] + self.warmup:
+            raise ValueError(f"skip: {self.skip} samples not learned from cover the warm-up of "
+                             f"record {name!r} (its {self.warmup} excited samples from sample "
+                             f"{moved[0]}); expected fewer than {moved[0] + self.warmup}")
 
     def partial_fit(self, record: Record,
                     progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
