@@ -430,13 +430,35 @@ def _drift_per_second(fit: _NormalisedFit, prep: Any, record: Record) -> float:
 
 def _drift_note(fit: _NormalisedFit, prep: Any, record: Record) -> list[str]:
     """A sentence on a drift estimated beside the model, when it is large."""
-    moved = abs(fit.drift) * prep.y_scale
-    if not moved > DRIFT_SAID * fit.rms * prep.y_scale:
+    return drift_note(_drift_per_second(fit, prep, record), abs(fit.drift) * prep.y_scale,
+                      fit.rms * prep.y_scale, record.units.get("y", ""), "fitted samples")
+
+
+def drift_note(rate: float, moved: float, rms: float, unit: str, where: str) -> list[str]:
+    """The warning for a drift of the output's zero estimated beside a model.
+
+    Parameters
+    ----------
+    rate : float
+        The drift per second, output units.
+    moved : float
+        How far it moved the output over ``where``.
+    rms : float
+        The fit's RMS residual there.
+    unit : str
+        The output's unit.
+    where : str
+        The samples it was estimated on, for the sentence.
+
+    Returns
+    -------
+    list of str
+        One sentence when ``moved`` exceeds :data:`DRIFT_SAID` times ``rms``, else none.
+    """
+    if not abs(moved) > DRIFT_SAID * rms:
         return []
-    unit = record.units.get("y", "")
-    rate = _drift_per_second(fit, prep, record)
-    return [f"the output's zero drifts by {rate:.3g} {unit}/s ({moved:.3g} {unit} over the "
-            "fitted samples), estimated beside the model and not part of it: records taken "
+    return [f"the output's zero drifts by {rate:.3g} {unit}/s ({abs(moved):.3g} {unit} over "
+            f"the {where}), estimated beside the model and not part of it: records taken "
             "later will be offset by the drift since"]
 
 
@@ -462,11 +484,11 @@ def _zero_scales(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 def _fit_normalised_from_zero(
     u: np.ndarray, y: np.ndarray, r: np.ndarray, structure: PIStructure, *,
     max_nfev: int = 200, tol: float = 1e-8, screen_nfev: int = SCREEN_NFEV,
-    offset: bool = False,
+    offset: bool = False, drift: bool = False,
 ) -> tuple[_NormalisedFit, float, float]:
-    """:func:`_solve_normalised` at rest at ``u = 0`` (with an offset when ``offset``), on
-    ``u / su`` and ``y / sy`` (:func:`_zero_scales`); samples with a non-finite ``y`` are left
-    out of the cost.
+    """:func:`_solve_normalised` at rest at ``u = 0`` (with an offset when ``offset``, and a
+    drift beside it when ``drift``), on ``u / su`` and ``y / sy`` (:func:`_zero_scales`);
+    samples with a non-finite ``y`` are left out of the cost.
 
     Returns
     -------
@@ -478,7 +500,7 @@ def _fit_normalised_from_zero(
     su, sy = _zero_scales(u, y)
     with np.errstate(invalid="ignore"):
         fit = _solve_normalised(u / su, y / sy, np.isfinite(y), r / su, structure, None, offset,
-                                max_nfev, tol, screen_nfev)
+                                max_nfev, tol, screen_nfev, drift=drift)
     return fit, su, sy
 
 

@@ -69,6 +69,7 @@ from ..pi import PISandwich, PIStructure
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
 from .horizon import HorizonSolve, covariance, drain, run_steps
+from .pi_batch import drift_note
 from .pi_online_kernels import (
     _KMAX,
     _STATE_ROWS,
@@ -281,6 +282,9 @@ class PIStageOnline(Estimator):
         (:attr:`~hystid.identify.horizon.HorizonSolve.spent`).
     e, yhat : float
         Prediction error and prediction of the last sample (output units).
+    drift_per_second_ : float
+        The drift of the output's zero estimated in the warm-up and taken off every later
+        output (on a record that begins in motion; 0 otherwise), output units per second.
     """
 
     method = "pi-stage-online"
@@ -377,6 +381,11 @@ class PIStageOnline(Estimator):
                           offset=self.offset_)
 
     @property
+    def drift_per_second_(self) -> float:
+        """The drift taken off the outputs, output units per second (see the class)."""
+        return self._rate * self._sy * self.fs
+
+    @property
     def offset_(self) -> float:
         """The sensor's output at rest: :attr:`offset` (or the one taken from the record)
         corrected by the estimate."""
@@ -402,6 +411,8 @@ class PIStageOnline(Estimator):
         self.resolve_work_ = 0.0
         self._u0: float | None = None
         self._y0 = 0.0 if self.offset is None else self.offset
+        self._rate, self._kref = 0.0, 0  # the drift taken off (normalised, per sample), its zero
+        self._warm_rms = 0.0  # the warm-up fit's RMS residual (output units)
         self._rest: list[tuple[float, float]] = []
         self._buffer: list[tuple[float, float]] = []
         self._phi: np.ndarray | None = None
@@ -500,6 +511,8 @@ class PIStageOnline(Estimator):
         """The per-sample recursion over samples that stay inside the open chunk."""
         m = len(u)
         un, yn = (u - self._u0) / self._su, (y - self._y0) / self._sy
+        if self._rate:
+            yn = yn - self._rate * (self.k - self._kref + np.arange(m))
         yhat, err = np.empty(m), np.empty(m)
         none = self._no_rows
         kept = none if history is None else np.empty((m, len(self._phi)))
@@ -544,11 +557,18 @@ class PIStageOnline(Estimator):
         in_motion = len(rest) < REST_SAMPLES  # no rest pins the output's zero
         fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure,
                                                 max_nfev=WARMUP_NFEV, screen_nfev=WARMUP_SCREEN,
-                                                offset=in_motion)
+                                                offset=in_motion, drift=in_motion)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
         phi = np.r_[stage_from_theta(fit.theta, n), [fit.y0] * in_motion]
         phi[:n] = admissible_weights(phi[:n])
         un, yn = u / su, y / sy
+        if in_motion:  # the warm-up's drift is taken off every later output as well
+            rows = np.flatnonzero(np.isfinite(y))
+            k0 = self.k - len(y)  # the warm-up's first sample
+            self._rate = fit.drift / max(1.0, float(rows[-1] - rows[0]))
+            self._kref = k0 + int(round(0.5 * (rows[0] + rows[-1])))
+            yn = yn - self._rate * (k0 + np.arange(len(y)) - self._kref)
+        self._warm_rms = fit.rms * sy
         nr = len(rest)
         self._wstate = self._simulate(phi, np.zeros((_STATE_ROWS, n)), un[:nr], yn[:nr])[2]
         err, J, st = self._simulate(phi, self._wstate, un[nr:], yn[nr:])
@@ -698,6 +718,10 @@ class PIStageOnline(Estimator):
             "thresholds": self.thresholds.tolist(),
             "stable": bool(self.model.is_stable()),
             "loading_slope_min": float(_slope(self.theta, self.structure.n_operators)),
+            "drift_per_second": self.drift_per_second_,
+            "warnings": drift_note(self.drift_per_second_,
+                                   self.drift_per_second_ * self.warmup / self.fs,
+                                   self._warm_rms, "output units", "warm-up"),
         }
         return IdentificationResult(self.model, self.method, {**self.settings, "samples": n},
                                     history=history,
