@@ -95,7 +95,7 @@ def test_a_drift_over_a_record_longer_than_the_window_is_taken_off():
         result = member("pi-stage").fit(train, "online")
         est.fit(train)
     assert est.drift_per_second_ == pytest.approx(0.05, rel=0.1)
-    said = r"drifts by 0\.0[45]\d* output units/s"
+    said = r"drifts by 0\.0[45]\d* um/s"
     assert any(re.search(said, w) for w in result.info["warnings"])
     batch = compare(fitted(train, "batch"), train, held).rows
     online = compare(result.model, train, held).rows

@@ -721,7 +721,8 @@ class PIStageOnline(Estimator):
             "drift_per_second": self.drift_per_second_,
             "warnings": drift_note(self.drift_per_second_,
                                    self.drift_per_second_ * self.warmup / self.fs,
-                                   self._warm_rms, "output units", "warm-up"),
+                                   self._warm_rms, record.units.get("y") or "output units",
+                                   "warm-up"),
         }
         return IdentificationResult(self.model, self.method, {**self.settings, "samples": n},
                                     history=history,
