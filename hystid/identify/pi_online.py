@@ -721,9 +721,14 @@ class PIStageOnline(Estimator):
             "drift_per_second": self.drift_per_second_,
             "warnings": drift_note(self.drift_per_second_,
                                    self.drift_per_second_ * self.warmup / self.fs,
-                                   self._warm_rms, record.units.get("y") or "output units",
-                                   "warm-up"),
+                                   self._warm_rms, _output_unit(record), "warm-up"),
         }
         return IdentificationResult(self.model, self.method, {**self.settings, "samples": n},
                                     history=history,
                                     converged_at=converged_at(history, self.epsilon), info=info)
+
+
+def _output_unit(record: Any) -> str:
+    """The record's output unit for a sentence (any object with ``u``, ``y`` is a record)."""
+    units = getattr(record, "units", None) or {}
+    return str(units.get("y") or "output units")
