@@ -35,15 +35,19 @@ POLISHED = 2
 RIDGE = 1e-8
 
 
+def _span(rows: np.ndarray) -> float:
+    """Samples from the first fitted sample to the last (at least one)."""
+    return max(1.0, float(rows[-1] - rows[0])) if len(rows) else 1.0
+
+
 def _nuisance(rows: np.ndarray, drift: bool) -> np.ndarray:
     """Columns of the output's nuisance terms on the fitted samples ``rows``: the sensor
     offset (ones) and, with ``drift``, a straight line in time through zero at the middle of
-    the fitted span, one output unit from its start to its end."""
+    the fitted span, one output unit from its start to its end (:func:`_span`)."""
     ones = np.ones((len(rows), 1))
     if not drift or not len(rows):
         return ones
-    span = max(1.0, float(rows[-1] - rows[0]))
-    return np.column_stack([ones, (rows - 0.5 * (rows[0] + rows[-1])) / span])
+    return np.column_stack([ones, (rows - 0.5 * (rows[0] + rows[-1])) / _span(rows)])
 
 
 
@@ -112,7 +116,8 @@ class _NormalisedFit(NamedTuple):
     nfev: int
     message: str
     start: str
-    drift: float = 0.0  # normalised output units over the fitted span
+    drift: float = 0.0  # normalised output units over the fitted span ..
+    span: float = 1.0  # .. of this many samples (:func:`_span`)
 
     def info(self, r: np.ndarray, u_scale: float, y_scale: float) -> dict[str, Any]:
         """The fit's report in record units (RMS residual, thresholds, scales)."""
@@ -159,7 +164,7 @@ def _solve_normalised(
     theta, y0 = problem.split(sol.x)
     rms = float(np.sqrt(np.mean(problem.evaluate(sol.x)["data"] ** 2)))
     return _NormalisedFit(theta, y0, rms, int(sol.nfev), str(sol.message), label,
-                          problem.drift(sol.x))
+                          problem.drift(sol.x), _span(rows))
 
 
 def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
@@ -418,14 +423,9 @@ def fit_pi_output_error(
 DRIFT_SAID = 3.0
 
 
-def _fitted_seconds(prep: Any, record: Record) -> float:
-    rows = np.flatnonzero(prep.weight)
-    return max(1.0, float(rows[-1] - rows[0])) / record.fs if len(rows) else 1.0 / record.fs
-
-
 def _drift_per_second(fit: _NormalisedFit, prep: Any, record: Record) -> float:
     """The estimated drift in output units per second."""
-    return fit.drift * prep.y_scale / _fitted_seconds(prep, record)
+    return fit.drift * prep.y_scale * record.fs / fit.span
 
 
 def _drift_note(fit: _NormalisedFit, prep: Any, record: Record) -> list[str]:

@@ -419,8 +419,10 @@ class PIStageOnline(Estimator):
         self._theta_rest = np.zeros(len(self.names))
         self._su = self._sy = 1.0
         self._rn = self.thresholds
-        npar = len(self.names)  # the member's parameters in search coordinates (the offset's
-        self._P = np.eye(npar) * self.P0  # correction is added at the warm-up, if at all)
+        # the member's parameters in search coordinates (a correction of the offset is added
+        # at the warm-up on a record that begins in motion)
+        npar = len(self.names)
+        self._P = np.eye(npar) * self.P0
         self._st = np.zeros((_STATE_ROWS, n))
         self._open = np.empty((2, self.every))  # the open chunk: u, y (normalised) ..
         self._n_open = 0  # .. its samples so far
@@ -565,7 +567,7 @@ class PIStageOnline(Estimator):
         if in_motion:  # the warm-up's drift is taken off every later output as well
             rows = np.flatnonzero(np.isfinite(y))
             k0 = self.k - len(y)  # the warm-up's first sample
-            self._rate = fit.drift / max(1.0, float(rows[-1] - rows[0]))
+            self._rate = fit.drift / fit.span
             self._kref = k0 + int(round(0.5 * (rows[0] + rows[-1])))
             yn = yn - self._rate * (k0 + np.arange(len(y)) - self._kref)
         self._warm_rms = fit.rms * sy
