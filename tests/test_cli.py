@@ -318,8 +318,8 @@ def test_two_files_holding_records_of_one_name_are_told_apart(capsys, tmp_path):
     # file (the name -> file map kept the last one loaded).
     from hystid.testing import stage_b_like
 
-    stage_b_like(seed=0).save(tmp_path / "b0.csv")
-    stage_b_like(seed=1).save(tmp_path / "b1.csv")
+    stage_b_like(seed=0, seconds=2.0).save(tmp_path / "b0.csv")  # too short to diagnose
+    stage_b_like(seed=1, seconds=2.0).save(tmp_path / "b1.csv")
     code, _, err = run(["diagnose", tmp_path / "b0.csv", "--val", tmp_path / "b1.csv",
                         "--out", tmp_path / "d"], capsys)
     assert code == 2

@@ -252,7 +252,7 @@ def test_held_out_tail_without_val():
 
 # --------------------------------------------------------------------------- bad input
 def test_too_short_records_are_refused():
-    train, val = _records("none", {}, n=1500)
+    train, val = _records("none", {}, n=400)
     with pytest.raises(DiagnosisError, match="too short"):
         diagnose(train, val, progress=False)
     with pytest.raises(DiagnosisError, match="too short"):

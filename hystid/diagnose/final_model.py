@@ -25,6 +25,7 @@ import numpy as np
 from ..baselines import rest_zero, simulate_from_rest
 from ..metrics import gap_closed
 from ..records import Record
+from .rounds import held_out_skip
 
 __all__ = ["FINAL_MEMBERS", "FinalModel", "final_model", "fit_member", "member_records"]
 
@@ -95,9 +96,10 @@ class FinalModel:
         list of str
         """
         lines = ["model the diagnosis ends in (mean held-out RMS, each record run whole from rest "
-                 "and zeroed on its rest output, as hystid.baselines.compare scores; the rounds "
-                 "above score after the transient, from the record's level, so their RMS and "
-                 "gap closed differ for the same model):"]
+                 "and zeroed on its rest output, a record that begins in motion scored after its "
+                 "burn-in, as hystid.baselines.compare scores; the rounds above score after the "
+                 "transient, from the record's level, so their RMS and gap closed differ for the "
+                 "same model):"]
         nominal = self.rows[0]["mean_rms"]
         at_floor = nominal <= AT_FLOOR * self.floor
         if at_floor:  # a share of a gap this small would say -900000 % for a worse candidate
@@ -129,7 +131,8 @@ def _scores(model: Any, held: Sequence[tuple[Record, int]]) -> list[float]:
     out = []
     for rec, k in held:
         p = _predict(model, rec.u)
-        e = (p + (rest_zero(p, rec) if k == 0 else 0.0) - rec.y)[k:]  # a tail shares its zero
+        # zeroed on the record's rest (a tail shares its zero; a record in motion has no rest)
+        e = (p + (rest_zero(p, rec) if k == 0 else 0.0) - rec.y)[k:]
         r = float(np.sqrt(np.mean(e ** 2)))
         out.append(r if np.isfinite(r) else float("inf"))
     return out
@@ -154,8 +157,8 @@ def member_records(train: Record, vals: Sequence[Record],
     tuple
         The record to fit on and ``[(record, first scored sample), ...]``.
     """
-    if vals:
-        return train, [(v, 0) for v in vals]
+    if vals:  # a record that begins in motion is scored after its burn-in, as compare does
+        return train, [(v, held_out_skip(v, 0.0)) for v in vals]
     from ..identify.prepare import held_out_from
 
     k = held_out_from(train.u, holdout)

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..baselines import repeat_floor
 from ..errors import DiagnosisError
-from ..identify.prepare import held_out_from, prepare
+from ..identify.prepare import burn_in, held_out_from, prepare, shows_rest
 from ..model import DuhemSandwich
 from ..records import Record
 from .effects import EFFECT_NAMES, EFFECTS, FAMILIES, effect_dict, family_of
@@ -44,9 +44,12 @@ NOISE_REACH = 0.9
 #: Factor an accepted form's guessed search ranges widen by when a parameter ends at a bound.
 WIDEN = 4.0
 
-#: Fewest samples in the train part and in the held-out part.
-MIN_TRAIN_SAMPLES = 2000
-MIN_VAL_SAMPLES = 1000
+#: Fewest samples in the train part and in the held-out part (after its transient or burn-in).
+#: A 200 Hz stage's record of four 1 Hz cycles has 800 (the stage-B look-alike,
+#: ``tests/test_diagnose_in_motion.py``), some 40 per parameter of the nominal model and an
+#: effect.
+MIN_TRAIN_SAMPLES = 500
+MIN_VAL_SAMPLES = 250
 
 
 # --------------------------------------------------------------------------- progress
@@ -120,12 +123,13 @@ def _check_inputs(train: Record, vals: list[Record], holdout: float, transient: 
             raise DiagnosisError(
                 f"train {train.name!r}: {train.n} samples is too short (expected at least "
                 f"{MIN_TRAIN_SAMPLES})")
-        skip = int(round(transient * train.fs))
         for i, v in enumerate(vals):
+            skip = held_out_skip(v, transient)
             if v.n - skip < MIN_VAL_SAMPLES:
+                what = "transient" if shows_rest(v.u) else "burn-in (it begins in motion)"
                 raise DiagnosisError(
                     f"val[{i}] {v.name!r}: {v.n} samples is too short (expected at least "
-                    f"{MIN_VAL_SAMPLES} after the {skip}-sample transient)")
+                    f"{MIN_VAL_SAMPLES} after the {skip}-sample {what})")
     else:
         if not 0.05 <= holdout <= 0.8:
             raise DiagnosisError(f"holdout: expected a fraction in [0.05, 0.8], got {holdout}")
@@ -175,6 +179,29 @@ def _repeat_floor(train: Record, vals: list[Record],
                          "equally long)")
 
 
+def held_out_skip(rec: Record, transient: float) -> int:
+    """Leading samples of a held-out record left out of its score: the ``transient`` (seconds)
+    of a record that starts at rest, the burn-in (:func:`~hystid.identify.prepare.burn_in`)
+    of one that begins in motion, as :func:`hystid.baselines.compare` scores it.
+
+    Parameters
+    ----------
+    rec : Record
+        A held-out record.
+    transient : float
+        Seconds dropped at the start of a record.
+
+    Returns
+    -------
+    int
+        The first sample scored.
+    """
+    skip = int(round(transient * rec.fs))
+    if shows_rest(rec.u):
+        return skip
+    return max(skip, burn_in(rec.u, False))
+
+
 def _split(train: Record, vals: list[Record], holdout: float, transient: float, skip_tr: int,
            initial: str, u_rest: float) -> tuple[FitData, list[FitData], list[float], str]:
     """The train part and the held-out parts as :class:`FitData` (input less ``u_rest``)."""
@@ -188,10 +215,10 @@ def _split(train: Record, vals: list[Record], holdout: float, transient: float, 
     if vals:
         tr = FitData(train.u - u_rest, train.y, fs, level(train, "train"),
                      slice(skip_tr, None))
-        skip = int(round(transient * fs))
-        vds = [FitData(v.u - u_rest, v.y, fs, level(v, f"val[{i}]"), slice(skip, None))
-               for i, v in enumerate(vals)]
-        return tr, vds, [skip / fs] * len(vds), "held-out records"
+        skips = [held_out_skip(v, transient) for v in vals]
+        vds = [FitData(v.u - u_rest, v.y, fs, level(v, f"val[{i}]"), slice(k, None))
+               for i, (v, k) in enumerate(zip(vals, skips, strict=True))]
+        return tr, vds, [k / fs for k in skips], "held-out records"
     k = held_out_from(train.u, holdout)
     lev = level(train, "train")
     tr = FitData(train.u[:k] - u_rest, train.y[:k], fs, lev, slice(skip_tr, None))
