@@ -31,6 +31,12 @@ def diagnosed():
         res = diagnose(train, val, progress=False)
         fm = final_model(res, train, [val])
         cmp = compare(res.model, train, [val], orders=(3, 3, 1))
+    row = cmp.rows[0]
+    kept = next(r["mean_rms"] for r in fm.rows if r["candidate"] == fm.chosen)
+    print(f"\nstage-B look-alike, seed 1 -> seed 2 [um]: diagnosis' nominal "
+          f"{res.nominal['rms_val']:.3g} (compare: {row['model']:.3g}); final model "
+          f"{fm.chosen} {kept:.3g}; linear {row['linear']:.3g}, "
+          f"static line {row['static_line']:.3g}")
     return train, val, res, fm, cmp
 
 
