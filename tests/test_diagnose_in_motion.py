@@ -68,3 +68,15 @@ def test_the_model_it_ends_in_beats_both_baselines(diagnosed):
     assert chosen["mean_rms"] <= fm.rows[0]["mean_rms"]
     assert chosen["mean_rms"] < row["linear"] and chosen["mean_rms"] < row["static_line"]
     assert np.isfinite(chosen["mean_rms"])
+
+
+def test_the_noise_floor_is_the_sensor_noise_when_the_model_error_fills_the_upper_band(
+        diagnosed):
+    # the look-alike's sensor noise is 0.02 um; the high-frequency residual read 0.05 there (the
+    # error at the 1 Hz input's harmonics fills every bin up to 100 Hz), which understated the
+    # gap; the input repeats, and its periods bound the noise
+    _, _, res, fm, _ = diagnosed
+    noise = res.where.noise
+    assert 0.015 < res.floor["rms"] < 0.025
+    assert noise["spectral_rms"] > 2 * noise["rms"]
+    assert fm.floor == res.floor["rms"]

@@ -670,6 +670,16 @@ def noise_floor_of(segments: list[Segment]) -> dict:
     if per:
         noise["repeated_periods_rms"] = float(np.mean([p["rms"] for p in per]))
         noise["period_s"] = per[0]["period_s"]
+        if noise["repeated_periods_rms"] < noise["rms"]:
+            # an upper bound of the noise below the spectral level: the model's error fills the
+            # upper band (harmonics of a slow periodic input at a low sampling rate: 0.048 um
+            # read there on the stage-B look-alike, whose noise is 0.02 um; the periods 0.0195)
+            noise["spectral_rms"] = noise["rms"]
+            noise["rms"] = noise["repeated_periods_rms"]
+            noise["psd"] = noise["rms"] ** 2 * 2.0 / fs
+            noise["method"] = ("repeated periods of the input: std(y(k + T) - y(k)) / sqrt(2), "
+                               "below the high-frequency residual's level, which the model's "
+                               "error fills")
     return noise
 
 
