@@ -166,17 +166,24 @@ def render(payload: dict) -> str:
         seconds = (f"{b['seconds']:.2g} ({b['single_start_seconds']:.2g})"
                    if b.get("single_start_seconds") else "-")
         rows.append([f"{LABELS.get(case, case)} [{entry['unit']}]", *cells,
-                     _cell(line, [False] * len(line)), _cell(linear, [False] * len(linear)),
+                     _cell(line, [v == b for v, b in zip(line, best, strict=True)]),
+                     _cell(linear, [v == b for v, b in zip(linear, best, strict=True)]),
                      seconds])
         gain = [1 - m / li for m, li in zip(model.get("batch", []), linear, strict=False)
                 if m is not None and li]
-        if gain and min(gain) < 0.2:
-            close.append(f"on the {LABELS.get(case, case).split(',')[0]} the batch model beats "
-                         f"the linear model by only {100 * min(gain):.0f}-{100 * max(gain):.0f} %")
+        where = LABELS.get(case, case).split(",")[0]
+        if gain and min(gain) < 0.0:
+            lost = sum(g < 0.0 for g in gain)
+            close.append(f"on the {where} the batch model loses to the linear model on {lost} "
+                         f"of {len(gain)} held-out records (by up to {-100 * min(gain):.0f} %; "
+                         f"it beats it by {100 * max(gain):.0f} % at best)")
+        elif gain and min(gain) < 0.2:
+            close.append(f"on the {where} the batch model beats the linear model by only "
+                         f"{100 * min(gain):.0f}-{100 * max(gain):.0f} %")
     text = [table(rows, ["records (train -> held out)", *methods, "static line", "linear",
                          "batch fit [s] (one start, no offset)"])]
     if close:
-        text.append("\nNot much better than a linear model: " + "; ".join(close) + ".")
+        text.append("\nAgainst the linear model: " + "; ".join(close) + ".")
     if failed:
         text.append("\nRefused: " + "; ".join(failed))
     return "\n".join(text)
