@@ -25,8 +25,9 @@ the first ``n_start`` samples and solves the output-error problem on them
 offset and data-driven starts) and runs the recursion from that solution with ``P`` set to the
 inverse Gauss-Newton information. The start is **checked** (:func:`check_start`): the simulation
 error must reach its own noise estimate (from the residual's sample-to-sample differences: a
-white residual is noise, a smooth one is a misfit) and beat a linear model of the same orders
-(:class:`hystid.baselines.LinearModel`). The check runs on the start-up window and again, on
+white residual is noise, a smooth one is a misfit) and beat the linear baseline
+(:class:`hystid.baselines.LinearModel` of :func:`hystid.baselines.baseline_orders`). The check
+runs on the start-up window and again, on
 the running estimate, once ``start_retries`` samples (1 000 and 3 000 by default) have come,
 most of which the start-up solve never saw -- a window can be fitted to its noise by a wrong
 solution when it does not excite the stage enough. When such a check fails the problem is

@@ -1,5 +1,5 @@
 """The on-line identifier's start-up check: a start-up solution against its own noise
-estimate and a linear model of the same orders (:class:`StartUpCheck`, :func:`check_start`).
+estimate and the linear baseline (:class:`StartUpCheck`, :func:`check_start`).
 
 :class:`~hystid.identify.online.OnlineIdentifier` solves the sandwich on its first samples
 before the recursion runs; a solution that passes this check is where the recursion starts.
@@ -34,7 +34,8 @@ class StartUpCheck:
         Noise estimate from the same residual: ``RMS(diff r) / sqrt(2)`` (a white residual has
         ``noise ~ rms``; a misfit is smooth and has ``noise << rms``).
     rms_linear : float
-        RMS simulation error of a linear model of the sandwich's orders with its own offset.
+        RMS simulation error of the linear baseline with its own offset
+        (:func:`hystid.baselines.baseline_orders`, as :func:`hystid.baselines.compare` fits).
     start : str
         Which start the solution came from.
     passed : bool
@@ -78,7 +79,7 @@ def check_start(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, structure: Struc
     yhat : ndarray
         The solution's simulated output (offset included).
     structure : Structure
-        The sandwich's structure (orders of the linear baseline).
+        The sandwich's structure (the linear baseline's orders follow from it).
     fs : float
         Sampling rate in Hz.
     start : str
@@ -88,14 +89,13 @@ def check_start(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, structure: Struc
     -------
     StartUpCheck
     """
-    from ..baselines import LinearModel
+    from ..baselines import LinearModel, baseline_orders
 
     r = y - yhat
     rms = float(np.sqrt(np.mean(r**2)))
     noise = float(np.sqrt(np.mean(np.diff(r) ** 2) / 2.0))
-    s = structure
     rec = Record(u, y, fs, name="start-up window")
-    linear = LinearModel.fit(rec, s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
+    linear = LinearModel.fit(rec, *baseline_orders(structure))
     rms_linear = float(np.sqrt(np.mean((y - linear.predict(u)) ** 2)))
     round_off = 1e-9 * max(float(np.std(y)), 1e-300)
     white = rms <= NOISE_RATIO * noise or rms <= round_off
