@@ -143,10 +143,15 @@ def render(payload: dict) -> str:
     rows.append(["repeat floor (offset removed)", *(_nm(f) for f in floor), ""])
     text = [table(rows, ["held-out RMS [nm], trained on prbn_1", *names, "fit [s]"]), ""]
     narx_rms = payload["baselines"].get("NARX (SysIdentPy)")
-    if narx_rms is not None:
-        for m, e in payload["members"].items():
-            wins = sum(a < b for a, b in zip(e["rms"], narx_rms, strict=True))
-            text.append(f"- `{m}` beats the NARX on {wins} of {len(names)} records.")
+    linear_rms = payload["baselines"].get("linear (3rd order)")
+    for m, e in payload["members"].items():
+        said = []
+        for label, ref in (("the NARX", narx_rms), ("the linear model", linear_rms)):
+            if ref is not None:
+                wins = sum(a < b for a, b in zip(e["rms"], ref, strict=True))
+                said.append(f"{label} on {wins} of {len(names)} records")
+        if said:
+            text.append(f"- `{m}` beats {' and '.join(said)}.")
     for m, e in payload["members"].items():
         ratio = [a / f for a, f in zip(e["rms"], floor, strict=True)]
         text.append(f"- `{m}`: {min(ratio):.1f}-{max(ratio):.1f}x the repeat floor; with the "
