@@ -462,10 +462,10 @@ def baseline_orders(structure: Any) -> tuple[int, int, int]:
     ``q = q1 + q2`` and a numerator as long as the denominator (``nb = max(n1b + n2b, na)``).
 
     The sandwich's own numerator count is no fair size for a yardstick: the paper's structure
-    has none (``n1b = n2b = 0``), and its all-pole linear part was 553-918 nm off stage-A-like
-    records cut mid-motion where ``(3, 2, 1)`` was 97-201 nm: a forced Duhem fit "beat" a
-    linear model that any engineer would have fitted better (``tests/test_baselines_orders.py``
-    measures it on stage A).
+    has none (``n1b = n2b = 0``), and its all-pole linear part was 112-150 nm off measured
+    stage A's held-out records where ``(3, 3, 1)`` is 55-84 nm: a forced Duhem fit "beat" on
+    all five a linear model that any engineer would have fitted better, and loses to the fair
+    one on both triangles (``tests/test_baselines_orders.py``).
 
     Parameters
     ----------

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..baselines import repeat_floor
 from ..errors import DiagnosisError
-from ..identify.prepare import burn_in, held_out_from, prepare, shows_rest
+from ..identify.prepare import burn_in, held_out_from, prepare, rest_level
 from ..model import DuhemSandwich
 from ..records import Record
 from .effects import EFFECT_NAMES, EFFECTS, FAMILIES, effect_dict, family_of
@@ -126,7 +126,8 @@ def _check_inputs(train: Record, vals: list[Record], holdout: float, transient: 
         for i, v in enumerate(vals):
             skip = held_out_skip(v, transient)
             if v.n - skip < MIN_VAL_SAMPLES:
-                what = "transient" if shows_rest(v.u) else "burn-in (it begins in motion)"
+                what = ("transient" if rest_level(v.u)[1] else
+                        "burn-in (it begins in motion)")
                 raise DiagnosisError(
                     f"val[{i}] {v.name!r}: {v.n} samples is too short (expected at least "
                     f"{MIN_VAL_SAMPLES} after the {skip}-sample {what})")
@@ -196,10 +197,7 @@ def held_out_skip(rec: Record, transient: float) -> int:
     int
         The first sample scored.
     """
-    skip = int(round(transient * rec.fs))
-    if shows_rest(rec.u):
-        return skip
-    return max(skip, burn_in(rec.u, False))
+    return max(int(round(transient * rec.fs)), burn_in(rec.u, rest_level(rec.u)[1]))
 
 
 def _split(train: Record, vals: list[Record], holdout: float, transient: float, skip_tr: int,
