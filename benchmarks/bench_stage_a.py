@@ -41,8 +41,8 @@ STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "st
 TRAIN = "prbn_1"
 INPUTS = ("prbn", "sine50", "tri50")
 #: ``model=`` values, or ``model/method`` (``pi-stage/online``: the member's on-line identifier).
-MEMBERS = ("duhem", "duhem/online", "gduhem", "mduhem", "pi", "pi-stage", "pi-stage/online",
-           "auto")
+MEMBERS = ("duhem", "duhem/online", "gduhem", "mduhem", "pi", "pi-stage", "pi-poly",
+           "pi-stage/online", "auto")
 
 
 def records() -> dict:

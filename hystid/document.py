@@ -127,6 +127,8 @@ def model_document(
     structure = asdict(model.structure)
     if getattr(model.structure, "is_plain", False):  # the paper's eq. (7): files as before
         structure = {k: v for k, v in structure.items() if k not in _SHAPE_KEYS}
+    if kind == "pi" and not structure.get("n_poly"):  # the plays alone: files as before
+        structure.pop("n_poly", None)
     doc: dict[str, Any] = {
         "format": FORMAT,
         "version": VERSION,

@@ -138,7 +138,7 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich | Mul
         else:
             from .pi import PISandwich, PIStructure
 
-            structure = PIStructure(**_structure(doc, _PI_KEYS, where))
+            structure = PIStructure(**_structure(doc, _PI_KEYS, where, ("n_poly",)))
             check_structure_size(structure)
             thresholds = _numbers(doc, "thresholds", where, "a PI model's play-operator "
                                   "thresholds")

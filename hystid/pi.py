@@ -51,6 +51,8 @@ from .pi_operator import (  # the operator; re-exported here, where the sandwich
     pi_operator,
     pi_simulate_into,
     play_operator,
+    poly_keys,
+    poly_terms,
 )
 from .poly import is_stable
 from .sandwich import InitialCondition, UnitGainSandwich, unit_gain_numerator
@@ -91,6 +93,10 @@ class PIStructure:
         The same for L2.
     q1, q2 : int
         Input delays of L1 and L2 (1 in eqs. 29 and 31).
+    n_poly : int
+        Memoryless polynomial terms beside the plays, ``c_2 w1^2 .. c_{n_poly+1}
+        w1^{n_poly+1}`` (``w1`` from the rest): the loop's asymmetry, which a sum of plays
+        cannot make (its loops are point-symmetric). 0 (the paper's operator) by default.
     """
 
     n_operators: int = N_OPERATORS
@@ -100,9 +106,10 @@ class PIStructure:
     n2b: int = 2
     q1: int = 1
     q2: int = 1
+    n_poly: int = 0
 
     def __post_init__(self) -> None:
-        for key in ("n1a", "n2a", "q1", "q2"):
+        for key in ("n1a", "n2a", "q1", "q2", "n_poly"):
             value = getattr(self, key)
             if not isinstance(value, int | np.integer) or value < 0:
                 raise ValueError(f"PIStructure: {key} must be a non-negative integer, got "
@@ -125,6 +132,7 @@ class PIStructure:
             tuple(f"a1{i}" for i in range(1, self.n1a + 1))
             + tuple(f"b1{j}" for j in range(2, self.n1b + 1))
             + tuple(f"mu{i}" for i in range(self.n_operators))
+            + tuple(f"c{j}" for j in range(2, self.n_poly + 2))
             + tuple(f"a2{i}" for i in range(1, self.n2a + 1))
             + tuple(f"b2{j}" for j in range(2, self.n2b + 1))
         )
@@ -135,7 +143,8 @@ class PIStructure:
         return max(1, self.n1a, self.q1 + self.n1b - 1, self.n2a, self.q2 + self.n2b - 1)
 
     def slices(self) -> dict[str, slice]:
-        """Slices of ``theta`` by group: ``a1, b1, mu, a2, b2`` (free coefficients only).
+        """Slices of ``theta`` by group: ``a1, b1, mu, c, a2, b2`` (free coefficients only;
+        ``c`` the polynomial terms' coefficients, empty without them).
 
         Returns
         -------
@@ -143,7 +152,7 @@ class PIStructure:
             Where each group sits in ``theta``.
         """
         sizes = (("a1", self.n1a), ("b1", self.n1b - 1), ("mu", self.n_operators),
-                 ("a2", self.n2a), ("b2", self.n2b - 1))
+                 ("c", self.n_poly), ("a2", self.n2a), ("b2", self.n2b - 1))
         out, start = {}, 0
         for key, size in sizes:
             out[key] = slice(start, start + size)
@@ -216,6 +225,54 @@ class PISandwich(UnitGainSandwich):
         return self._part("mu")
 
     @property
+    def poly(self) -> np.ndarray:
+        """Coefficients ``c_2, c_3, ..`` of the memoryless terms beside the plays (empty for
+        the paper's operator; see :attr:`PIStructure.n_poly`)."""
+        return self._part("c")
+
+    def hysteresis_output(self, w1: float, p: np.ndarray) -> float:
+        """``w2`` for input ``w1`` (from the rest) and play states ``p`` already at ``w1``:
+        the weighted plays and the polynomial terms.
+
+        Parameters
+        ----------
+        w1 : float
+            The block's input.
+        p : ndarray
+            The plays' states at that input.
+
+        Returns
+        -------
+        float
+        """
+        return float(self.mu @ p) + poly_terms(float(w1), self.poly)[0]
+
+    def w1_span(self) -> tuple[float, float]:
+        """The block input's range the model is trusted on, from the rest: the envelope's input
+        range (L1 has unit DC gain), else twice the largest threshold either side.
+
+        Returns
+        -------
+        tuple of float
+        """
+        if self.envelope is not None:
+            return (self.envelope.u_min - self.u_rest, self.envelope.u_max - self.u_rest)
+        reach = 2.0 * float(np.max(self.thresholds))
+        return (-reach, reach)
+
+    def poly_slope_min(self) -> float:
+        """The polynomial terms' least slope over :meth:`w1_span` (0 without them).
+
+        Returns
+        -------
+        float
+        """
+        if not len(self.poly):
+            return 0.0
+        w = np.linspace(*self.w1_span(), 201)
+        return float(min(poly_terms(float(v), self.poly)[1] for v in w))
+
+    @property
     def coefficients(self) -> dict[str, float]:
         """Every coefficient of eqs. (29) and (31) by name, the derived ``b11, b21`` included."""
         out = {}
@@ -234,17 +291,20 @@ class PISandwich(UnitGainSandwich):
         return is_stable(self.a1, self.a2)
 
     def is_invertible(self) -> bool:
-        """Whether the PI operator has an exact inverse (see :func:`pi_inverse_parameters`).
+        """Whether the hysteresis block has an inverse (see :func:`pi_inverse_parameters`).
 
         Returns
         -------
         bool
-            True when ``mu_0 > 0``, every partial sum of the weights is positive and the
-            thresholds start at 0 and increase.
+            True when the thresholds start at 0 and increase and every branch rises: every
+            partial sum of the weights plus the polynomial terms' least slope over
+            :meth:`w1_span` is positive (without polynomial terms: ``mu_0 > 0`` and every
+            partial sum positive, the exact inverse's condition).
         """
         W = np.cumsum(self.mu)
         r = self.thresholds
-        return bool(self.mu[0] > 0 and np.all(W > 0) and r[0] == 0 and np.all(np.diff(r) > 0))
+        return bool(r[0] == 0 and np.all(np.diff(r) > 0)
+                    and np.min(W) + self.poly_slope_min() > 0)
 
     # ----------------------------------------------------------------- python-control bridge
     @property
@@ -254,11 +314,22 @@ class PISandwich(UnitGainSandwich):
         Its ``params`` are the block's (``pi_mu*``, ``pi_r*``) and, where not zero, the model's
         ``u_rest`` and ``offset``, which the update ignores and :meth:`from_control` reads back.
         """
-        return self._carry(pi_block(self.thresholds, self.mu, dt=self.dt, name="H"))
+        return self._carry(pi_block(self.thresholds, self.mu, dt=self.dt, name="H",
+                                    poly=self.poly))
 
     @property
     def H_inverse(self) -> ct.NonlinearIOSystem:
-        """The exact inverse of :attr:`H` (w2 -> w1), for hysteresis compensation."""
+        """The exact inverse of :attr:`H` (w2 -> w1), for hysteresis compensation.
+
+        Raises
+        ------
+        ValueError
+            With polynomial terms, which have no inverse PI operator (their per-sample inverse
+            is the compensator's: :func:`hystid.compensate.compensator`).
+        """
+        if len(self.poly):
+            raise ValueError("H_inverse: a PI block with polynomial terms has no inverse PI "
+                             "operator; hystid.compensate inverts it sample by sample")
         return pi_inverse_block(self.thresholds, self.mu, dt=self.dt, name="H_inv")
 
     def operator_state(
@@ -309,7 +380,7 @@ class PISandwich(UnitGainSandwich):
         P = self.structure.history + 1
         v = float(u0) - self.u_rest
         p = np.maximum(v - self.thresholds, np.minimum(v + self.thresholds, 0.0))
-        w2 = float(self.mu @ p)
+        w2 = self.hysteresis_output(v, p)
         return InitialCondition(*(np.full(P, x) for x in (v, v, w2, w2)))
 
     def _h_state(self, x0: InitialCondition, **state: Any) -> np.ndarray:
@@ -374,7 +445,14 @@ class PISandwich(UnitGainSandwich):
                              f"{prefix}_r0.., one per state)") from None
         values, (g1, g2), orders = cls._linear_parts(L1, L2, structure)
         values.update({f"mu{i}": g1 * g2 * m for i, m in enumerate(mu)})
-        s = structure or PIStructure(n_operators=n, **orders)
+        # c_j w1^j with w1 = g1 w1': the coefficient on w1'^j is g1^j g2 c_j
+        keys = poly_keys(prefix, H.params)
+        values.update({f"c{j}": g1 ** j * g2 * float(H.params[k])
+                       for j, k in enumerate(keys, start=2)})
+        if structure is not None and structure.n_poly != len(keys):
+            raise ValueError(f"H has {len(keys)} polynomial terms, the structure "
+                             f"{structure.n_poly}")
+        s = structure or PIStructure(n_operators=n, n_poly=len(keys), **orders)
         return cls(values, r / abs(g1), s, fs=1.0 / L1.dt, **model)
 
     # ----------------------------------------------------------------- simulation
@@ -382,9 +460,10 @@ class PISandwich(UnitGainSandwich):
              x0: InitialCondition, **state: Any) -> None:
         p = self._h_state(x0, **state)
         s = self.structure
-        pi_simulate_into(self.a1, self.b1, s.q1, self.mu, self.thresholds, self.a2, self.b2,
-                         s.q2, U, W1, W2, Y, p, P)
+        pi_simulate_into(self.a1, self.b1, s.q1, self.mu, self.poly, self.thresholds, self.a2,
+                         self.b2, s.q2, U, W1, W2, Y, p, P)
 
     def __repr__(self) -> str:
         lin = ", ".join(f"{k}={v:.6g}" for k, v in self.coefficients.items())
-        return f"PISandwich({lin}, N={len(self.thresholds)}, fs={self.fs:g})"
+        poly = "".join(f", c{j}={v:.6g}" for j, v in enumerate(self.poly, start=2))
+        return f"PISandwich({lin}, N={len(self.thresholds)}{poly}, fs={self.fs:g})"

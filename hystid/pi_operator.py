@@ -47,6 +47,35 @@ def play(v, p_prev, r):
     return max(v - r, min(v + r, p_prev))
 
 
+@njit(cache=True, inline="always")
+def poly_terms(w, c):
+    """The memoryless polynomial beside the plays, ``sum_j c[j] w^(j+2)``, and its slope.
+
+    The one writing of it (the PI sandwich's simulation, its sensitivities and its inverse
+    call it).
+
+    Parameters
+    ----------
+    w : float
+        Input ``w1(k)`` from the rest.
+    c : ndarray
+        Coefficients of ``w^2, w^3, ..`` (empty: none).
+
+    Returns
+    -------
+    value, slope : float
+        The polynomial and its derivative in ``w``.
+    """
+    value = 0.0
+    slope = 0.0
+    power = w  # w^(j+1)
+    for j in range(c.shape[0]):
+        slope += (j + 2) * c[j] * power
+        power *= w
+        value += c[j] * power
+    return value, slope
+
+
 @njit(cache=True, nogil=True)
 def _pi_operator_into(v, r, mu, p, out):
     for k in range(v.shape[0]):
@@ -66,12 +95,13 @@ def _play_operator_into(v, r, p, out):
 
 
 @njit(cache=True, nogil=True)
-def pi_simulate_into(a1, b1, q1, mu, r, a2, b2, q2, U, W1, W2, Y, p, start):
+def pi_simulate_into(a1, b1, q1, mu, c, r, a2, b2, q2, U, W1, W2, Y, p, start):
     """Eqs. (29)-(31) from index ``start`` to the end of the extended arrays.
 
     ``U, W1, W2, Y`` hold the past in their first ``start`` entries (most recent last);
     ``b1[j]`` multiplies ``u(k - q1 - j)`` and ``b2[j]`` multiplies ``w2(k - q2 - j)``;
-    ``p`` holds the play-operator states ``p_i(k-1)`` and is updated in place.
+    ``p`` holds the play-operator states ``p_i(k-1)`` and is updated in place; ``c`` the
+    coefficients of the polynomial terms beside the plays (:func:`poly_terms`; empty: none).
     """
     for k in range(start, U.shape[0]):
         # eq. (29)
@@ -86,7 +116,7 @@ def pi_simulate_into(a1, b1, q1, mu, r, a2, b2, q2, U, W1, W2, Y, p, start):
         for i in range(r.shape[0]):
             p[i] = play(w1, p[i], r[i])
             w2 += mu[i] * p[i]
-        W2[k] = w2
+        W2[k] = w2 + poly_terms(w1, c)[0]
         # eq. (31)
         y = 0.0
         for j in range(b2.shape[0]):
@@ -239,6 +269,27 @@ def _unpack(params: Mapping, prefix: str, n: int) -> tuple[np.ndarray, np.ndarra
             np.fromiter((params[k] for k in kr), float, n))
 
 
+def poly_keys(prefix: str, params: Mapping) -> tuple[str, ...]:
+    """The parameter names ``<prefix>_c2, <prefix>_c3, ..`` of a PI block's polynomial terms
+    present in ``params`` (consecutive from ``c2``).
+
+    Parameters
+    ----------
+    prefix : str
+        The block's parameter prefix.
+    params : mapping
+        Its parameters (or an interconnected system's flat ones).
+
+    Returns
+    -------
+    tuple of str
+    """
+    keys: list[str] = []
+    while f"{prefix}_c{len(keys) + 2}" in params:
+        keys.append(f"{prefix}_c{len(keys) + 2}")
+    return tuple(keys)
+
+
 def _make_pi_functions(prefix: str):
     def update(t, x, u, params):
         _, r = _unpack(params, prefix, len(x))
@@ -246,7 +297,10 @@ def _make_pi_functions(prefix: str):
 
     def output(t, x, u, params):
         mu, r = _unpack(params, prefix, len(x))
-        return np.array([mu @ np.maximum(u[0] - r, np.minimum(u[0] + r, x))])
+        c = np.array([params[k] for k in poly_keys(prefix, params)], dtype=float)
+        w = float(u[0])
+        return np.array([mu @ np.maximum(w - r, np.minimum(w + r, x))
+                         + poly_terms(w, c)[0]])
 
     return update, output
 
@@ -260,6 +314,7 @@ def pi_block(
     outputs: str = "w2",
     prefix: str = "pi",
     name: str = "H",
+    poly: np.ndarray | Sequence[float] = (),
 ) -> ct.NonlinearIOSystem:
     """The PI hysteresis operator (eq. 30) as a discrete python-control system.
 
@@ -267,6 +322,9 @@ def pi_block(
     ----------
     thresholds, weights : array_like
         ``r_i`` and ``mu_i``, same length ``N``.
+    poly : array_like
+        Coefficients ``c_2, c_3, ..`` of memoryless terms ``c_j w1^j`` added to the plays'
+        sum (:func:`poly_terms`; parameters ``<prefix>_c2 ..``); none by default.
     dt : float
         Sampling period in seconds.
     inputs, outputs, name : str
@@ -284,8 +342,12 @@ def pi_block(
     r = _check_thresholds(thresholds)
     mu = _weights(weights, len(r))
     kmu, kr = _keys(prefix, len(r))
+    c = np.asarray(poly, dtype=float).ravel()
+    if not np.all(np.isfinite(c)):
+        raise ValueError(f"poly: expected finite coefficients, got {c!r}")
     params = {**dict(zip(kmu, map(float, mu), strict=True)),
-              **dict(zip(kr, map(float, r), strict=True))}
+              **dict(zip(kr, map(float, r), strict=True)),
+              **{f"{prefix}_c{j + 2}": float(v) for j, v in enumerate(c)}}
     update, output = _make_pi_functions(prefix)
     return ct.nlsys(
         update, output, inputs=[inputs], outputs=[outputs],

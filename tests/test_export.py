@@ -143,6 +143,16 @@ def pi_model(placed: bool) -> PISandwich:
                       fs=10_000.0, **place)
 
 
+def pi_poly_model() -> PISandwich:
+    """:func:`pi_model` (placed) with quadratic and cubic terms beside the plays."""
+    base = pi_model(True)
+    n = len(base.thresholds)
+    s = PIStructure(n_operators=n, n_poly=2)
+    params = {**base.params, "c2": 0.004, "c3": -2e-4}
+    return PISandwich(params, base.thresholds, s, fs=base.fs, u_rest=base.u_rest,
+                      offset=base.offset, envelope=base.envelope)
+
+
 def stage_a_model() -> DuhemSandwich:
     from hystid.identify import identify
     from hystid.records import load_record
@@ -169,6 +179,7 @@ MODELS = {
     "duhem-placed": placed_duhem,
     "pi": lambda: pi_model(False),
     "pi-placed": lambda: pi_model(True),
+    "pi-poly-placed": pi_poly_model,
 }
 
 
@@ -388,6 +399,16 @@ def test_a_model_without_envelope_is_exported_without_compensator_unless_limits_
     assert notes and "envelope" in notes[0]
     head = c_sources(model, compensator={"u_limits": (0.0, 10.0)})["hystid_model.h"]
     assert "HYSTID_NO_FF" not in head and "#define HYSTID_FF_U_MAX 10.0" in head
+
+
+def test_pi_poly_is_exported_without_compensator_saying_why():
+    model = pi_poly_model()
+    assert model.is_invertible()
+    notes: list[str] = []
+    texts = c_sources(model, notes=notes)
+    assert "#define HYSTID_NO_FF 1" in texts["hystid_model.h"]
+    assert "#define HX_NPOLY 2" in texts["hystid_model.c"]
+    assert notes and "polynomial terms" in notes[0] and "not exported to C" in notes[0]
 
 
 def test_pi_without_inverse_is_exported_without_compensator():

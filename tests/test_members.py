@@ -64,7 +64,7 @@ def test_every_swing_threshold_is_reversed_by_the_input_it_was_placed_on():
 
 # --------------------------------------------------------------------------- members
 def test_members_and_the_identify_entry_point():
-    assert tuple(MEMBERS) == ("duhem", "gduhem", "pi", "pi-stage", "mduhem")
+    assert tuple(MEMBERS) == ("duhem", "gduhem", "pi", "pi-stage", "pi-poly", "mduhem")
     assert set(AUTO_CANDIDATES) <= set(MEMBERS)
     from hystid.cli.identify import MODEL_NAMES
 

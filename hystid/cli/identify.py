@@ -58,7 +58,7 @@ REPORT_FILES = ("report.json", "model.json", "validation.png", "convergence.png"
 
 #: The members of the model family (``hystid.identify.members.MEMBERS``; a test keeps the two
 #: equal, so that the parser does not import the models).
-MODEL_NAMES = ("duhem", "gduhem", "pi", "pi-stage", "mduhem")
+MODEL_NAMES = ("duhem", "gduhem", "pi", "pi-stage", "pi-poly", "mduhem")
 #: Methods of each hysteresis block (``--model``) that keep a parameter history.
 _HISTORY_METHODS = {"duhem": ("online", "eria", "ekf"), "pi": ("online", "eria")}
 

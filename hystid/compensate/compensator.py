@@ -75,6 +75,7 @@ from .member_inverse import (
     gduhem_inverse_step,
     mduhem_forward,
     mduhem_inverse_step,
+    pi_poly_inverse,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -241,6 +242,10 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
                                             fpar[_NF + m:_NF + 2 * m],
                                             fpar[_NF + 2 * m:_NF + 3 * m], fpar[_BOUND])
             w1c = w1p + d
+        elif kind == KIND_PI and ispec.shape[0] > _NI:  # polynomial terms: no inverse PI
+            n = ispec[_NPI]
+            w1c, status = pi_poly_inverse(w2d, w1p, xn[oH:oH + n], r_pi, mu_pi,
+                                          fpar[_NF:_NF + ispec[_NI]])
         elif kind == KIND_PI:
             n = ispec[_NPI]
             # inverse-operator states matching the forward states p (pi_inverse_state)
@@ -302,7 +307,7 @@ def _stamped_chain_step(stamp: int) -> Dispatcher:
 
 chain_step = _stamped_chain_step(source_stamp(plan_memo, duhem_forward, play, gduhem_inverse_step,
                                               gduhem_forward, mduhem_inverse_step,
-                                              mduhem_forward))
+                                              mduhem_forward, pi_poly_inverse))
 
 
 @njit(cache=True)
@@ -468,6 +473,8 @@ def _build(model, *, kind: int, u_limits, reference_model, preview, duhem_bound,
     if kind == KIND_PI:
         r_pi, mu_pi, r_inv, mu_inv = _pi_parts(model)
         n_ops = len(r_pi)
+        if len(model.poly):  # inverted sample by sample (pi_poly_inverse)
+            ipar, hpar = np.array([len(model.poly)], np.int64), model.poly
         hyst_states = tuple(f"p{i}" for i in range(n_ops))
     elif kind == KIND_MDUHEM:
         n_ops = model.structure.n_operators

@@ -172,10 +172,17 @@ def _pi_parts(model):
     from ..pi_operator import pi_inverse_parameters
 
     if not model.is_invertible():
+        if len(model.poly):
+            raise ValueError(
+                "model: the PI block with polynomial terms has no inverse: a partial sum of "
+                "the weights plus the polynomial terms' least slope over the envelope, "
+                f"{np.min(np.cumsum(model.mu)) + model.poly_slope_min():.4g}, is not positive")
         raise ValueError(
             "model: the PI operator has no exact inverse (first weight or a partial sum of "
             "the weights is not positive)"
         )
+    if len(model.poly):  # no inverse PI operator: the compensator solves per sample
+        return model.thresholds.copy(), model.mu.copy(), np.zeros(0), np.zeros(0)
     r_inv, mu_inv = pi_inverse_parameters(model.thresholds, model.mu)
     return model.thresholds.copy(), model.mu.copy(), r_inv, mu_inv
 

@@ -1,4 +1,5 @@
-"""Per-sample inverses of the generalised Duhem block and of the parallel Duhem operators.
+"""Per-sample inverses of the generalised Duhem block, of the parallel Duhem operators and of
+a PI block with polynomial terms.
 
 The members ``gduhem`` (:class:`~hystid.model.DuhemSandwich` with a generalised block, see
 :mod:`hystid.kernels`) and ``mduhem`` (:class:`~hystid.mduhem.MultiDuhemSandwich`, see
@@ -47,6 +48,13 @@ such a block a reversal is approximate for the few samples the fallback above ne
 reversal is reachable in one step (the reversible slope larger than the rate term on the
 branches, e.g. ``f1 < 2 g0`` for the plain block) every step is exact.
 
+A PI block with polynomial terms (``pi-poly``, ``w2 = sum_i mu_i p_i + sum_j c_j w1^j``) has
+no inverse PI operator; its ``w2`` is continuous and, on an invertible model
+(:meth:`hystid.pi.PISandwich.is_invertible`: every branch rises over the envelope), increasing
+in ``w1(k)`` for the plays' states at ``k-1``. :func:`pi_poly_inverse` brackets the wanted
+``w2`` from ``w1(k-1)`` and bisects to round-off: exact up to the last bits wherever the
+model is invertible (status ``UNREACHABLE`` where the bracket is not found).
+
 The kernels take the model's own parameter arrays: the generalised block its ``theta`` and
 ``layout`` (its coefficients from :func:`hystid.kernels.shape_terms`, its forward step written
 as :func:`hystid.kernels.step` writes it), the parallel operators their rates, ``f1_j`` and
@@ -62,6 +70,7 @@ from __future__ import annotations
 from numba import njit
 
 from ..kernels import offsets, sgn, shape_terms
+from ..pi_operator import play, poly_terms
 from .duhem_inverse import BOUND, EXACT, UNREACHABLE
 
 __all__ = [
@@ -72,6 +81,7 @@ __all__ = [
     "mduhem_forward",
     "mduhem_inverse_step",
     "mduhem_slopes",
+    "pi_poly_inverse",
 ]
 
 # a requested change of w2 this small is round-off of the reference path (as duhem_inverse's)
@@ -345,3 +355,73 @@ def mduhem_inverse_step(w2d, w1p, p, rates, f1, g0, bound):
     if delta > 0.0:
         return _towards(1.0, q, dq_pos, bound / rmax), UNREACHABLE
     return _towards(-1.0, q, dq_neg, bound / rmax), UNREACHABLE
+
+
+# =========================================================================== PI with polynomial
+#: Doublings of the bracket's width before a wanted ``w2`` is taken as unreachable.
+BRACKET_DOUBLINGS = 80
+
+
+@njit(cache=True)
+def _pi_poly_gap(w, w2d, p, r, mu, c):
+    # w2 after a move of the plays (states p at k-1, not changed) to w, less the wanted w2
+    acc = 0.0
+    for i in range(r.shape[0]):
+        acc += mu[i] * play(w, p[i], r[i])
+    return acc + poly_terms(w, c)[0] - w2d
+
+
+@njit(cache=True)
+def pi_poly_inverse(w2d, w1p, p, r, mu, c):
+    """The inverse of a PI block with polynomial terms for one sample.
+
+    Parameters
+    ----------
+    w2d : float
+        Wanted ``w2(k)``.
+    w1p : float
+        ``w1(k-1)``.
+    p : ndarray
+        The plays' states ``p_i(k-1)`` (not changed).
+    r, mu : ndarray
+        Thresholds and weights.
+    c : ndarray
+        The polynomial terms' coefficients ``c_2, c_3, ..``.
+
+    Returns
+    -------
+    w1 : float
+        ``w1(k)``.
+    status : int
+        ``EXACT``, or ``UNREACHABLE`` when no bracket was found (a block that does not rise
+        there): then the last point tried on the way.
+    """
+    g0 = _pi_poly_gap(w1p, w2d, p, r, mu, c)
+    if abs(g0) <= _ROUND_OFF * (1.0 + abs(w2d)):
+        return w1p, EXACT
+    way = -1.0 if g0 > 0.0 else 1.0  # an invertible block rises with w1
+    slope = abs(poly_terms(w1p, c)[1])
+    for i in range(mu.shape[0]):
+        slope += abs(mu[i])
+    width = abs(g0) / slope if slope > 0.0 else 1.0
+    near, far = w1p, w1p + way * width
+    found = False
+    for _ in range(BRACKET_DOUBLINGS):
+        if _pi_poly_gap(far, w2d, p, r, mu, c) * way >= 0.0:  # crossed: g(far) has left g0's sign
+            found = True
+            break
+        near = far
+        width *= 2.0
+        far = w1p + way * width
+    if not found:
+        return far, UNREACHABLE
+    lo, hi = (near, far) if near < far else (far, near)
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if _pi_poly_gap(mid, w2d, p, r, mu, c) < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi), EXACT

@@ -121,7 +121,7 @@ void hystid_model_init(hystid_model_state *s)
 double hystid_model_step(hystid_model_state *s, double u)
 {
     double *U = s->u, *W1 = s->w1, *W2 = s->w2, *Y = s->y, *p = s->p;
-    double w1, w2, y, v;
+    double w1, w2, y, v, pw;
     int i, j;
     const int k = HX_HIST;
     for (i = 0; i < HX_HIST; i++) {
@@ -147,7 +147,14 @@ double hystid_model_step(hystid_model_state *s, double u)
         p[i] = v;
         w2 += hx_mu[i] * v;
     }
-    W2[k] = w2;
+    /* the polynomial terms beside the plays, c_j w1^j (hystid.pi_operator.poly_terms) */
+    v = 0.0;
+    pw = w1;
+    for (j = 0; j < HX_NPOLY; j++) {
+        pw *= w1;
+        v += hx_c[j] * pw;
+    }
+    W2[k] = w2 + v;
     /* eq. (31) */
     y = 0.0;
     for (j = 0; j < HX_N2B; j++) {

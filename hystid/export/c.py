@@ -150,7 +150,8 @@ def _model_part(model: DuhemSandwich | PISandwich | MultiDuhemSandwich) -> tuple
                 + _array("hx_f1", model.f1) + _array("hx_g0", model.g0) + MDUHEM_STEP)
     else:
         src += (_define("HX_NPI", len(model.thresholds)) + _array("hx_r", model.thresholds)
-                + _array("hx_mu", model.mu) + PI_STEP)
+                + _array("hx_mu", model.mu) + _define("HX_NPOLY", len(model.poly))
+                + _array("hx_c", model.poly) + PI_STEP)
     return head, src
 
 
@@ -251,6 +252,9 @@ def _ff_part(
              comp.KIND_LINEAR: "central-line",
              comp.KIND_GDUHEM: "generalised Duhem block's per-sample",
              comp.KIND_MDUHEM: "multi-Duhem sandwich's per-sample"}
+    if kind == comp.KIND_PI and len(getattr(model, "poly", ())):
+        raise ValueError("the per-sample inverse of a PI block with polynomial terms "
+                         "(pi_poly_inverse) is not exported to C; the model's step is")
     if kind not in names:
         raise ValueError(f"compensator kind {kind} is not exported to C (the C step has the "
                          "Duhem (plain and generalised), multi-Duhem, Prandtl-Ishlinskii and "

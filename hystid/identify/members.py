@@ -14,6 +14,10 @@ block, its structure and the fit that identifies it:
 ``pi-stage``            a PI operator of 20 plays between a static L1 and a third-order L2
                         (a flexure mode and a slow real pole, two zeros): the shape of a
                         5-10 kHz piezo stage, where one Duhem operator's loop is too rigid
+``pi-poly``             ``pi-stage`` with memoryless terms ``c2 w1^2 + c3 w1^3`` beside the
+                        plays: a sum of plays makes point-symmetric loops only, a measured
+                        stage's are not (:attr:`hystid.pi.PIStructure.n_poly`); batch fit
+                        only
 ``mduhem``              six Duhem operators of eq. (7) in parallel, their rates fixed on a
                         log grid over the training input's span and swings
                         (:mod:`hystid.mduhem`), between a first-order L1 lag and the
@@ -84,8 +88,8 @@ class Member:
         record : Record
             Input and measured output, in any units.
         method : {"batch", "online"}
-            Off-line output error, or the member's on-line identifier (the ``mduhem`` member
-            has none).
+            Off-line output error, or the member's on-line identifier (the ``mduhem`` and
+            ``pi-poly`` members have none).
         progress : callable, optional
             ``progress(k, n)`` during long runs.
         **settings
@@ -117,6 +121,10 @@ class Member:
                             progress=progress, **settings)
         from .pi_recursive import identify_pi
 
+        if method != "batch" and self.structure.n_poly:
+            raise ValueError(f"method: the {self.name} member is identified by 'batch' only "
+                             f"(no on-line identifier runs its polynomial terms), got "
+                             f"{method!r}")
         if method == "batch":
             return identify_pi(record, "batch",
                                **{**self.settings, "structure": self.structure, **settings})
@@ -233,6 +241,10 @@ MEMBERS: dict[str, Member] = {m.name: m for m in (
            PIStructure(n_operators=20, n1a=0, n1b=1, q1=0, n2a=3, n2b=3, q2=1),
            "PI operator of 20 plays, static L1, third-order L2 (mode + slow pole)",
            {"thresholds": "swing", "max_nfev": PI_NFEV}),
+    Member("pi-poly", "pi",
+           PIStructure(n_operators=20, n1a=0, n1b=1, q1=0, n2a=3, n2b=3, q2=1, n_poly=2),
+           "the pi-stage member with quadratic and cubic terms beside the plays (asymmetric "
+           "loops)", {"thresholds": "swing", "max_nfev": PI_NFEV}),
     Member("mduhem", "mduhem", MultiDuhemStructure(n_operators=MDUHEM_OPERATORS),
            f"{MDUHEM_OPERATORS} Duhem operators in parallel, rates on a log grid, first-order "
            "L1 lag, third-order L2"),

@@ -53,31 +53,42 @@ def _nuisance(rows: np.ndarray, drift: bool) -> np.ndarray:
 
 
 # =========================================================================== off-line
-def _scale_weights(theta: np.ndarray, structure: PIStructure, factor: float) -> np.ndarray:
-    """``theta`` (a vector, or one per row) with its weights multiplied by ``factor``.
+def _scale_weights(theta: np.ndarray, structure: PIStructure, y_scale: float,
+                   u_scale: float) -> np.ndarray:
+    """``theta`` (a vector, or one per row) from normalised units to ``u = u_scale un`` and
+    ``y = y_scale yn`` (pass the reciprocals for the other way).
 
     With unit-DC-gain L1 and L2, ``w1`` is in input units and ``w2`` in output units, so the
-    weights alone carry units (output per input): with ``u = s_u un`` and ``y = s_y yn`` the
-    thresholds are ``s_u`` times and the weights ``s_y / s_u`` times their normalised values.
+    weights alone carry units: the thresholds are ``u_scale`` times and the weights
+    ``y_scale / u_scale`` times their normalised values, and the coefficient of a polynomial
+    term ``c_j w1^j`` is ``y_scale / u_scale^j`` times its normalised value.
     """
     out = np.array(theta, dtype=float)
-    out[..., structure.slices()["mu"]] *= factor
+    out[..., structure.slices()["mu"]] *= y_scale / u_scale
+    out[..., structure.slices()["c"]] *= y_scale / u_scale ** np.arange(2, structure.n_poly + 2)
     return out
+
+
+def _linear_slice(structure: PIStructure) -> slice:
+    """Where the weights and the polynomial terms' coefficients sit in ``theta`` (together:
+    the output is linear in them, and both carry the ridge)."""
+    sl = structure.slices()
+    return slice(sl["mu"].start, sl["c"].stop)
 
 
 def _weights_given_blocks(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
                           r: np.ndarray, structure: PIStructure, fit_offset: bool,
                           drift: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """``theta`` with its weights (and the offset, and the drift) set by linear least squares
-    for its L1 and L2: exact, since the output is linear in them."""
+    """``theta`` with its weights and polynomial terms (and the offset, and the drift) set by
+    linear least squares for its L1 and L2: exact, since the output is linear in them."""
     theta = np.array(theta, dtype=float)
-    mu = structure.slices()["mu"]
+    mu = _linear_slice(structure)
     theta[mu] = 0.0
     _, J = pi_output_sensitivities(PISandwich(theta, r, structure), un)
     A = J[rows][:, mu]
     if fit_offset:
         A = np.column_stack([A, _nuisance(rows, drift)])
-    n = structure.n_operators
+    n = structure.n_operators + structure.n_poly
     A = np.vstack([A, np.sqrt(RIDGE * len(rows)) * np.eye(n, A.shape[1])])
     coef, *_ = np.linalg.lstsq(A, np.r_[yn[rows], np.zeros(n)], rcond=None)
     theta[mu] = coef[:n]
@@ -210,7 +221,7 @@ class _PIOutputError:
         self.rp = Reflections([index[sl["a1"]], index[sl["a2"]]], self.n)
         self.ones = _nuisance(rows, drift) if fit_offset else np.ones((len(rows), 0))
         self.fo = self.ones.shape[1]  # the nuisance terms: offset, drift
-        self.mu = index[sl["mu"]]
+        self.mu = index[_linear_slice(s)]
         self.ridge = np.sqrt(RIDGE * len(rows))
         self.ridge_rows = np.zeros((len(self.mu), self.n + self.fo))
         self.ridge_rows[np.arange(len(self.mu)), self.mu] = self.ridge
@@ -404,10 +415,10 @@ def fit_pi_output_error(
         prep.y_ref, prep.yn = 0.0, record.y / prep.y_scale
     su, sy = prep.u_scale, prep.y_scale
     theta0_n = None if theta0 is None else _scale_weights(
-        np.asarray(theta0, dtype=float).ravel(), s, su / sy)
+        np.asarray(theta0, dtype=float).ravel(), s, 1.0 / sy, 1.0 / su)
     fit = _solve_normalised(prep.un, prep.yn, prep.weight, r / su, s, theta0_n, offset,
                             max_nfev, tol, drift=drift)
-    model = PISandwich(_scale_weights(fit.theta, s, sy / su), r, s, fs=record.fs, name=name,
+    model = PISandwich(_scale_weights(fit.theta, s, sy, su), r, s, fs=record.fs, name=name,
                        u_rest=prep.u_rest, offset=prep.offset(fit.y0), envelope=prep.envelope,
                        units=record.units)
     info = {**fit.info(r, su, sy), "offset": model.offset, "at_rest": prep.at_rest,
@@ -468,7 +479,7 @@ def _zero_result(
     name: str = "identified PI sandwich",
 ) -> IdentificationResult:
     """The result of :func:`_fit_normalised_from_zero` in record units (weights mapped back)."""
-    model = PISandwich(_scale_weights(fit.theta, structure, sy / su), r, structure, fs=fs,
+    model = PISandwich(_scale_weights(fit.theta, structure, sy, su), r, structure, fs=fs,
                        name=name)
     settings = {"n_operators": len(r), "max_nfev": max_nfev, "tol": tol, "samples": samples}
     return IdentificationResult(model, "pi-batch", settings, info=fit.info(r, su, sy))

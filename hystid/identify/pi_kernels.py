@@ -13,7 +13,7 @@ from numba import njit
 from ..kernels import filter_output, l2_output_sens
 from ..model import InitialCondition
 from ..pi import PISandwich, PIStructure
-from ..pi_operator import play
+from ..pi_operator import play, poly_terms
 from ..poly import KMAX_STABLE, schur_stable
 
 __all__ = [
@@ -61,9 +61,9 @@ def _operators_step(w1, r, p, SP, S1, k, n1):
 
 @njit(cache=True, nogil=True)
 def _layout_offsets(layout):
-    # layout = [n1a, n1b, N, n2a, n2b, q1, q2]; full coefficient vector
-    # c = [a1 (n1a), b1 (n1b), mu (N), a2 (n2a), b2 (n2b)]
-    n1a, n1b, n, n2a = layout[0], layout[1], layout[2], layout[3]
+    # layout = [n1a, n1b, N, n2a, n2b, q1, q2, n_poly]; full coefficient vector
+    # c = [a1 (n1a), b1 (n1b), mu (N), c (n_poly), a2 (n2a), b2 (n2b)]
+    n1a, n1b, n, n2a = layout[0], layout[1], layout[2] + layout[7], layout[3]
     return 0, n1a, n1a + n1b, n1a + n1b + n, n1a + n1b + n + n2a
 
 
@@ -89,7 +89,7 @@ def full_coefficients(theta, layout, c):
             t += 1
         c[ib] = gain
         if blk == 0:
-            for i in range(n):
+            for i in range(n + layout[7]):  # the weights, then the polynomial terms'
                 c[imu + i] = theta[t]
                 t += 1
 
@@ -112,7 +112,7 @@ def free_gradient(psi_c, layout, psi):
             psi[t] = psi_c[ib + j] - psi_c[ib]
             t += 1
         if blk == 0:
-            for i in range(n):
+            for i in range(n + layout[7]):
                 psi[t] = psi_c[imu + i]
                 t += 1
 
@@ -137,6 +137,7 @@ def pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start, stop):
     ia1, ib1, imu, ia2, ib2 = _layout_offsets(layout)
     nc = c.shape[0]
     n1 = n1a + n1b
+    npoly, ic = layout[7], imu + n
     for k in range(start, stop):
         w1 = _l1_step(c, n1a, n1b, q1, U, W1, S1, k)       # eq. (29)
         _operators_step(w1, r, p, SP, S1, k, n1)            # eq. (30)
@@ -148,6 +149,15 @@ def pi_sens_range(c, layout, r, U, W1, W2, Y, S1, SW2, SY, p, SP, start, stop):
             SW2[k, imu + i] = p[i]
             for m in range(n1):
                 SW2[k, m] += c[imu + i] * SP[i, m]
+        if npoly:  # the polynomial terms beside the plays, c_j w1^j
+            value, slope = poly_terms(w1, c[ic:ic + npoly])
+            w2 += value
+            power = w1
+            for j in range(npoly):
+                power *= w1
+                SW2[k, ic + j] = power
+            for m in range(n1):
+                SW2[k, m] += slope * S1[k, m]
         W2[k] = w2
         # eq. (31)
         l2_output_sens(c, ib2, n2b, ia2, n2a, q2, W2, Y, SW2, SY, k, nc)
@@ -402,11 +412,12 @@ def recursion_one(mode, theta, U_, D, lam, gamma, k0, layout, r, U, W1, W2, Y, S
 
 # =========================================================================== helpers
 def _layout(s: PIStructure) -> np.ndarray:
-    return np.array([s.n1a, s.n1b, s.n_operators, s.n2a, s.n2b, s.q1, s.q2], dtype=np.int64)
+    return np.array([s.n1a, s.n1b, s.n_operators, s.n2a, s.n2b, s.q1, s.q2, s.n_poly],
+                    dtype=np.int64)
 
 
 def _n_full(s: PIStructure) -> int:
-    return s.n1a + s.n1b + s.n_operators + s.n2a + s.n2b
+    return s.n1a + s.n1b + s.n_operators + s.n_poly + s.n2a + s.n2b
 
 
 def pi_output_sensitivities(

@@ -114,10 +114,11 @@ def is_stage_structure(structure: PIStructure) -> bool:
     -------
     bool
         True for a static L1 (``n1a=0, n1b=1, q1=0``) and a third-order L2 with three
-        numerator coefficients and one input delay (``n2a=3, n2b=3, q2=1``).
+        numerator coefficients and one input delay (``n2a=3, n2b=3, q2=1``), the plays alone
+        (no polynomial terms).
     """
     s = structure
-    return (s.n1a, s.n1b, s.q1, s.n2a, s.n2b, s.q2) == (0, 1, 0, 3, 3, 1)
+    return (s.n1a, s.n1b, s.q1, s.n2a, s.n2b, s.q2, s.n_poly) == (0, 1, 0, 3, 3, 1, 0)
 
 
 # =========================================================================== coordinates
@@ -312,7 +313,7 @@ class PIStageOnline(Estimator):
                                      n2a=3, n2b=3, q2=1)
         if not is_stage_structure(s):
             raise ValueError(f"structure: expected the pi-stage shape (static L1, n2a=3, n2b=3, "
-                             f"q2=1), got {s}")
+                             f"q2=1, no polynomial terms), got {s}")
         r = np.ascontiguousarray(np.asarray(thresholds, dtype=float).ravel())
         if len(r) != s.n_operators or not np.all(np.isfinite(r)) or np.any(r < 0):
             raise ValueError(f"thresholds: expected {s.n_operators} finite non-negative values")

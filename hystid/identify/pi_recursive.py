@@ -322,7 +322,7 @@ class PIRecursiveIdentifier(Estimator):
 
     def _to_record(self, theta: np.ndarray) -> np.ndarray:
         """Model parameters (a vector or rows) from the recursion's units to the record's."""
-        return _scale_weights(theta, self.structure_, self._sy / self._su)
+        return _scale_weights(theta, self.structure_, self._sy, self._su)
 
     def _unit_factors(self) -> np.ndarray:
         """Per coordinate of the recursion, its value in record units over its normalised
@@ -393,6 +393,10 @@ class PIRecursiveIdentifier(Estimator):
     def _start(self, thresholds: Any) -> None:
         """Allocate the recursion's state for these thresholds (theta0, P0, at rest)."""
         s = self._structure()
+        if s.n_poly:
+            raise ValueError(f"structure: the paper's PI recursion runs the plays alone; got "
+                             f"n_poly={s.n_poly} polynomial terms (identify them off-line: "
+                             "method='batch')")
         r = np.ascontiguousarray(np.asarray(thresholds, dtype=float).ravel())
         if s.n_operators != len(r):
             raise ValueError(f"thresholds: expected {s.n_operators} values, got {len(r)}")
