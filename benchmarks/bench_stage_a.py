@@ -12,7 +12,8 @@ Duhem fit timed in the same process, on the same record.
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_stage_a.py [--members duhem,pi-stage,auto]
 
 ``pi-stage/online`` is the member identified by its on-line identifier
-(``identify(train, model="pi-stage", method="online")``), scored like the batch fits;
+(``identify(train, model="pi-stage", method="online")``), scored like the batch fits (and
+``pi-poly/online`` the same for ``pi-poly``);
 ``duhem/online`` the same for the paper's Duhem sandwich.
 
 The NARX column needs the ``bench`` extra (SysIdentPy); without it the column is left out.
@@ -42,7 +43,7 @@ TRAIN = "prbn_1"
 INPUTS = ("prbn", "sine50", "tri50")
 #: ``model=`` values, or ``model/method`` (``pi-stage/online``: the member's on-line identifier).
 MEMBERS = ("duhem", "duhem/online", "gduhem", "mduhem", "pi", "pi-stage", "pi-poly",
-           "pi-stage/online", "auto")
+           "pi-stage/online", "pi-poly/online", "auto")
 
 
 def records() -> dict:

@@ -401,14 +401,16 @@ def test_a_model_without_envelope_is_exported_without_compensator_unless_limits_
     assert "HYSTID_NO_FF" not in head and "#define HYSTID_FF_U_MAX 10.0" in head
 
 
-def test_pi_poly_is_exported_without_compensator_saying_why():
+@needs_cc
+def test_ff_step_matches_for_a_pi_poly_model(tmp_path):
+    """The per-sample inverse of a PI block with polynomial terms (bracket and bisection):
+    the C step against compensate(), sample by sample."""
     model = pi_poly_model()
     assert model.is_invertible()
-    notes: list[str] = []
-    texts = c_sources(model, notes=notes)
-    assert "#define HYSTID_NO_FF 1" in texts["hystid_model.h"]
-    assert "#define HX_NPOLY 2" in texts["hystid_model.c"]
-    assert notes and "polynomial terms" in notes[0] and "not exported to C" in notes[0]
+    texts = c_sources(model)
+    assert "#define HX_FF_NPOLY 2" in texts["hystid_model.c"]
+    assert "hx_pi_poly_inverse" in texts["hystid_model.c"]
+    _ff_case(model, triangle(model, 1.5, seconds=0.3), tmp_path, u_limits=(-20.0, 20.0))
 
 
 def test_pi_without_inverse_is_exported_without_compensator():

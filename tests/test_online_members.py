@@ -52,7 +52,7 @@ def test_stage_coordinates_round_trip_and_predict_as_the_sandwich():
     u = np.cumsum(rng.normal(0, 0.05, 3000))
     st = np.zeros((12, 20))
     yhat, err = np.empty(len(u)), np.empty(len(u))
-    _run(phi, np.eye(25), 1.0, 1.0, 1.0, r, u, np.zeros(len(u)), st, False,
+    _run(phi, np.eye(25), 1.0, 1.0, 1.0, r, 0, u, np.zeros(len(u)), st, False,
          np.zeros((0, 25)), yhat, err, np.zeros((0, 25)))
     y = model.simulate(u).y
     np.testing.assert_allclose(yhat, y, atol=1e-9 * np.max(np.abs(y)))
@@ -213,7 +213,7 @@ def test_branch_gradients_are_the_derivatives_of_the_prediction():
 
     def run(p):
         J, yhat, err = np.empty((len(u), 25)), np.empty(len(u)), np.empty(len(u))
-        _run(p, np.eye(25), 1.0, 1.0, 1.0, r, u, np.zeros(len(u)), np.zeros((12, 20)), False,
+        _run(p, np.eye(25), 1.0, 1.0, 1.0, r, 0, u, np.zeros(len(u)), np.zeros((12, 20)), False,
              J, yhat, err, np.zeros((0, 25)))
         return yhat, J
 

@@ -574,7 +574,7 @@ double hystid_ff_step(hystid_ff_state *s, double r)
     double dev, ym, v, w, w2d, w1p, w1c, u, w1;
     long k;
     int i, j, status = 0;
-#if HX_FF_KIND == 1
+#if HX_FF_KIND == 1 && HX_FF_NPOLY == 0
     double pinv[HX_FF_NPI], tail, cum;
 #endif
     k = s->n;
@@ -662,6 +662,12 @@ double hystid_ff_step(hystid_ff_state *s, double r)
             status |= 8;
         }
         w1c = w1p + d;
+    }
+#elif HX_FF_KIND == 1 && HX_FF_NPOLY > 0
+    {
+        int st = 0;
+        w1c = hx_pi_poly_inverse(win[0], w1p, &x[HX_FF_OFF_H], &st);
+        status |= st;
     }
 #elif HX_FF_KIND == 1
     {

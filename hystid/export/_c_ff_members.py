@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from ._c_ff import FF_CHAIN
 
-__all__ = ["FF_GDUHEM", "FF_MDUHEM", "FF_MEMBER", "ff_chain"]
+__all__ = ["FF_GDUHEM", "FF_MDUHEM", "FF_MEMBER", "FF_PI_POLY", "ff_chain"]
 
 #: What the members' inverses share (:func:`hystid.compensate.member_inverse.affine_step` and
 #: ``_towards``): the inverse step of a block whose step is ``Delta = S_s d`` on each direction.
@@ -212,6 +212,82 @@ _MEMBER_BRANCHES = {
         "    hx_md_forward(&x[HX_FF_OFF_H], w1, w1p);\n",
     ),
 }
+
+
+#: :func:`hystid.compensate.member_inverse.pi_poly_inverse`: the wanted ``w2`` bracketed from
+#: ``w1(k-1)`` and bisected, the same arithmetic in the same order (``hx_ff_poly`` holds the
+#: polynomial terms' coefficients, ``HX_FF_NPOLY`` of them).
+FF_PI_POLY = r"""
+#define HX_ROUND_OFF 1e-13
+#define HX_BRACKET_DOUBLINGS 80
+
+/* the plays moved to w (their states p at k-1, not changed) and the polynomial terms, less
+   the wanted w2 */
+static double hx_pi_poly_gap(double w, double w2d, const double *p)
+{
+    double acc = 0.0, value = 0.0, power = w;
+    int i, j;
+    for (i = 0; i < HX_FF_NPI; i++) {
+        acc += hx_ff_mu_pi[i] * hx_max(w - hx_ff_r_pi[i], hx_min(w + hx_ff_r_pi[i], p[i]));
+    }
+    for (j = 0; j < HX_FF_NPOLY; j++) {
+        power *= w;
+        value += hx_ff_poly[j] * power;
+    }
+    return acc + value - w2d;
+}
+
+/* w1(k); *status 2 (no exact step) when no bracket is found */
+static double hx_pi_poly_inverse(double w2d, double w1p, const double *p, int *status)
+{
+    double g0 = hx_pi_poly_gap(w1p, w2d, p), way, slope, width, nearw, farw, lo, hi, mid;
+    double power = w1p;
+    int i, j, found = 0;
+    if (fabs(g0) <= HX_ROUND_OFF * (1.0 + fabs(w2d))) {
+        return w1p;
+    }
+    way = g0 > 0.0 ? -1.0 : 1.0;
+    slope = 0.0;
+    for (j = 0; j < HX_FF_NPOLY; j++) {
+        slope += (j + 2) * hx_ff_poly[j] * power;
+        power *= w1p;
+    }
+    slope = fabs(slope);
+    for (i = 0; i < HX_FF_NPI; i++) {
+        slope += fabs(hx_ff_mu_pi[i]);
+    }
+    width = slope > 0.0 ? fabs(g0) / slope : 1.0;
+    nearw = w1p;
+    farw = w1p + way * width;
+    for (i = 0; i < HX_BRACKET_DOUBLINGS; i++) {
+        if (hx_pi_poly_gap(farw, w2d, p) * way >= 0.0) {
+            found = 1;
+            break;
+        }
+        nearw = farw;
+        width *= 2.0;
+        farw = w1p + way * width;
+    }
+    if (!found) {
+        *status = 2;
+        return farw;
+    }
+    lo = nearw < farw ? nearw : farw;
+    hi = nearw < farw ? farw : nearw;
+    for (i = 0; i < 200; i++) {
+        mid = 0.5 * (lo + hi);
+        if (mid <= lo || mid >= hi) {
+            break;
+        }
+        if (hx_pi_poly_gap(mid, w2d, p) < 0.0) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return 0.5 * (lo + hi);
+}
+"""
 
 
 def ff_chain(kind: int) -> str:

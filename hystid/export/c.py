@@ -54,7 +54,7 @@ import numpy as np
 from ..kernels import offsets
 from ..model import DuhemSandwich
 from ._c_ff import FF_PLANNER
-from ._c_ff_members import FF_GDUHEM, FF_MDUHEM, FF_MEMBER, ff_chain
+from ._c_ff_members import FF_GDUHEM, FF_MDUHEM, FF_MEMBER, FF_PI_POLY, ff_chain
 from ._c_model import DUHEM_STEP, GDUHEM_STEP, MDUHEM_STEP, MODEL_COMMON, PI_STEP, SHAPE_TERMS
 from ._c_rpem import GDUHEM_RPEM_STEP, RPEM_STEP
 from .rpem import rpem_start
@@ -248,13 +248,13 @@ def _ff_part(
     chain, l2 = plan.chain, plan.l2
     ispec, fpar = chain.ispec, chain.fpar
     kind = int(ispec[comp._KIND])
-    names = {comp.KIND_DUHEM: "Duhem", comp.KIND_PI: "Prandtl-Ishlinskii",
+    poly = kind == comp.KIND_PI and len(ispec) > comp._NI
+    names = {comp.KIND_DUHEM: "Duhem",
+             comp.KIND_PI: ("PI block with polynomial terms' per-sample" if poly else
+                            "Prandtl-Ishlinskii"),
              comp.KIND_LINEAR: "central-line",
              comp.KIND_GDUHEM: "generalised Duhem block's per-sample",
              comp.KIND_MDUHEM: "multi-Duhem sandwich's per-sample"}
-    if kind == comp.KIND_PI and len(getattr(model, "poly", ())):
-        raise ValueError("the per-sample inverse of a PI block with polynomial terms "
-                         "(pi_poly_inverse) is not exported to C; the model's step is")
     if kind not in names:
         raise ValueError(f"compensator kind {kind} is not exported to C (the C step has the "
                          "Duhem (plain and generalised), multi-Duhem, Prandtl-Ishlinskii and "
@@ -352,10 +352,16 @@ def _ff_part(
         arrays.update(l2_a=l2.A, l2_b=l2.B, l2_gain=l2.gain)
     if M:
         arrays.update(m_num=plan.m_num, m_den=plan.m_den)
-    if kind == comp.KIND_PI:
-        arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi, r_inv=chain.r_inv,
-                      mu_inv=chain.mu_inv)
     member = ""
+    if kind == comp.KIND_PI:
+        arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi)
+        npoly = int(ispec[comp._NI]) if len(ispec) > comp._NI else 0
+        src += _define("HX_FF_NPOLY", npoly)
+        if npoly:  # the polynomial terms: the per-sample inverse (pi_poly_inverse)
+            arrays.update(poly=fpar[comp._NF:comp._NF + npoly])
+            member = FF_PI_POLY
+        else:  # the exact inverse PI operator
+            arrays.update(r_inv=chain.r_inv, mu_inv=chain.mu_inv)
     if kind == comp.KIND_GDUHEM:  # the chain's theta, read by the model part's hx_shape_terms
         theta, layout = fpar[comp._NF:], ispec[comp._NI:]
         # hx_shape_terms reads theta at the HX_I_* indices of the model's layout

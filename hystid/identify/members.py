@@ -16,8 +16,7 @@ block, its structure and the fit that identifies it:
                         5-10 kHz piezo stage, where one Duhem operator's loop is too rigid
 ``pi-poly``             ``pi-stage`` with memoryless terms ``c2 w1^2 + c3 w1^3`` beside the
                         plays: a sum of plays makes point-symmetric loops only, a measured
-                        stage's are not (:attr:`hystid.pi.PIStructure.n_poly`); batch fit
-                        only
+                        stage's are not (:attr:`hystid.pi.PIStructure.n_poly`)
 ``mduhem``              six Duhem operators of eq. (7) in parallel, their rates fixed on a
                         log grid over the training input's span and swings
                         (:mod:`hystid.mduhem`), between a first-order L1 lag and the
@@ -88,8 +87,8 @@ class Member:
         record : Record
             Input and measured output, in any units.
         method : {"batch", "online"}
-            Off-line output error, or the member's on-line identifier (the ``mduhem`` and
-            ``pi-poly`` members have none).
+            Off-line output error, or the member's on-line identifier (the ``mduhem`` member
+            has none).
         progress : callable, optional
             ``progress(k, n)`` during long runs.
         **settings
@@ -121,10 +120,6 @@ class Member:
                             progress=progress, **settings)
         from .pi_recursive import identify_pi
 
-        if method != "batch" and self.structure.n_poly:
-            raise ValueError(f"method: the {self.name} member is identified by 'batch' only "
-                             f"(no on-line identifier runs its polynomial terms), got "
-                             f"{method!r}")
         if method == "batch":
             return identify_pi(record, "batch",
                                **{**self.settings, "structure": self.structure, **settings})

@@ -14,9 +14,9 @@ with ``p = K tanh(xp)``, ``c2 = K tanh(x2)``, ``c1 = K tanh(x1) (1 + c2)``, ``K 
 (so L2 is stable, and no branch an integrator, for every value of the search coordinates
 ``phi = [mu_0..mu_N-1, g, xp, x1, x2, m1]``, and ``c`` after them on a record that begins in
 motion: a correction of the output's offset, added to ``y(k)``). Multiplied out, it is the
-member's L2
-``B(z) / A(z)`` (:func:`theta_from_stage`; :func:`stage_from_theta` goes
-back). Why this form:
+member's L2 ``B(z) / A(z)`` (:func:`theta_from_stage`; :func:`stage_from_theta` goes back).
+The ``pi-poly`` member's polynomial terms ``u^2, u^3`` are operators after the plays, their
+``x_i`` run alike and their coefficients follow the weights in ``phi``. Why this form:
 
 * the operator outputs ``p_i`` do not depend on the parameters (L1 is static), and the branch
   states ``S p_i``, ``M p_i`` depend on the four filter coordinates only: the prediction and
@@ -69,7 +69,7 @@ from ..pi import PISandwich, PIStructure
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
 from .horizon import HorizonSolve, covariance, drain, run_steps
-from .pi_batch import drift_note
+from .pi_batch import _scale_weights, drift_note
 from .pi_online_kernels import (
     _KMAX,
     _STATE_ROWS,
@@ -114,11 +114,11 @@ def is_stage_structure(structure: PIStructure) -> bool:
     -------
     bool
         True for a static L1 (``n1a=0, n1b=1, q1=0``) and a third-order L2 with three
-        numerator coefficients and one input delay (``n2a=3, n2b=3, q2=1``), the plays alone
-        (no polynomial terms).
+        numerator coefficients and one input delay (``n2a=3, n2b=3, q2=1``), with or without
+        polynomial terms beside the plays (``pi-poly``).
     """
     s = structure
-    return (s.n1a, s.n1b, s.q1, s.n2a, s.n2b, s.q2, s.n_poly) == (0, 1, 0, 3, 3, 1, 0)
+    return (s.n1a, s.n1b, s.q1, s.n2a, s.n2b, s.q2) == (0, 1, 0, 3, 3, 1)
 
 
 # =========================================================================== coordinates
@@ -131,7 +131,7 @@ def theta_from_stage(phi: np.ndarray, n_operators: int) -> np.ndarray:
         ``[mu_0..mu_N-1, g, xp, x1, x2, m1]`` (see the module docstring), or one such row per
         sample.
     n_operators : int
-        Number of operators ``N``.
+        Number of weights ``N`` (of the plays, and of the polynomial terms after them).
 
     Returns
     -------
@@ -157,7 +157,7 @@ def stage_from_theta(theta: np.ndarray, n_operators: int) -> np.ndarray:
     theta : ndarray
         ``[mu.., a21, a22, a23, b22, b23]`` with a stable L2.
     n_operators : int
-        Number of operators ``N``.
+        Number of weights ``N`` (of the plays, and of the polynomial terms after them).
 
     Returns
     -------
@@ -313,7 +313,7 @@ class PIStageOnline(Estimator):
                                      n2a=3, n2b=3, q2=1)
         if not is_stage_structure(s):
             raise ValueError(f"structure: expected the pi-stage shape (static L1, n2a=3, n2b=3, "
-                             f"q2=1, no polynomial terms), got {s}")
+                             f"q2=1), got {s}")
         r = np.ascontiguousarray(np.asarray(thresholds, dtype=float).ravel())
         if len(r) != s.n_operators or not np.all(np.isfinite(r)) or np.any(r < 0):
             raise ValueError(f"thresholds: expected {s.n_operators} finite non-negative values")
@@ -349,6 +349,7 @@ class PIStageOnline(Estimator):
     def settings(self) -> dict[str, Any]:
         """The constructor's configuration as plain values (JSON-ready)."""
         return {"thresholds": self.thresholds.tolist(), "n_operators": self.structure.n_operators,
+                "n_poly": self.structure.n_poly,
                 "warmup": self.warmup, "window": self.window, "every": self.every,
                 "iterations": self.iterations, "resolve_rate": self.resolve_rate,
                 "settle_at_end": self.settle_at_end, "skip": self.skip, "offset": self.offset,
@@ -369,9 +370,13 @@ class PIStageOnline(Estimator):
 
     def _record_theta(self, phi: np.ndarray) -> np.ndarray:
         """The member's parameters in record units of search coordinates (a vector or rows)."""
-        th = theta_from_stage(phi, self.structure.n_operators)
-        th[..., : self.structure.n_operators] *= self._sy / self._su
-        return th
+        th = theta_from_stage(phi, self._n_weights)
+        return _scale_weights(th, self.structure, self._sy, self._su)
+
+    @property
+    def _n_weights(self) -> int:
+        """The weights of the operators: the plays', then the polynomial terms'."""
+        return self.structure.n_operators + self.structure.n_poly
 
     @property
     def model(self) -> PISandwich:
@@ -401,7 +406,7 @@ class PIStageOnline(Estimator):
         PIStageOnline
             The identifier.
         """
-        n = self.structure.n_operators
+        n = self._n_weights
         self.k = 0
         self.n_skipped = 0
         self.n_resolves = 0
@@ -519,7 +524,8 @@ class PIStageOnline(Estimator):
         yhat, err = np.empty(m), np.empty(m)
         none = self._no_rows
         kept = none if history is None else np.empty((m, len(self._phi)))
-        _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn, un, yn,
+        _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
+             self.structure.n_poly, un, yn,
              self._st, True, none, yhat, err, kept)
         if history is not None:  # the estimate after each sample, as theta gives it
             history[:] = self._record_theta(kept)
@@ -542,7 +548,7 @@ class PIStageOnline(Estimator):
         from .pi_batch import _fit_normalised_from_zero
 
         t0 = time.perf_counter()
-        n = self.structure.n_operators
+        n = self._n_weights
         rest = np.array(self._rest).reshape(-1, 2)
         exc = np.array(self._buffer)
         if not np.isfinite(exc[:, 1]).any():
@@ -563,7 +569,8 @@ class PIStageOnline(Estimator):
                                                 offset=in_motion, drift=in_motion)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
         phi = np.r_[stage_from_theta(fit.theta, n), [fit.y0] * in_motion]
-        phi[:n] = admissible_weights(phi[:n])
+        nplay = self.structure.n_operators
+        phi[:nplay] = admissible_weights(phi[:nplay])
         un, yn = u / su, y / sy
         if in_motion:  # the warm-up's drift is taken off every later output as well
             rows = np.flatnonzero(np.isfinite(y))
@@ -617,15 +624,16 @@ class PIStageOnline(Estimator):
                J: np.ndarray, err: np.ndarray) -> None:
         """The branches over a slice, gradients and errors written (the re-solve's
         :data:`~hystid.identify.horizon.Simulate`)."""
-        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, u, y, st, False, J, np.empty(len(u)), err,
+        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, self.structure.n_poly, u, y, st, False, J,
+             np.empty(len(u)), err,
              self._no_rows)
 
     def _admissible(self, trial: np.ndarray, phi: np.ndarray) -> bool:
         """A re-solve's trial: L2 stable, the loading slope positive or no lower than at
         ``phi``."""
-        n = self.structure.n_operators
-        after = _slope(trial, n)
-        return bool((after > 0 or after >= _slope(phi, n)) and _l2_stable(trial, n))
+        nplay, n = self.structure.n_operators, self._n_weights
+        after = _slope(trial, nplay)
+        return bool((after > 0 or after >= _slope(phi, nplay)) and _l2_stable(trial, n))
 
     def _launch(self, starts: tuple[np.ndarray, ...]) -> HorizonSolve:
         """A re-solve of the window's last ``window // every`` chunks (the older ones folded

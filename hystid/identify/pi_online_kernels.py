@@ -43,11 +43,13 @@ def _theta_rows(phi, n, out):
 
 
 @njit(cache=True)
-def _step(phi, r, u_k, st, psi):
+def _step(phi, r, npoly, u_k, st, psi):
     # one sample: branch states at k from p(k-1), p(k-2), the prediction and its gradient
-    # psi = d yhat / d phi; then the operators move with u(k). Returns yhat(k). A coordinate
-    # phi[n + 5], when there is one, corrects the output's offset.
-    n = r.shape[0]
+    # psi = d yhat / d phi; then the operators move with u(k). Returns yhat(k). The operators
+    # are the plays (thresholds r) and, after them, npoly memoryless terms u^2, u^3, ..; a
+    # coordinate phi[n + 5], when there is one, corrects the output's offset.
+    nplay = r.shape[0]
+    n = nplay + npoly
     g = phi[n]
     tp, t1, t2 = np.tanh(phi[n + 1]), np.tanh(phi[n + 2]), np.tanh(phi[n + 3])
     p, k1, c2 = _KMAX * tp, _KMAX * t1, _KMAX * t2
@@ -85,7 +87,10 @@ def _step(phi, r, u_k, st, psi):
         s0 += mu * d0
         s1 += mu * d1
         s2 += mu * d2
-        q = max(u_k - r[i], min(u_k + r[i], p1))     # eq. (30), w1 = u
+        if i < nplay:
+            q = max(u_k - r[i], min(u_k + r[i], p1))     # eq. (30), w1 = u
+        else:
+            q = u_k ** (i - nplay + 2)                  # a polynomial term
         st[1, i] = p1
         st[0, i] = q
     psi[n] = dg
@@ -122,8 +127,9 @@ def _slope(phi, n):
 
 
 @njit(cache=True)
-def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
+def _rpem_step(phi, P, psi, e, s2, lam, max_step, nplay, n, Pg, old):
     # recursive Gauss-Newton: K = P psi / (lam s2 + psi' P psi), a bounded, admissible step
+    # (the loading slope over the nplay plays' weights, L2 after all n weights)
     npar = phi.shape[0]
     den = lam * s2
     for a in range(npar):
@@ -138,11 +144,11 @@ def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
     scale = 1.0 if norm <= max_step * max_step else max_step / np.sqrt(norm)
     for a in range(npar):
         old[a] = phi[a]
-    before = _slope(phi, n)
+    before = _slope(phi, nplay)
     for _ in range(12):
         for a in range(npar):
             phi[a] = old[a] + scale * Pg[a] / den * e
-        after = _slope(phi, n)
+        after = _slope(phi, nplay)
         if (after > 0.0 or after >= before) and _l2_stable(phi, n):
             break
         scale *= 0.5
@@ -160,15 +166,17 @@ def _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old):
 
 
 @njit(cache=True)
-def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err, kept):
-    """Run the branches over ``u`` from the state ``st`` (updated in place).
+def _run(phi, P, s2, lam, max_step, r, npoly, u, y, st, learn, J, yhat, err, kept):
+    """Run the branches over ``u`` from the state ``st`` (updated in place); the operators are
+    the plays of thresholds ``r`` and ``npoly`` polynomial terms after them.
 
     With ``learn`` each sample with a finite ``y`` updates ``phi`` and ``P``; ``J`` (one row per
     sample, or zero rows) receives the gradients; ``yhat`` and ``err`` the predictions and the
     errors (NaN where ``y`` is not finite); ``kept`` (one row per sample, or zero rows) the
     search coordinates after each sample.
     """
-    n = r.shape[0]
+    nplay = r.shape[0]
+    n = nplay + npoly
     npar = phi.shape[0]
     psi = np.empty(npar)
     Pg = np.empty(npar)
@@ -176,7 +184,7 @@ def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err, kept):
     keep = J.shape[0] > 0
     track = kept.shape[0] > 0
     for k in range(u.shape[0]):
-        yh = _step(phi, r, u[k], st, psi)
+        yh = _step(phi, r, npoly, u[k], st, psi)
         yhat[k] = yh
         if keep:
             J[k, :] = psi
@@ -186,6 +194,6 @@ def _run(phi, P, s2, lam, max_step, r, u, y, st, learn, J, yhat, err, kept):
             e = y[k] - yh
             err[k] = e
             if learn:
-                _rpem_step(phi, P, psi, e, s2, lam, max_step, n, Pg, old)
+                _rpem_step(phi, P, psi, e, s2, lam, max_step, nplay, n, Pg, old)
         if track:
             kept[k, :] = phi
