@@ -170,7 +170,7 @@ def make_base(root: Path) -> None:
     model = load_model(BASE.dir / "model.json")
     BASE.pred = simulate_quiet(model, BASE.uv)
     BASE.span = float(np.ptp(BASE.yv))
-    for member in ("pi-stage", "pi", "mduhem"):
+    for member in ("pi-stage", "pi", "mduhem", "pi-poly"):
         res = identify(tr, model=member)
         save_model(res.model, BASE.dir / f"{member}.json")
     # numba compiles a kernel the first time a tree runs it (a minute or more): run each
@@ -1465,6 +1465,13 @@ def add_model_file_cases() -> None:
         expect="any", judge=judge_file_ok("s.csv"))
     sim("pi_thresholds_huge_list", model_doc(pi_resize("thresholds", 100_000),
                                              source="pi-stage.json"))
+    sim("pi_poly_n_poly_more", model_doc(setp("structure.n_poly", 3), source="pi-poly.json"))
+    sim("pi_poly_n_poly_negative", model_doc(setp("structure.n_poly", -1),
+                                             source="pi-poly.json"))
+    sim("pi_poly_c3_1e300", model_doc(setp("params.c3", 1e300), source="pi-poly.json"),
+        expect="any", judge=judge_sim_output("s.csv"))
+    sim("pi_poly_n_poly_dropped", model_doc(lambda d: d["structure"].pop("n_poly") and None,
+                                            source="pi-poly.json"))
     sim("mduhem_rates_negative", model_doc(pi_edit("rates", -1.0), source="mduhem.json"))
     sim("mduhem_kind_as_duhem", model_doc(setp("kind", "duhem"), source="mduhem.json"))
     sim("duhem_kind_as_pi", model_doc(setp("kind", "pi")))
@@ -1736,6 +1743,8 @@ def add_export_cases() -> None:
             BASE.t, BASE.u, np.random.default_rng(22).normal(0, 1, 6000)))), expect="any")
     cli("export_pi_stage", ["export", "m.json", "--c", "cdir"], g,
         setup=model_doc(source="pi-stage.json"), expect="ok")
+    cli("export_pi_poly", ["export", "m.json", "--c", "cdir"], g,
+        setup=model_doc(source="pi-poly.json"), expect="ok")
     cli("export_mduhem", ["export", "m.json", "--c", "cdir"], g,
         setup=model_doc(source="mduhem.json"), expect="ok")  # exported since the C mduhem step
 
