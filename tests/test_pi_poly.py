@@ -201,3 +201,23 @@ def test_terms_cost_little_where_the_loop_is_symmetric(scores):
     # measured: 0.077 / 0.079 um against 0.075 / 0.078
     assert np.all(poly < 1.1 * stage)
     assert np.all(poly < 0.7 * scores[0.0, "baselines"])
+
+
+# --------------------------------------------------------------------------- diagnosis
+def test_diagnose_tries_the_members_asked_for(tmp_path, capsys):
+    from hystid.cli import main
+    from hystid.testing.measured import stage_b_like
+
+    for name, seed in (("b1.csv", 1), ("b2.csv", 2)):
+        stage_b_like(seed=seed).save(tmp_path / name)
+    base = ["diagnose", str(tmp_path / "b1.csv"), "--val", str(tmp_path / "b2.csv"), "--quiet"]
+    assert main([*base, "--members", "pi-stage,bogus", "--out", str(tmp_path / "x")]) == 2
+    assert "--members: expected names of" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()  # refused before anything is written
+    assert main([*base, "--members", " , ", "--out", str(tmp_path / "y")]) == 2
+    assert "--members ' , ': names no member" in capsys.readouterr().err
+    assert main([*base, "--members", "pi-stage,pi-poly", "--out", str(tmp_path / "d")]) == 0
+    table = (tmp_path / "d" / "summary.txt").read_text()
+    assert "  pi-stage " in table and "  pi-poly " in table
+    kept = load_model(tmp_path / "d" / "model.json")
+    assert isinstance(kept, PISandwich) and kept.structure.n_poly in (0, 2)

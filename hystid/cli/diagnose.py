@@ -73,6 +73,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                         "with 'params' and 'structure' is read too); a model of another member "
                         "than the Duhem sandwich (e.g. pi-stage) is scored beside the "
                         "diagnosed Duhem sandwich and the members in the final table")
+    parser.add_argument("--members", default=None, metavar="pi-stage,pi-poly",
+                        help="members of the model family tried as the hysteresis itself in "
+                        "the final table (comma-separated; default pi-stage; pi-poly adds "
+                        "asymmetric loops, mduhem and gduhem other operators: one fit more "
+                        "each)")
     parser.add_argument("--structure", default=None, metavar="n1a=1,n2a=2,...",
                         help="structure of the identified nominal model (keys n1a, n1b, n2a, "
                         "n2b, q1, q2, f0); the paper's experimental one by default")
@@ -243,7 +248,7 @@ def _write(out: Path, report: dict, result: DiagnosisResult, final: FinalModel, 
 _OPTIONS = {"train_skip": "--train-skip", "holdout": "--holdout", "alpha": "--alpha",
             "min_reduction": "--min-reduction", "max_rounds": "--max-rounds",
             "time_budget": "--time-budget", "effects": "--effects", "initial": "--initial",
-            "workers": "--workers"}
+            "workers": "--workers", "members": "--members"}
 
 
 def _diagnose(args: argparse.Namespace) -> None:
@@ -294,6 +299,11 @@ def _diagnose(args: argparse.Namespace) -> None:
                  "train record, and the model given is scored beside it and the members in the "
                  "final table")
             model = None
+        members = FINAL_MEMBERS if args.members is None else tuple(
+            n.strip() for n in args.members.split(",") if n.strip())
+        if not members:
+            raise CommandError(f"--members {args.members!r}: names no member (expected "
+                               "comma-separated names, e.g. pi-stage,pi-poly)")
         try:
             result = diagnose(
                 train, vals, model, structure=_structure(args.structure), effects=names,
@@ -301,12 +311,12 @@ def _diagnose(args: argparse.Namespace) -> None:
                 min_reduction=args.min_reduction, max_rounds=args.max_rounds,
                 train_skip=args.train_skip, initial=args.initial, refit_all=args.refit_all,
                 repeats=repeats, time_budget=args.time_budget,
-                require_excitation=strict, members=FINAL_MEMBERS, workers=args.workers,
+                require_excitation=strict, members=members, workers=args.workers,
                 progress=not args.quiet,
             )
         except DiagnosisError as err:  # its settings said as the options that set them
             raise DiagnosisError(as_option(str(err), _OPTIONS)) from err
-        final = final_model(result, train, vals, given=given,
+        final = final_model(result, train, vals, given=given, members=members,
                             progress=None if args.quiet else (lambda m: tell(args, m)))
     report = result.to_dict()
     report["records"] = {"train": train.name, "val": [v.name for v in vals],
