@@ -221,3 +221,18 @@ def test_diagnose_tries_the_members_asked_for(tmp_path, capsys):
     assert "  pi-stage " in table and "  pi-poly " in table
     kept = load_model(tmp_path / "d" / "model.json")
     assert isinstance(kept, PISandwich) and kept.structure.n_poly in (0, 2)
+
+
+def test_the_fit_does_not_depend_on_the_units():
+    from hystid.testing.measured import with_units
+
+    rec = curved(stage_a_like("prbn", seconds=0.6, rest_seconds=0.2, seed=3), 0.08)
+    other = with_units(rec, u="kV", y="nm")  # the values converted
+    assert np.allclose(other.u, rec.u * 1e-3) and np.allclose(other.y, rec.y * 1e3)
+    a = _quiet(identify, rec, model="pi-poly").model
+    b = _quiet(identify, other, model="pi-poly").model
+    # the terms' coefficients carry output / input^j: c_j scales by 1e3 / 1e-3^j
+    assert np.allclose(b.poly, a.poly * 1e3 / 1e-3 ** np.array([2, 3]), rtol=1e-3)
+    ya = a.simulate(rec.u, check=False).y
+    yb = b.simulate(other.u, check=False).y
+    assert np.max(np.abs(yb * 1e-3 - ya)) < 1e-4 * np.ptp(ya)
