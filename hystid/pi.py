@@ -8,7 +8,10 @@
     L2:  y(k)  = -a21 y(k-1) - a22 y(k-2) + b21 w2(k-1) + b22 w2(k-2)                    (31)
 
 Each ``p_i`` is a backlash (play) operator of threshold ``r_i``; the hysteresis block is their
-weighted sum. This module holds
+weighted sum, and with ``PIStructure(n_poly=k)`` memoryless terms beside them,
+``w2 = sum_i mu_i p_i + c_2 w1^2 + .. + c_{k+1} w1^{k+1}`` (:func:`poly_terms`): a sum of plays
+draws point-symmetric loops only, and the terms bend them (the ``pi-poly`` member). This module
+holds
 
 * :func:`pi_thresholds` -- the paper's threshold placement rule, ``r_i = i/N (max - min)/2``
   (with :func:`hystid.thresholds.swing_thresholds`, the fits' default, in
@@ -69,6 +72,7 @@ __all__ = [
     "pi_thresholds",
     "play_operator",
     "pi_simulate_into",
+    "poly_terms",
     "unit_gain_numerator",
     "N_OPERATORS",
 ]
