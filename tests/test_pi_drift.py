@@ -81,3 +81,41 @@ def test_a_drift_without_an_offset_is_refused():
 
     with pytest.raises(ValueError, match="drift: .*offset=True"):
         fit_pi_output_error(record(0), offset=False, drift=True)
+
+
+# --------------------------------------------------------------------------- a drift that turns
+def turning(seed: int, seconds: float = 40.0) -> Record:
+    """A long record whose zero drifts at +0.05 um/s for 20 s and at -0.05 um/s after."""
+    from hystid.testing.measured import stage_b_like
+
+    rec = stage_b_like(seed=seed, seconds=seconds, noise_rms=0.05)
+    t = np.arange(rec.n) / rec.fs
+    drift = 0.05 * np.minimum(t, 20.0) - 0.05 * np.maximum(0.0, t - 20.0)
+    return Record(rec.u, rec.y + drift, rec.fs, units=rec.units, name=f"{rec.name} turning")
+
+
+def _shape_rms(model, rec) -> float:
+    """Held-out RMS with the record's mean removed (the zero between records is unknown)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        e = (model.simulate(rec.u, check=False).y - rec.y)[200:]  # after a second
+    return float(np.std(e))
+
+
+def test_a_drift_whose_rate_changes_bends_instead_of_bending_the_model():
+    from hystid.testing.measured import stage_b_like
+
+    train = turning(0)
+    result = fit(train, model="pi-stage")
+    plain = fit(stage_b_like(seed=0, seconds=40.0, noise_rms=0.05), model="pi-stage")
+    assert result.info["drift_pieces"] == 4  # bends at 10, 20 and 30 s
+    assert any("in 4 straight pieces" in w for w in result.info["warnings"])
+    held = [stage_b_like(seed=s) for s in (1, 2, 3)]
+    # measured: 0.069-0.081 um, the drift-free record's fit; one straight line left 0.22-0.68
+    # (and 130 um as placed)
+    for rec in held:
+        assert _shape_rms(result.model, rec) < 1.1 * _shape_rms(plain.model, rec)
+    for r in compare(result.model, train, held).rows:
+        assert r["model"] < 1.5  # the zero moved by up to 1 um between records, not 130
+    # a record shorter than two bends keeps one straight line
+    assert fit(stage_b_like(seed=0), model="pi-stage").info["drift_pieces"] == 1
