@@ -195,8 +195,9 @@ def _solve_normalised(
     _, label, sol = min(polished, key=lambda item: item[0])
     theta, y0 = problem.split(sol.x)
     rms = float(np.sqrt(np.mean(problem.evaluate(sol.x)["data"] ** 2)))
+    moved, pieces = problem.moved(sol.x)
     return _NormalisedFit(theta, y0, rms, int(sol.nfev), str(sol.message), label,
-                          *problem.drift(sol.x), _span(rows), *problem.moved(sol.x))
+                          problem.drift(sol.x), _span(rows), moved, pieces)
 
 
 def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
@@ -261,10 +262,10 @@ class _PIOutputError:
         """Parameters and offset of ``z``."""
         return self.rp.to_theta(z[: self.n])[0], float(z[self.n]) if self.fit_offset else 0.0
 
-    def drift(self, z: np.ndarray) -> tuple[float]:
+    def drift(self, z: np.ndarray) -> float:
         """The drift of ``z`` over the fitted span, its end less its start (0 without one)."""
         path = self.drift_path(z)
-        return (float(path[-1] - path[0]) if len(path) else 0.0,)
+        return float(path[-1] - path[0]) if len(path) else 0.0
 
     def moved(self, z: np.ndarray) -> tuple[float, int]:
         """The drift's range over the fitted span and its straight pieces."""
