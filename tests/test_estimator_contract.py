@@ -19,7 +19,7 @@ from hystid.identify.eria import ERIA
 from hystid.identify.online import OnlineIdentifier
 from hystid.identify.pi_online import PIStageOnline
 from hystid.identify.pi_recursive import PIRecursiveIdentifier
-from hystid.pi import pi_thresholds
+from hystid.pi import PIStructure, pi_thresholds
 from hystid.records import Record
 from hystid.reference import PAPER_PARAMS
 from hystid.testing import paper_excitation, paper_stage
@@ -27,6 +27,8 @@ from hystid.testing import paper_excitation, paper_stage
 NEAR = {k: (1.05 if k.startswith("a2") else 1.1) * v for k, v in PAPER_PARAMS.items()}
 NEAR["a22"] = 0.9 * PAPER_PARAMS["a22"]  # a stable L2 near the truth
 PI_THRESHOLDS = pi_thresholds(paper_excitation(0.02, seed=3), 8)  # the record's input range
+#: The pi-stage shape with the pi-poly member's polynomial terms.
+POLY_STAGE = PIStructure(n_operators=8, n1a=0, n1b=1, q1=0, n2a=3, n2b=3, q2=1, n_poly=2)
 ESTIMATORS = {
     "online": lambda: OnlineIdentifier(n_start=200, start_retries=(300,)),
     "eria": lambda: ERIA(),
@@ -34,6 +36,8 @@ ESTIMATORS = {
     "pi-recursive": lambda: PIRecursiveIdentifier(PI_THRESHOLDS, warmup=200),
     "pi-stage-online": lambda: PIStageOnline(PI_THRESHOLDS, warmup=200, window=200, every=100,
                                              fs=30_000.0),
+    "pi-poly-online": lambda: PIStageOnline(PI_THRESHOLDS, POLY_STAGE, warmup=200, window=200,
+                                            every=100, fs=30_000.0),
 }
 
 
