@@ -265,7 +265,8 @@ class PISandwich(UnitGainSandwich):
         return (-reach, reach)
 
     def poly_slope_min(self) -> float:
-        """The polynomial terms' least slope over :meth:`w1_span` (0 without them).
+        """The polynomial terms' least slope over :meth:`w1_span` (0 without them): at the
+        span's ends or where the slope turns inside it.
 
         Returns
         -------
@@ -273,8 +274,23 @@ class PISandwich(UnitGainSandwich):
         """
         if not len(self.poly):
             return 0.0
-        w = np.linspace(*self.w1_span(), 201)
-        return float(min(poly_terms(float(v), self.poly)[1] for v in w))
+        lo, hi = self.w1_span()
+        slope = np.polynomial.Polynomial(np.r_[0.0, 0.0, self.poly]).deriv()
+        turns = slope.deriv().roots()
+        turns = turns[np.isreal(turns)].real
+        at = np.r_[lo, hi, turns[(turns > lo) & (turns < hi)]]
+        return float(np.min(slope(at)))
+
+    def branch_slope_min(self) -> float:
+        """The least slope of any branch of the hysteresis block over :meth:`w1_span`: the
+        least partial sum of the weights (a branch after a reversal, plays moving in order of
+        their thresholds) plus the polynomial terms' least slope. Positive: every branch rises.
+
+        Returns
+        -------
+        float
+        """
+        return float(np.min(np.cumsum(self.mu))) + self.poly_slope_min()
 
     @property
     def coefficients(self) -> dict[str, float]:
@@ -300,15 +316,12 @@ class PISandwich(UnitGainSandwich):
         Returns
         -------
         bool
-            True when the thresholds start at 0 and increase and every branch rises: every
-            partial sum of the weights plus the polynomial terms' least slope over
-            :meth:`w1_span` is positive (without polynomial terms: ``mu_0 > 0`` and every
-            partial sum positive, the exact inverse's condition).
+            True when the thresholds start at 0 and increase and every branch rises
+            (:meth:`branch_slope_min` positive; without polynomial terms: ``mu_0 > 0`` and
+            every partial sum positive, the exact inverse's condition).
         """
-        W = np.cumsum(self.mu)
         r = self.thresholds
-        return bool(r[0] == 0 and np.all(np.diff(r) > 0)
-                    and np.min(W) + self.poly_slope_min() > 0)
+        return bool(r[0] == 0 and np.all(np.diff(r) > 0) and self.branch_slope_min() > 0)
 
     # ----------------------------------------------------------------- python-control bridge
     @property

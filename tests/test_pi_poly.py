@@ -138,6 +138,24 @@ def test_per_sample_inverse_meets_the_wanted_output():
         w1 = w1_new
 
 
+def test_the_least_slope_is_found_where_the_slope_turns():
+    # slope 2 c2 w + 3 c3 w^2 with c2 = c3 = 1: least at w = -1/3, inside the span, -1/3
+    model = rich_model(c2=1.0, c3=1.0)
+    assert model.w1_span() == (-2.0, 2.0)
+    assert model.poly_slope_min() == pytest.approx(-1.0 / 3.0, abs=1e-12)
+    assert model.branch_slope_min() == pytest.approx(
+        np.min(np.cumsum(model.mu)) - 1.0 / 3.0, abs=1e-12)
+    # with c3 < 0 the slope 2 w - 3 w^2 is least at an end of the span: -16 at w = -2
+    assert rich_model(c2=1.0, c3=-1.0).poly_slope_min() == pytest.approx(-16.0, abs=1e-12)
+
+
+def test_the_paper_recursion_refuses_the_terms_and_says_where_to_go():
+    from hystid.identify.pi_recursive import PIRecursiveIdentifier
+
+    with pytest.raises(ValueError, match="plays alone.*PIStageOnline"):
+        PIRecursiveIdentifier(pi_thresholds((-2.0, 2.0), 6), structure=RICH, warmup=200)
+
+
 def test_compensation_follows_a_reachable_reference():
     model = rich_model()
     assert model.is_invertible()

@@ -176,7 +176,7 @@ def _pi_parts(model):
             raise ValueError(
                 "model: the PI block with polynomial terms has no inverse: a partial sum of "
                 "the weights plus the polynomial terms' least slope over the envelope, "
-                f"{np.min(np.cumsum(model.mu)) + model.poly_slope_min():.4g}, is not positive")
+                f"{model.branch_slope_min():.4g}, is not positive")
         raise ValueError(
             "model: the PI operator has no exact inverse (first weight or a partial sum of "
             "the weights is not positive)"

@@ -248,9 +248,10 @@ def _ff_part(
     chain, l2 = plan.chain, plan.l2
     ispec, fpar = chain.ispec, chain.fpar
     kind = int(ispec[comp._KIND])
-    poly = kind == comp.KIND_PI and len(ispec) > comp._NI
+    # the PI block's polynomial terms (their count after ispec[_NI]; none without them)
+    npoly = int(ispec[comp._NI]) if kind == comp.KIND_PI and len(ispec) > comp._NI else 0
     names = {comp.KIND_DUHEM: "Duhem",
-             comp.KIND_PI: ("PI block with polynomial terms' per-sample" if poly else
+             comp.KIND_PI: ("PI block with polynomial terms' per-sample" if npoly else
                             "Prandtl-Ishlinskii"),
              comp.KIND_LINEAR: "central-line",
              comp.KIND_GDUHEM: "generalised Duhem block's per-sample",
@@ -355,7 +356,6 @@ def _ff_part(
     member = ""
     if kind == comp.KIND_PI:
         arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi)
-        npoly = int(ispec[comp._NI]) if len(ispec) > comp._NI else 0
         src += _define("HX_FF_NPOLY", npoly)
         if npoly:  # the polynomial terms: the per-sample inverse (pi_poly_inverse)
             arrays.update(poly=fpar[comp._NF:comp._NF + npoly])

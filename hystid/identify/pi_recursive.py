@@ -395,8 +395,9 @@ class PIRecursiveIdentifier(Estimator):
         s = self._structure()
         if s.n_poly:
             raise ValueError(f"structure: the paper's PI recursion runs the plays alone; got "
-                             f"n_poly={s.n_poly} polynomial terms (identify them off-line: "
-                             "method='batch')")
+                             f"n_poly={s.n_poly} polynomial terms (identify them off-line, "
+                             "method='batch', or on-line in the pi-stage shape: "
+                             "hystid.identify.pi_online.PIStageOnline)")
         r = np.ascontiguousarray(np.asarray(thresholds, dtype=float).ravel())
         if s.n_operators != len(r):
             raise ValueError(f"thresholds: expected {s.n_operators} values, got {len(r)}")
