@@ -12,8 +12,9 @@ unit DC gain::
 
 with ``p = K tanh(xp)``, ``c2 = K tanh(x2)``, ``c1 = K tanh(x1) (1 + c2)``, ``K = 1 - 1e-6``
 (so L2 is stable, and no branch an integrator, for every value of the search coordinates
-``phi = [mu_0..mu_N-1, g, xp, x1, x2, m1]``, and ``c`` after them on a record that begins in
-motion: a correction of the output's offset, added to ``y(k)``). Multiplied out, it is the
+``phi = [mu_0..mu_N-1, g, xp, x1, x2, m1]``, and ``c, d`` after them on a record that begins
+in motion: the sensor's zero drifts, ``c + d t(k)`` is added to ``y(k)``, a straight line over
+the window, see below). Multiplied out, it is the
 member's L2 ``B(z) / A(z)`` (:func:`theta_from_stage`; :func:`stage_from_theta` goes back).
 The ``pi-poly`` member's polynomial terms ``u^2, u^3`` are operators after the plays, their
 ``x_i`` run alike and their coefficients follow the weights in ``phi``. Why this form:
@@ -50,6 +51,16 @@ The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
    sample counts only. With the default ``window`` (1 s at 10 kHz) the last re-solve on a
    record with 1 s of excitation spans all of it.
 
+The drift, on a record that begins in motion (no rest pins the sensor's zero): its clock
+``t(k)`` runs 1 over the window and is moved to 0 at every chunk boundary (``c`` is then the
+zero there; the estimates, the arrival cost and the covariance move with it), and ``c, d``
+are marginalised out of the arrival cost after every re-solve, so that the window alone fixes
+the line: a rate that changes is followed once the window has passed the change. There the
+window spans at most :data:`~hystid.identify.pi_batch.DRIFT_KNOT_SECONDS` (the batch fit's
+straight pieces). Taken from the warm-up only, a drift that began after it was fitted as the
+stage (measured on the stage-B look-alike, a drift of 0.1 um/s from 10 s: 0.38-1.14 um
+held-out with the means removed, nothing said; now 0.069-0.081, the drift-free record's).
+
 Admissible: L2 stable (by construction) and a positive loading slope, every cumulative sum of
 the weights ``mu_0 + .. + mu_i > 0``: the warm-up fit is moved into that set
 (:func:`admissible_weights`) and a step that would leave it is halved (the re-solve damps it).
@@ -69,7 +80,7 @@ from ..pi import PISandwich, PIStructure
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays
 from .horizon import HorizonSolve, covariance, drain, run_steps
-from .pi_batch import _scale_weights, drift_note
+from .pi_batch import DRIFT_KNOT_SECONDS, _scale_weights, drift_note
 from .pi_online_kernels import (
     _KMAX,
     _STATE_ROWS,
@@ -258,7 +269,8 @@ class PIStageOnline(Estimator):
         not the stage at rest), it biased the parameters (measured on the stage-B look-alike:
         up to 1.4x the batch fit's held-out error, 1.0-1.02x with it). After a rest the rest
         pins it: estimated there too, stage A's held-out errors went from 1.03x to 1.42x the
-        batch fit's and the identifier ran 4x slower.
+        batch fit's and the identifier ran 4x slower. A drift of the zero is tracked beside it
+        (see the module docstring).
     P0 : float
         Prior variance of every search coordinate (normalised units) before any data.
     forgetting : float
@@ -284,8 +296,10 @@ class PIStageOnline(Estimator):
     e, yhat : float
         Prediction error and prediction of the last sample (output units).
     drift_per_second_ : float
-        The drift of the output's zero estimated in the warm-up and taken off every later
-        output (on a record that begins in motion; 0 otherwise), output units per second.
+        The drift of the output's zero over the last window (on a record that begins in
+        motion; 0 otherwise), output units per second.
+    drift_range_ : float
+        How far the zero moved over the samples so far, output units.
     """
 
     method = "pi-stage-online"
@@ -388,15 +402,31 @@ class PIStageOnline(Estimator):
 
     @property
     def drift_per_second_(self) -> float:
-        """The drift taken off the outputs, output units per second (see the class)."""
-        return self._rate * self._sy * self.fs
+        """The drift of the output's zero over the last window, output units per second (see
+        the class)."""
+        if not self._tracks_drift:
+            return 0.0
+        return float(self._phi[len(self.names) + 1]) * self._tick * self._sy * self.fs
+
+    @property
+    def drift_range_(self) -> float:
+        """How far the output's zero moved (its largest less its least value) over the samples
+        so far, output units: the warm-up's straight line, then the zero at each chunk's end."""
+        return (self._zeros[1] - self._zeros[0]) * self._sy
+
+    @property
+    def _tracks_drift(self) -> bool:
+        """Whether the offset and the drift are search coordinates (a record in motion)."""
+        return self._phi is not None and len(self._phi) > len(self.names)
 
     @property
     def offset_(self) -> float:
         """The sensor's output at rest: :attr:`offset` (or the one taken from the record)
-        corrected by the estimate."""
-        tracked = self._phi is not None and len(self._phi) > len(self.names)
-        return self._y0 + (float(self._phi[-1]) * self._sy if tracked else 0.0)
+        corrected by the estimate; where the drift is tracked, the zero at the next sample."""
+        if not self._tracks_drift:
+            return self._y0
+        c, d = self._phi[len(self.names):len(self.names) + 2]
+        return self._y0 + float(c + d * self._st[0, self._n_weights]) * self._sy
 
     def reset(self) -> PIStageOnline:
         """Forget everything learned: at rest, before the warm-up, at sample 0.
@@ -417,7 +447,9 @@ class PIStageOnline(Estimator):
         self.resolve_work_ = 0.0
         self._u0: float | None = None
         self._y0 = 0.0 if self.offset is None else self.offset
-        self._rate, self._kref = 0.0, 0  # the drift taken off (normalised, per sample), its zero
+        self._tick = 0.0  # the drift's clock step per sample (1 / the window on a record in
+        self._span = self.window  # motion, which spans at most DRIFT_KNOT_SECONDS there)
+        self._zeros = (0.0, 0.0)  # the least and largest zero seen (normalised output)
         self._warm_rms = 0.0  # the warm-up fit's RMS residual (output units)
         self._rest: list[tuple[float, float]] = []
         self._buffer: list[tuple[float, float]] = []
@@ -429,11 +461,11 @@ class PIStageOnline(Estimator):
         # at the warm-up on a record that begins in motion)
         npar = len(self.names)
         self._P = np.eye(npar) * self.P0
-        self._st = np.zeros((_STATE_ROWS, n))
+        self._st = np.zeros((_STATE_ROWS, n + 1))  # the branches, and the drift's clock
         self._open = np.empty((2, self.every))  # the open chunk: u, y (normalised) ..
         self._n_open = 0  # .. its samples so far
         self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # the window's whole chunks
-        self._wstate = np.zeros((_STATE_ROWS, n))  # the branches at the window's start
+        self._wstate = np.zeros((_STATE_ROWS, n + 1))  # the branches at the window's start
         self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
         self._solved: np.ndarray | None = None  # the last re-solve's estimate
         self._job: HorizonSolve | None = None  # the re-solve running
@@ -519,8 +551,6 @@ class PIStageOnline(Estimator):
         """The per-sample recursion over samples that stay inside the open chunk."""
         m = len(u)
         un, yn = (u - self._u0) / self._su, (y - self._y0) / self._sy
-        if self._rate:
-            yn = yn - self._rate * (self.k - self._kref + np.arange(m))
         yhat, err = np.empty(m), np.empty(m)
         none = self._no_rows
         kept = none if history is None else np.empty((m, len(self._phi)))
@@ -568,25 +598,23 @@ class PIStageOnline(Estimator):
                                                 max_nfev=WARMUP_NFEV, screen_nfev=WARMUP_SCREEN,
                                                 offset=in_motion, drift=in_motion)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
-        phi = np.r_[stage_from_theta(fit.theta, n), [fit.y0] * in_motion]
+        phi = stage_from_theta(fit.theta, n)
         nplay = self.structure.n_operators
         phi[:nplay] = admissible_weights(phi[:nplay])
         un, yn = u / su, y / sy
-        if in_motion:  # the warm-up's drift is taken off every later output as well
-            rows = np.flatnonzero(np.isfinite(y))
-            k0 = self.k - len(y)  # the warm-up's first sample
-            self._rate = fit.drift / fit.span
-            self._kref = k0 + int(round(0.5 * (rows[0] + rows[-1])))
-            yn = yn - self._rate * (k0 + np.arange(len(y)) - self._kref)
+        st0 = np.zeros((_STATE_ROWS, n + 1))
+        if in_motion:  # the offset and the drift's rate: search coordinates from here on
+            phi = np.r_[phi, fit.y0, self._start_clock(fit, y, st0)]
         self._warm_rms = fit.rms * sy
         nr = len(rest)
-        self._wstate = self._simulate(phi, np.zeros((_STATE_ROWS, n)), un[:nr], yn[:nr])[2]
+        self._wstate = self._simulate(phi, st0, un[:nr], yn[:nr])[2]
         err, J, st = self._simulate(phi, self._wstate, un[nr:], yn[nr:])
         seen = np.isfinite(err)
         s2 = max(float(np.mean(err[seen] ** 2)), 1e-12)
         # the recursion is scale-free: information in plain sums of squares, the prior's
         # variance P0 relative to the warm-up fit's residual variance
-        self._arrival = (phi.copy(), np.eye(len(phi)) * s2 / self.P0)
+        self._prior = s2 / self.P0
+        self._arrival = (phi.copy(), np.eye(len(phi)) * self._prior)
         for a in range(0, len(exc) - self.every + 1, self.every):
             self._chunks.append((un[nr + a:nr + a + self.every], yn[nr + a:nr + a + self.every]))
         done = len(self._chunks) * self.every
@@ -597,13 +625,69 @@ class PIStageOnline(Estimator):
         self._P = covariance(J[seen].T @ J[seen] + self._arrival[1])
         self._buffer, self._rest = [], []
         if self._chunks and not self._n_open:  # a first re-solve, in the warm-up's time
-            self._launch((phi, phi))
+            self._rereference()
+            self._launch((self._phi, self._phi))
             self._apply()
         self.warmup_seconds_ = time.perf_counter() - t0
 
+    def _start_clock(self, fit: Any, y: np.ndarray, st0: np.ndarray) -> float:
+        """Start the drift's clock in ``st0`` (0 at the middle of the warm-up's fitted samples,
+        1 over the window) and return the warm-up's rate per unit of it. The window spans at
+        most :data:`~hystid.identify.pi_batch.DRIFT_KNOT_SECONDS` (the batch fit's straight
+        pieces): the drift is a straight line over the window."""
+        n = self._n_weights
+        knot = max(1, int(round(DRIFT_KNOT_SECONDS * self.fs / self.every)))
+        self._span = self.every * min(self._keep(), knot)
+        self._tick = 1.0 / self._span
+        rows = np.flatnonzero(np.isfinite(y))
+        middle = 0.5 * (rows[0] + rows[-1])
+        st0[0, n], st0[1, n] = -middle * self._tick, self._tick
+        rate = fit.drift / fit.span / self._tick
+        first = fit.y0 - rate * middle * self._tick
+        last = fit.y0 + rate * (len(y) - 1 - middle) * self._tick
+        self._zeros = (min(first, last), max(first, last))
+        return rate
+
     # ----------------------------------------------------------------- moving horizon
     def _keep(self) -> int:
-        return max(1, self.window // self.every)
+        return max(1, self._span // self.every)
+
+    def _rereference(self, *others: np.ndarray) -> list[np.ndarray]:
+        """Move the drift's clock to 0 at the next sample (the offset coordinate becomes the
+        zero there): the estimates, the arrival cost, the covariance and the states move with
+        it, and so do ``others`` (returned). Without a drift, nothing moves."""
+        if not self._tracks_drift:
+            return list(others)
+        n, c = self._n_weights, len(self.names)
+        shift = float(self._st[0, n])
+        T = np.eye(len(self._phi))
+        T[c, c + 1] = shift  # c' = c + d shift
+        Ti = np.eye(len(self._phi))
+        Ti[c, c + 1] = -shift
+        self._phi, self._solved = T @ self._phi, T @ self._solved
+        phi_a, R_a = self._arrival
+        self._arrival = (T @ phi_a, Ti.T @ R_a @ Ti)
+        self._P = T @ self._P @ T.T
+        for st in (self._st, self._wstate):
+            st[0, n] -= shift
+        zero = float(self._phi[c])
+        self._zeros = (min(self._zeros[0], zero), max(self._zeros[1], zero))
+        return [T @ v for v in others]
+
+    def _free_drift(self, arrival: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray,
+                                                                          np.ndarray]:
+        """The arrival cost with the offset and the drift's rate marginalised out (and their
+        prior restored): the window alone fixes the drift's straight line, so a rate that
+        changes is followed once the window has passed the change."""
+        if not self._tracks_drift:
+            return arrival
+        phi_a, R = arrival
+        c = len(self.names)
+        m, d = slice(0, c), slice(c, c + 2)
+        out = np.zeros_like(R)
+        out[m, m] = R[m, m] - R[m, d] @ np.linalg.solve(R[d, d], R[d, m])
+        out[d, d] = np.eye(2) * self._prior
+        return phi_a, out
 
     def _close_chunk(self) -> None:
         """The open chunk is complete: keep it in the window and open the next one; the
@@ -614,6 +698,7 @@ class PIStageOnline(Estimator):
         recursion = self._phi.copy()
         if self._job is not None:
             self._apply()
+        (recursion,) = self._rereference(recursion)
         self._launch((recursion, self._solved))
 
     def _simulate(self, phi: np.ndarray, st0: np.ndarray, u: np.ndarray,
@@ -654,7 +739,7 @@ class PIStageOnline(Estimator):
         res = self._job.result()
         self.resolve_work_ += self._job.spent - before
         del self._chunks[:len(self._job.leaving)]
-        self._arrival, self._wstate = res.arrival, res.start
+        self._arrival, self._wstate = self._free_drift(res.arrival), res.start
         self._phi, self._st, self._solved = res.phi.copy(), res.state, res.phi.copy()
         self._P = covariance(res.information)
         self._job = None
@@ -730,9 +815,10 @@ class PIStageOnline(Estimator):
             "stable": bool(self.model.is_stable()),
             "loading_slope_min": float(_slope(self.theta, self.structure.n_operators)),
             "drift_per_second": self.drift_per_second_,
-            "warnings": drift_note(self.drift_per_second_,
-                                   self.drift_per_second_ * self.warmup / self.fs,
-                                   self._warm_rms, _output_unit(record), "warm-up"),
+            "drift_range": self.drift_range_,
+            "warnings": drift_note(self.drift_per_second_, self.drift_range_, self._warm_rms,
+                                   _output_unit(record),
+                                   "samples so far: its range; the rate is the last window's"),
         }
         return IdentificationResult(self.model, self.method, {**self.settings, "samples": n},
                                     history=history,

@@ -14,7 +14,8 @@ from numba import njit
 from ..poly import KMAX_STABLE, schur_stable
 
 #: Rows of the branch state of one operator: p(k-1), p(k-2), xS(k-1), dxS/dp, xM(k-1),
-#: xM(k-2), dxM/d(c1, c2, m1) at k-1 and at k-2.
+#: xM(k-2), dxM/d(c1, c2, m1) at k-1 and at k-2. A column after the operators' holds the
+#: drift's clock: its value at the next sample (row 0) and its step per sample (row 1).
 _STATE_ROWS = 12
 #: Bound on the slow pole and on the mode's reflection coefficients (``|.| < 1 - 1e-6``), so
 #: that neither branch can become an integrator.
@@ -47,7 +48,8 @@ def _step(phi, r, npoly, u_k, st, psi):
     # one sample: branch states at k from p(k-1), p(k-2), the prediction and its gradient
     # psi = d yhat / d phi; then the operators move with u(k). Returns yhat(k). The operators
     # are the plays (thresholds r) and, after them, npoly memoryless terms u^2, u^3, ..; a
-    # coordinate phi[n + 5], when there is one, corrects the output's offset.
+    # coordinate phi[n + 5], when there is one, corrects the output's offset, and phi[n + 6]
+    # is the drift's rate per unit of the clock st[0, n] (which then steps by st[1, n]).
     nplay = r.shape[0]
     n = nplay + npoly
     g = phi[n]
@@ -58,7 +60,10 @@ def _step(phi, r, npoly, u_k, st, psi):
     m1 = phi[n + 4]
     m0 = 1.0 + c1 + c2 - m1
     offset = phi.shape[0] > n + 5
+    drift = phi.shape[0] > n + 6
     yhat = phi[n + 5] if offset else 0.0
+    if drift:
+        yhat += phi[n + 6] * st[0, n]
     dg = 0.0
     sp = 0.0
     s0 = 0.0
@@ -102,6 +107,9 @@ def _step(phi, r, npoly, u_k, st, psi):
     psi[n + 4] = (1.0 - g) * s2
     if offset:
         psi[n + 5] = 1.0
+    if drift:
+        psi[n + 6] = st[0, n]
+        st[0, n] += st[1, n]
     return yhat
 
 
