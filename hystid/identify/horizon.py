@@ -6,7 +6,8 @@ re-solve stalls that call for its whole cost (milliseconds) while every other ca
 microseconds: beside a control loop a sample is then late. :class:`HorizonSolve` runs the same
 re-solve in steps of at most :data:`SLICE` simulated samples: first the chunks that leave the
 window are folded into the arrival cost, then the window is solved, then the model is run at the
-estimate over the samples that arrived meanwhile. The identifier gives it a fixed share of work
+estimate over the samples that arrived meanwhile, a whole slice of them at a time (one compiled
+call, not one per sample). The identifier gives it a fixed share of work
 per processed sample (:meth:`HorizonSolve.advance`) and takes its estimate at the next chunk
 boundary (:meth:`HorizonSolve.result` does the work left, if any). The work per sample is thus
 bounded when the share suffices, and the estimates depend neither on the share nor on time:
@@ -362,10 +363,12 @@ class HorizonSolve:
                 break
             self._credit -= step
             self.spent += step
-        if self.solved and self._n_run < self._n_fed and self._credit > 0.0:
-            self._follow(max(1.0, self._credit))
-        if self.solved and self._n_run == self._n_fed:
-            self._credit = 0.0
+        if self.solved:  # whole slices of the samples fed (one kernel call each)
+            whole = (self._n_fed - self._n_run) // SLICE * SLICE
+            if whole and self._credit > 0.0:
+                self._follow(min(whole, SLICE * math.ceil(min(self._credit, whole) / SLICE)))
+            if self._n_fed - self._n_run < SLICE:
+                self._credit = 0.0
         return self.solved
 
     def _follow(self, most: float) -> None:

@@ -70,6 +70,7 @@ input: a larger input cannot make the model diverge.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -78,7 +79,7 @@ import numpy as np
 
 from ..pi import PISandwich, PIStructure
 from ..records import Record
-from .base import Estimator, record_signals, sample_arrays
+from .base import Estimator, as_sample, record_signals, sample_arrays
 from .horizon import HorizonSolve, covariance, drain, run_steps
 from .pi_batch import DRIFT_KNOT_SECONDS, _scale_weights, drift_note
 from .pi_online_kernels import (
@@ -384,8 +385,10 @@ class PIStageOnline(Estimator):
 
     def _record_theta(self, phi: np.ndarray) -> np.ndarray:
         """The member's parameters in record units of search coordinates (a vector or rows)."""
-        th = theta_from_stage(phi, self._n_weights)
-        return _scale_weights(th, self.structure, self._sy, self._su)
+        if phi.ndim == 1:  # one compiled call, no reshaping: update() returns it every sample
+            _theta_rows(phi[np.newaxis], self._n_weights, self._theta1)
+            return self._theta1[0] * self._to_record
+        return theta_from_stage(phi, self._n_weights) * self._to_record
 
     @property
     def _n_weights(self) -> int:
@@ -456,6 +459,8 @@ class PIStageOnline(Estimator):
         self._phi: np.ndarray | None = None
         self._theta_rest = np.zeros(len(self.names))
         self._su = self._sy = 1.0
+        self._to_record = np.ones(n + 5)  # theta's scale from normalised to record units
+        self._theta1 = np.empty((1, n + 5))
         self._rn = self.thresholds
         # the member's parameters in search coordinates (a correction of the offset is added
         # at the warm-up on a record that begins in motion)
@@ -470,6 +475,7 @@ class PIStageOnline(Estimator):
         self._solved: np.ndarray | None = None  # the last re-solve's estimate
         self._job: HorizonSolve | None = None  # the re-solve running
         self._no_rows = np.zeros((0, npar))  # the kernel's optional outputs unused
+        self._one = tuple(np.empty(1) for _ in range(4))  # update(): u, y, yhat, error
         return self
 
     # ----------------------------------------------------------------- one sample
@@ -488,8 +494,19 @@ class PIStageOnline(Estimator):
         ndarray
             A copy of theta(k), in the order of :attr:`names`.
         """
-        u, y = sample_arrays(u_k, y_k)
-        self._process(u, y)
+        if self._phi is None or self.k < self.skip:
+            self._process(*sample_arrays(u_k, y_k))
+            return self.theta
+        u, y = as_sample(u_k, "u_k"), as_sample(y_k, "y_k")
+        if not math.isfinite(u):
+            raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
+        if not math.isfinite(y):
+            self.n_skipped += 1
+        # the recursion of one sample without a temporary array (beside a fast loop)
+        un, yn, yhat, err = self._one
+        un[0], yn[0] = (u - self._u0) / self._su, (y - self._y0) / self._sy
+        self._kernel(un, yn, yhat, err, self._no_rows)
+        self._book(un, yn, yhat, err)
         return self.theta
 
     def settle(self) -> np.ndarray:
@@ -552,25 +569,35 @@ class PIStageOnline(Estimator):
         m = len(u)
         un, yn = (u - self._u0) / self._su, (y - self._y0) / self._sy
         yhat, err = np.empty(m), np.empty(m)
-        none = self._no_rows
-        kept = none if history is None else np.empty((m, len(self._phi)))
-        _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
-             self.structure.n_poly, un, yn,
-             self._st, True, none, yhat, err, kept)
+        kept = self._no_rows if history is None else np.empty((m, len(self._phi)))
+        self._kernel(un, yn, yhat, err, kept)
         if history is not None:  # the estimate after each sample, as theta gives it
             history[:] = self._record_theta(kept)
         if errors is not None:
             errors[:] = err * self._sy
+        if self._book(un, yn, yhat, err) and history is not None:
+            history[-1] = self.theta
+
+    def _kernel(self, un, yn, yhat, err, kept) -> None:
+        """The compiled recursion over normalised samples (estimate, covariance and branches
+        updated in place)."""
+        _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
+             self.structure.n_poly, un, yn, self._st, True, self._no_rows, yhat, err, kept)
+
+    def _book(self, un, yn, yhat, err) -> bool:
+        """The samples the recursion ran kept in the open chunk and fed to the running
+        re-solve; returns whether they closed the chunk."""
+        m = len(un)
         self.k += m
         self.e, self.yhat = float(err[-1] * self._sy), float(yhat[-1] * self._sy + self._y0)
         self._open[0, self._n_open:self._n_open + m] = un
         self._open[1, self._n_open:self._n_open + m] = yn
         self._n_open += m
         self._advance(un, yn)
-        if self._n_open >= self.every:
-            self._close_chunk()
-            if history is not None:
-                history[-1] = self.theta
+        if self._n_open < self.every:
+            return False
+        self._close_chunk()
+        return True
 
     # ----------------------------------------------------------------- warm start
     def _warm_start(self) -> None:
@@ -598,6 +625,7 @@ class PIStageOnline(Estimator):
                                                 max_nfev=WARMUP_NFEV, screen_nfev=WARMUP_SCREEN,
                                                 offset=in_motion, drift=in_motion)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
+        self._to_record = _scale_weights(np.ones(n + 5), self.structure, sy, su)
         phi = stage_from_theta(fit.theta, n)
         nplay = self.structure.n_operators
         phi[:nplay] = admissible_weights(phi[:nplay])
