@@ -272,6 +272,10 @@ class HorizonSolve:
         Chunks folded into the arrival cost first.
     linearised_at : ndarray, optional
         The estimate they are folded at (required when ``leaving``).
+    forget : callable, optional
+        ``forget(arrival) -> arrival``, applied once the leaving chunks are folded and before
+        the window is solved (an identifier that marginalises nuisance coordinates out of the
+        arrival cost, so that the window alone fixes them).
 
     Attributes
     ----------
@@ -286,13 +290,16 @@ class HorizonSolve:
                  chunks: Sequence[tuple[np.ndarray, np.ndarray]], state: np.ndarray,
                  arrival: tuple[np.ndarray, np.ndarray], starts: Sequence[np.ndarray],
                  iterations: int, leaving: int = 0,
-                 linearised_at: np.ndarray | None = None) -> None:
+                 linearised_at: np.ndarray | None = None,
+                 forget: Callable[[tuple[np.ndarray, np.ndarray]],
+                                  tuple[np.ndarray, np.ndarray]] | None = None) -> None:
         if leaving and linearised_at is None:
             raise ValueError("linearised_at: expected the estimate to fold the leaving chunks at")
         self.simulate, self.admissible = simulate, admissible
         self.leaving = list(chunks[:leaving])
         self._window = list(chunks[leaving:])
         self.state, self.arrival, self.linearised_at = state.copy(), arrival, linearised_at
+        self.forget = forget
         self.starts: list[np.ndarray] = []
         for s in starts:
             if not any(np.array_equal(s, t) for t in self.starts):
@@ -432,6 +439,8 @@ class HorizonSolve:
         for u, y in self.leaving:
             self.arrival, self.state = yield from fold_steps(
                 self.simulate, self.linearised_at, self.state, self.arrival, u, y)
+        if self.forget is not None:
+            self.arrival = self.forget(self.arrival)
         self.phi_a, self.R_a = self.arrival
         best = None
         for start in self.starts:

@@ -106,12 +106,14 @@ _REST_KEPT = 200
 #: (``benchmarks/bench_pi_online.py``).
 WARMUP_SCREEN = 10
 WARMUP_NFEV = 25
-#: Default work of the running re-solve per processed sample, in simulated samples (20-35 us a
+#: Default work of the running re-solve per processed sample, in simulated samples (6-10 us a
 #: sample on stage A: 20 operators, 140-250 ns a simulated sample). A re-solve there takes some
-#: 37 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
-#: window, most trials refused), so most end within the 500 samples of a chunk; the rest of a
-#: longer one is done at its boundary.
-RESOLVE_RATE = 150.0
+#: 42 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
+#: window, most trials refused), so most end within the 2 000 samples of a chunk (the default
+#: ``every``); the rest of a longer one is done at its boundary. With a re-solve every 500
+#: samples (and 150 here) the held-out figures on stage A were the same and the identifier 3x
+#: slower.
+RESOLVE_RATE = 40.0
 
 
 def is_stage_structure(structure: PIStructure) -> bool:
@@ -312,7 +314,7 @@ class PIStageOnline(Estimator):
         *,
         warmup: int = 2000,
         window: int = 10_000,
-        every: int = 500,
+        every: int = 2000,
         iterations: int = 12,
         resolve_rate: float = RESOLVE_RATE,
         settle_at_end: bool = False,
@@ -705,7 +707,8 @@ class PIStageOnline(Estimator):
     def _free_drift(self, arrival: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray,
                                                                           np.ndarray]:
         """The arrival cost with the offset and the drift's rate marginalised out (and their
-        prior restored): the window alone fixes the drift's straight line, so a rate that
+        prior restored), once the chunks leaving the window are folded in and before the
+        window is solved: the window alone fixes the drift's straight line, so a rate that
         changes is followed once the window has passed the change."""
         if not self._tracks_drift:
             return arrival
@@ -756,7 +759,7 @@ class PIStageOnline(Estimator):
         leaving = max(0, len(self._chunks) - self._keep())
         self._job = HorizonSolve(self._slice, self._admissible, self._chunks, self._wstate,
                                  self._arrival, starts, self.iterations, leaving=leaving,
-                                 linearised_at=self._solved)
+                                 linearised_at=self._solved, forget=self._free_drift)
         return self._job
 
     def _apply(self) -> None:
@@ -767,7 +770,7 @@ class PIStageOnline(Estimator):
         res = self._job.result()
         self.resolve_work_ += self._job.spent - before
         del self._chunks[:len(self._job.leaving)]
-        self._arrival, self._wstate = self._free_drift(res.arrival), res.start
+        self._arrival, self._wstate = res.arrival, res.start
         self._phi, self._st, self._solved = res.phi.copy(), res.state, res.phi.copy()
         self._P = covariance(res.information)
         self._job = None
