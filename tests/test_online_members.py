@@ -243,3 +243,13 @@ def test_auto_online_chooses_on_the_head_and_runs_the_member_on_line():
     rms_online = np.array([r["model"] for r in compare(online.model, train, held).rows])
     rms_batch = np.array([r["model"] for r in compare(batch.model, train, held).rows])
     assert np.max(rms_online / rms_batch) <= RATIO, (rms_online, rms_batch)
+
+
+def test_a_window_shorter_than_the_default_chunk_takes_the_window_as_its_chunk():
+    r = np.arange(20) / 20.0
+    est = PIStageOnline(r, STAGE, window=1000)
+    assert est.get_params()["every"] is None and est.settings["every"] is None
+    assert est._every == 1000  # a re-solve at every window's end
+    assert PIStageOnline(r, STAGE)._every == 2000
+    with pytest.raises(ValueError, match=r"every: expected at most window \(1000\), got 1500"):
+        PIStageOnline(r, STAGE, window=1000, every=1500)

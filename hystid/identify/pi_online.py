@@ -54,8 +54,9 @@ The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
 The drift, on a record that begins in motion (no rest pins the sensor's zero): its clock
 ``t(k)`` runs 1 over the window and is moved to 0 at every chunk boundary (``c`` is then the
 zero there; the estimates, the arrival cost and the covariance move with it), and ``c, d``
-are marginalised out of the arrival cost after every re-solve, so that the window alone fixes
-the line: a rate that changes is followed once the window has passed the change. There the
+are marginalised out of the arrival cost before each window is solved (once the chunks leaving
+it are folded in), so that the window alone fixes the line: a rate that changes is followed
+once the window has passed the change. There the
 window spans at most :data:`~hystid.identify.pi_batch.DRIFT_KNOT_SECONDS` (the batch fit's
 straight pieces). Taken from the warm-up only, a drift that began after it was fitted as the
 stage (measured on the stage-B look-alike, a drift of 0.1 um/s from 10 s: 0.38-1.14 um
@@ -114,6 +115,8 @@ WARMUP_NFEV = 25
 #: samples (and 150 here) the held-out figures on stage A were the same and the identifier 3x
 #: slower.
 RESOLVE_RATE = 40.0
+#: Default samples between two re-solves (:class:`PIStageOnline`'s ``every``).
+EVERY = 2000
 
 
 def is_stage_structure(structure: PIStructure) -> bool:
@@ -243,8 +246,9 @@ class PIStageOnline(Estimator):
         samples before the input first moves, is not counted).
     window : int
         Samples of the moving-horizon re-solve (the last ``window`` samples).
-    every : int
-        Excited samples between two re-solves.
+    every : int, optional
+        Excited samples between two re-solves; by default :data:`EVERY`, or the window when
+        that is shorter.
     iterations : int
         Levenberg-Marquardt trials per start of a re-solve (0: the recursion alone); a start
         stops earlier once its steps gain next to nothing
@@ -314,7 +318,7 @@ class PIStageOnline(Estimator):
         *,
         warmup: int = 2000,
         window: int = 10_000,
-        every: int = 2000,
+        every: int | None = None,
         iterations: int = 12,
         resolve_rate: float = RESOLVE_RATE,
         settle_at_end: bool = False,
@@ -334,13 +338,14 @@ class PIStageOnline(Estimator):
         r = np.ascontiguousarray(np.asarray(thresholds, dtype=float).ravel())
         if len(r) != s.n_operators or not np.all(np.isfinite(r)) or np.any(r < 0):
             raise ValueError(f"thresholds: expected {s.n_operators} finite non-negative values")
-        for label, value in (("warmup", warmup), ("window", window), ("every", every),
+        for label, value in (("warmup", warmup), ("window", window),
+                             ("every", EVERY if every is None else every),
                              ("iterations", iterations + 1)):
             if int(value) != value or value < 1:
                 raise ValueError(f"{label}: expected a positive integer, got {value!r}")
         if int(skip) != skip or skip < 0:
             raise ValueError(f"skip: expected a non-negative integer, got {skip!r}")
-        if every > window:
+        if every is not None and every > window:
             raise ValueError(f"every: expected at most window ({window}), got {every}")
         for label, value in (("P0", P0), ("max_step", max_step), ("epsilon", epsilon),
                              ("fs", fs)):
@@ -353,7 +358,9 @@ class PIStageOnline(Estimator):
         if not 0.0 < forgetting <= 1.0:
             raise ValueError(f"forgetting: expected a value in (0, 1], got {forgetting!r}")
         self.thresholds, self.structure = r, s
-        self.warmup, self.window, self.every = int(warmup), int(window), int(every)
+        self.warmup, self.window = int(warmup), int(window)
+        self.every = None if every is None else int(every)
+        self._every = min(EVERY, self.window) if every is None else int(every)
         self.iterations, self.resolve_rate = int(iterations), float(resolve_rate)
         self.settle_at_end, self.skip = bool(settle_at_end), int(skip)
         self.offset = None if offset is None else float(offset)
@@ -469,7 +476,7 @@ class PIStageOnline(Estimator):
         npar = len(self.names)
         self._P = np.eye(npar) * self.P0
         self._st = np.zeros((_STATE_ROWS, n + 1))  # the branches, and the drift's clock
-        self._open = np.empty((2, self.every))  # the open chunk: u, y (normalised) ..
+        self._open = np.empty((2, self._every))  # the open chunk: u, y (normalised) ..
         self._n_open = 0  # .. its samples so far
         self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # the window's whole chunks
         self._wstate = np.zeros((_STATE_ROWS, n + 1))  # the branches at the window's start
@@ -540,7 +547,7 @@ class PIStageOnline(Estimator):
                 i = self._before_recursion(u, y, i, history, errors)
                 continue
             # the recursion up to the end of the open chunk (or of the block)
-            b = min(n, i + self.every - self._n_open)
+            b = min(n, i + self._every - self._n_open)
             self._recurse(u[i:b], y[i:b], None if errors is None else errors[i:b],
                           None if history is None else history[i:b])
             i = b
@@ -596,7 +603,7 @@ class PIStageOnline(Estimator):
         self._open[1, self._n_open:self._n_open + m] = yn
         self._n_open += m
         self._advance(un, yn)
-        if self._n_open < self.every:
+        if self._n_open < self._every:
             return False
         self._close_chunk()
         return True
@@ -645,9 +652,10 @@ class PIStageOnline(Estimator):
         # variance P0 relative to the warm-up fit's residual variance
         self._prior = s2 / self.P0
         self._arrival = (phi.copy(), np.eye(len(phi)) * self._prior)
-        for a in range(0, len(exc) - self.every + 1, self.every):
-            self._chunks.append((un[nr + a:nr + a + self.every], yn[nr + a:nr + a + self.every]))
-        done = len(self._chunks) * self.every
+        for a in range(0, len(exc) - self._every + 1, self._every):
+            self._chunks.append((un[nr + a:nr + a + self._every],
+                                 yn[nr + a:nr + a + self._every]))
+        done = len(self._chunks) * self._every
         left = len(exc) - done
         self._open[0, :left], self._open[1, :left] = un[nr + done:], yn[nr + done:]
         self._n_open = left
@@ -666,8 +674,8 @@ class PIStageOnline(Estimator):
         most :data:`~hystid.identify.pi_batch.DRIFT_KNOT_SECONDS` (the batch fit's straight
         pieces): the drift is a straight line over the window."""
         n = self._n_weights
-        knot = max(1, int(round(DRIFT_KNOT_SECONDS * self.fs / self.every)))
-        self._span = self.every * min(self._keep(), knot)
+        knot = max(1, int(round(DRIFT_KNOT_SECONDS * self.fs / self._every)))
+        self._span = self._every * min(self._keep(), knot)
         self._tick = 1.0 / self._span
         rows = np.flatnonzero(np.isfinite(y))
         middle = 0.5 * (rows[0] + rows[-1])
@@ -680,7 +688,7 @@ class PIStageOnline(Estimator):
 
     # ----------------------------------------------------------------- moving horizon
     def _keep(self) -> int:
-        return max(1, self._span // self.every)
+        return max(1, self._span // self._every)
 
     def _rereference(self, *others: np.ndarray) -> list[np.ndarray]:
         """Move the drift's clock to 0 at the next sample (the offset coordinate becomes the
