@@ -10,6 +10,7 @@ the repeat-to-repeat RMS of its two records with their means removed
 Duhem fit timed in the same process, on the same record.
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_stage_a.py [--members duhem,pi-stage,auto]
+        [--train tri50_1]
 
 ``pi-stage/online`` is the member identified by its on-line identifier
 (``identify(train, model="pi-stage", method="online")``), scored like the batch fits (and
@@ -59,13 +60,15 @@ def _rms(p: np.ndarray, rec) -> float:
     return r if np.isfinite(r) else float("inf")
 
 
-def measure(members: tuple[str, ...] = MEMBERS) -> dict:
+def measure(members: tuple[str, ...] = MEMBERS, train_name: str = TRAIN) -> dict:
     """Fit each member on ``prbn_1`` and score it, the baselines and the NARX on the others.
 
     Parameters
     ----------
     members : tuple of str
         ``model=`` values of :func:`hystid.identify.identify`, or ``model/method``.
+    train_name : str
+        The record identified on (``prbn_1``; another for ``--train``).
 
     Returns
     -------
@@ -77,8 +80,10 @@ def measure(members: tuple[str, ...] = MEMBERS) -> dict:
     recs = records()
     if not recs:
         return {"error": f"{STAGE_A} is absent"}
-    train = recs[TRAIN]
-    held = [r for n, r in recs.items() if n != TRAIN]
+    if train_name not in recs:
+        raise SystemExit(f"--train: expected one of {', '.join(recs)}, got {train_name!r}")
+    train = recs[train_name]
+    held = [r for n, r in recs.items() if n != train_name]
     names = [r.name for r in held]
     floors = {i: repeat_floor([recs[f"{i}_1"], recs[f"{i}_2"]]) for i in INPUTS}
     line, linear = StaticLine.fit(train), LinearModel.fit(train, 3, 3, 1)
@@ -110,7 +115,7 @@ def measure(members: tuple[str, ...] = MEMBERS) -> dict:
                   "selection": res.info.get("member_selection")}
     speed = (out["auto"]["seconds"] / out["duhem"]["seconds"]
              if "auto" in out and "duhem" in out else None)
-    return {"train": TRAIN, "records": names, "floors": floors, "baselines": base,
+    return {"train": train_name, "records": names, "floors": floors, "baselines": base,
             "narx_seconds": base_seconds, "narx_as_run": narx_as_run, "members": out,
             "speed_auto_over_duhem": speed}
 
@@ -142,7 +147,8 @@ def render(payload: dict) -> str:
     for b, v in payload["baselines"].items():
         rows.append([b, *(_nm(x) for x in v), ""])
     rows.append(["repeat floor (offset removed)", *(_nm(f) for f in floor), ""])
-    text = [table(rows, ["held-out RMS [nm], trained on prbn_1", *names, "fit [s]"]), ""]
+    train = payload.get("train", TRAIN)
+    text = [table(rows, [f"held-out RMS [nm], trained on {train}", *names, "fit [s]"]), ""]
     narx_rms = payload["baselines"].get("NARX (SysIdentPy)")
     linear_rms = payload["baselines"].get("linear (3rd order)")
     for m, e in payload["members"].items():
@@ -156,13 +162,13 @@ def render(payload: dict) -> str:
     for m, e in payload["members"].items():
         ratio = [a / f for a, f in zip(e["rms"], floor, strict=True)]
         text.append(f"- `{m}`: {min(ratio):.1f}-{max(ratio):.1f}x the repeat floor; with the "
-                    f"offset identified on prbn_1 instead of each record's rest output "
+                    f"offset identified on {train} instead of each record's rest output "
                     f"{_nm(min(e['as_placed']))}-{_nm(max(e['as_placed']))} nm.")
     as_run = payload.get("narx_as_run")
     if as_run is not None:
         text.append(f"- Without a zero put on either: the NARX as SysIdentPy runs it (from each "
                     f"record's first measured outputs) {', '.join(_nm(v) for v in as_run)} nm; "
-                    "the members from their own rest and offset (identified on prbn_1):")
+                    f"the members from their own rest and offset (identified on {train}):")
         for m, e in payload["members"].items():
             wins = sum(a < b for a, b in zip(e["as_placed"], as_run, strict=True))
             text.append(f"  `{m}` {', '.join(_nm(v) for v in e['as_placed'])} nm, ahead on "
@@ -175,7 +181,7 @@ def render(payload: dict) -> str:
                         "RMS (the goal: at most 1.25x on every record).")
     if payload.get("speed_auto_over_duhem"):
         text.append(f"- `auto` (the default) takes {payload['speed_auto_over_duhem']:.1f}x the "
-                    "Duhem sandwich's fit on prbn_1 (20 001 samples, one process).")
+                    f"Duhem sandwich's fit on {train} (20 001 samples, one process).")
     return "\n".join(text)
 
 
@@ -183,10 +189,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--members", default=",".join(MEMBERS))
+    parser.add_argument("--train", default=TRAIN,
+                        help=f"the record identified on (default {TRAIN}; the README block is "
+                        "of the default)")
     args = parser.parse_args()
-    payload = measure(tuple(args.members.split(",")))
+    payload = measure(tuple(args.members.split(",")), args.train)
     print(render(payload))
-    print(f"\nwritten {write_json('stage_a', payload)}")
+    name = "stage_a" if args.train == TRAIN else f"stage_a_train_{args.train}"
+    print(f"\nwritten {write_json(name, payload)}")
 
 
 if __name__ == "__main__":
