@@ -307,6 +307,9 @@ def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
             "the whole record")
     result = member(name).fit(record, "online", progress=progress, **settings)
     result.info["member_selection"] = {**choice.info["member_selection"], "on_samples": k}
+    undetermined = choice.info["member_selection"].get("undetermined")
+    if undetermined:
+        result.info["warnings"] = list(result.info.get("warnings", [])) + [undetermined]
     result.info["model"] = name
     return result
 

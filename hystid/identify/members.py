@@ -434,6 +434,48 @@ def _rate_eligible(record: Record, rows: list[dict], fits: dict,
     return eligible
 
 
+#: Candidates whose held-out RMS is within this factor of the best are taken as plausible by
+#: :func:`_undetermined`.
+PLAUSIBLE = 1.5
+#: The chosen candidate and a plausible other that differ on the probe input by more than this
+#: many times the larger of their held-out RMS errors: the record does not determine the model.
+#: Measured (:mod:`hystid.identify.agreement`, seed 0): identified on stage A's triangle and
+#: sine records 3.7-10.7 (where the model chosen is 128-455 nm off the PRBN records, the
+#: linear model 67-115); on the Bouc-Wen look-alike of stage A 2.4-3.2; on stage A's PRBN
+#: records 2.7-3.6, but there the Duhem sandwich is 1.6x ``pi-stage`` held out, not plausible.
+DISAGREE = 3.0
+
+
+def _undetermined(record: Record, chosen: dict, rows: list[dict], fits: dict) -> str | None:
+    """The warning when a plausible candidate (held-out RMS within :data:`PLAUSIBLE` of the
+    best) and the chosen one differ on an input with other reversals inside the record's range
+    (:func:`~hystid.identify.agreement.disagreement`) by more than :data:`DISAGREE` times their
+    held-out errors; each plausible row gets its figure."""
+    from .agreement import disagreement
+
+    best = min(r["heldout_rms"] for r in rows)
+    worst = None
+    for r in rows:
+        if r is chosen or not r["heldout_rms"] <= PLAUSIBLE * best:
+            continue
+        d = disagreement(fits[chosen["member"]].model, fits[r["member"]].model, record.u,
+                         record.fs)
+        r["disagreement"] = d
+        ratio = d / max(chosen["heldout_rms"], r["heldout_rms"])
+        if ratio > DISAGREE and (worst is None or ratio > worst[0]):
+            worst = (ratio, r, d)
+    if worst is None:
+        return None
+    ratio, r, d = worst
+    unit = record.units.get("y") or "output units"
+    return (f"the record does not determine the model: {chosen['member']} and {r['member']} "
+            f"are {chosen['heldout_rms']:.3g} and {r['heldout_rms']:.3g} {unit} off its held-out "
+            f"end, which repeats the record's own reversals, but differ by {d:.3g} {unit} "
+            f"({ratio:.1f}x) on an input with reversals of every size inside its range; "
+            "validate the model on another input, or identify on one with a broad spectrum of "
+            "reversals (PRBN)")
+
+
 @one_blas_thread
 def select_member(
     record: Record,
@@ -458,7 +500,9 @@ def select_member(
        ``1 + margin`` of the best;
     5. fit it on the whole record, started from its head fit (a PI member; again from its own
        starts when that fit is, on the head's samples, :data:`ASTRAY` times worse than the head
-       fit).
+       fit);
+    6. warn when a plausible candidate differs from the chosen one on an input with other
+       reversals than the record's (:func:`_undetermined`).
 
     Parameters
     ----------
@@ -479,7 +523,10 @@ def select_member(
     -------
     IdentificationResult
         The chosen member's fit on the whole record; ``info["member_selection"]`` holds every
-        candidate's held-out RMS, the baselines' and the choice.
+        candidate's held-out RMS, the baselines' and the choice, and ``undetermined``, the
+        warning (also in ``info["warnings"]``) when a plausible candidate differs from the
+        chosen one on other reversals by far more than the held-out end shows
+        (:data:`DISAGREE`; :mod:`hystid.identify.agreement`).
     """
     from ..baselines import LinearModel, StaticLine
 
@@ -524,9 +571,12 @@ def select_member(
         for r in rows:
             r["chosen"] = r is chosen
         result.info["rate_dependence"] = chosen["rate_dependence_whole"]
+    undetermined = _undetermined(record, chosen, rows, fits)
+    if undetermined:
+        result.info["warnings"] = list(result.info.get("warnings", [])) + [undetermined]
     result.info["member_selection"] = {
         "chosen": name, "holdout_from": int(k), "holdout_to": int(stop), "margin": margin,
-        "candidates": rows, "baselines": baseline_rms,
+        "candidates": rows, "baselines": baseline_rms, "undetermined": undetermined,
         "beats_baselines": bool(chosen["heldout_rms"] < min(baseline_rms.values()))}
     result.info["model"] = name
     return result
