@@ -21,6 +21,7 @@ The on-line identifier (:class:`~hystid.identify.online.OnlineIdentifier`), the 
 
 from __future__ import annotations
 
+import math
 import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -31,7 +32,8 @@ import numpy as np
 from ..signals import finite_signal
 from .result import IdentificationResult
 
-__all__ = ["Estimator", "as_sample", "finite_signal", "record_signals", "sample_arrays"]
+__all__ = ["Estimator", "as_sample", "finite_signal", "record_signals", "sample_arrays",
+           "sample_floats"]
 
 
 def as_sample(value: Any, argname: str) -> float:
@@ -71,9 +73,25 @@ def sample_arrays(u_k: Any, y_k: Any) -> tuple[np.ndarray, np.ndarray]:
     u, y : ndarray
         One-element float64 arrays.
     """
-    u = np.array([as_sample(u_k, "u_k")])
-    y = np.array([as_sample(y_k, "y_k")])
-    if not np.isfinite(u[0]):
+    u, y = sample_floats(u_k, y_k)
+    return np.array([u]), np.array([y])
+
+
+def sample_floats(u_k: Any, y_k: Any) -> tuple[float, float]:
+    """One sample pair as two floats, the input checked finite (without numpy for floats).
+
+    Parameters
+    ----------
+    u_k, y_k : float
+        Input and output of the sample; the input must be finite (the output may not be: the
+        estimators skip it).
+
+    Returns
+    -------
+    u, y : float
+    """
+    u, y = as_sample(u_k, "u_k"), as_sample(y_k, "y_k")
+    if not math.isfinite(u):
         raise ValueError(f"u_k: expected a finite input sample, got {u_k!r}")
     return u, y
 

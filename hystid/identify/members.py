@@ -160,8 +160,9 @@ class Member:
         PIStageOnline or PIRecursiveIdentifier
         """
         from ..thresholds import RULES
-        from .pi_online import PIStageOnline, is_stage_structure
+        from .pi_online import PIStageOnline
         from .pi_recursive import PIRecursiveIdentifier
+        from .pi_stage_coordinates import is_stage_structure
         from .prepare import prepare
 
         if self.kind != "pi":
