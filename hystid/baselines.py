@@ -29,8 +29,7 @@ from .poly import roots_inside
 from .records import Record
 
 __all__ = ["BaselineComparison", "LinearModel", "StaticLine", "baseline_orders", "compare",
-           "repeat_floor",
-           "simulate_from_rest", "starts_in_motion"]
+           "centring_input", "repeat_floor", "simulate_from_rest", "starts_in_motion"]
 
 #: The linear baseline is fitted on at most this many leading samples of the identification
 #: record (its output-error fit makes hundreds of passes: 25 s for a million samples); its
@@ -230,6 +229,15 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
     (:func:`~hystid.identify.prepare.rest_level`); here it starts in motion too: stepped from
     the model's rest, one such record of the look-alike was 12.9 um off, 0.38 this way.
 
+    A model identified on a record that did not begin at rest (its envelope's ``from_rest``
+    false) never saw its rest: it starts every record settled at its loop's centre
+    (:func:`centring_input`), at ``u[0]`` when the record begins at rest, else at the record's
+    mean level and then along the same ramp. Identified on pieces of independently simulated
+    records cut mid-motion and started from that unseen rest, the default model was 0.10-0.32
+    um off records of the stage-A look-alike that begin at rest (0.022-0.044 this way, 0.022-
+    0.072 identified on the whole record) and 0.134 um off the paper-like Preisach stage's
+    (0.023; 0.020); ``tests/test_rest_unseen.py``.
+
     Parameters
     ----------
     model : DuhemSandwich or PISandwich
@@ -244,6 +252,9 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
     ndarray
         The simulated output.
     """
+    envelope = getattr(model, "envelope", None)
+    if envelope is not None and not envelope.from_rest:
+        return _from_centre(model, np.asarray(u, float), check)
     x0 = None
     if hasattr(model, "rest_state"):
         x0 = model.rest_state(float(u[0]))
@@ -293,6 +304,89 @@ def _from_its_mean(model: Any, u: np.ndarray, check: bool) -> np.ndarray:
     m, approach = _approach(u)
     n = len(approach)
     return model.simulate(np.r_[approach, u], model.settled_state(m), check=check).y[n:]
+
+
+#: :func:`centring_input`: each half-swing of the decaying triangle is this share of the one
+#: before; the swings stop below :data:`CENTRE_LAST` of the first.
+CENTRE_DECAY = 0.85
+CENTRE_LAST = 1e-3
+#: :func:`centring_input` holds the level for this many of the slowest time constant of L1 and
+#: L2 (at most :data:`CENTRE_MAX_HOLD` seconds).
+CENTRE_HOLD = 10.0
+CENTRE_MAX_HOLD = 10.0
+
+
+def centring_input(model: Any, level: float) -> np.ndarray:
+    """The input that brings a model from its rest to ``level``, its loop's centre, settled.
+
+    For a model identified on a record that did not begin at rest (its envelope's
+    ``from_rest`` is false) the rest level ``u_rest`` is the record's first input, a point of
+    its motion, and the model's state there is nothing a stage rests in: started from it and
+    ramped to another level, the model sits on a branch of its loop that a resting stage need
+    not (on the Bouc-Wen look-alike of stage A cut mid-motion, 0.1-0.3 um off records that
+    begin at rest, the linear model 0.02-0.29). From its rest this input swings about
+    ``level`` in a triangle inside the envelope (widened to take ``level`` in), the first swing
+    to the envelope's farther end and every later one :data:`CENTRE_DECAY` of the one before,
+    down to :data:`CENTRE_LAST` of the first, at half the envelope's slew: every play or relay
+    inside the envelope is reversed and the hysteresis forgets its past, as a demagnetised core
+    does. It then holds ``level`` for :data:`CENTRE_HOLD` times the slowest time constant of L1
+    and L2 (at most :data:`CENTRE_MAX_HOLD` seconds).
+
+    A stage that rests in a state its motion never returns to (the Preisach look-alike of stage
+    B at rest at 0 V from its virgin state, whose relays the input's range switches up but not
+    down) is not predicted by it: 3.0 um off that record, the linear model 1.2
+    (``benchmarks/bench_narrowband.py``).
+
+    Parameters
+    ----------
+    model : Sandwich
+        A placed model with an envelope.
+    level : float
+        The input level to end at.
+
+    Returns
+    -------
+    ndarray
+        Input samples; the model's output after them is its output settled at ``level``.
+    """
+    env = model.envelope
+    level = float(level)
+    lo, hi = min(env.u_min, level), max(env.u_max, level)
+    first = max(hi - level, level - lo)  # to the farther end: every play or relay reversed
+    swings = first * CENTRE_DECAY ** np.arange(
+        int(np.ceil(np.log(CENTRE_LAST) / np.log(CENTRE_DECAY))) + 1)
+    turns = np.clip(level + swings * (-1.0) ** np.arange(swings.size), lo, hi)
+    points = np.r_[float(model.u_rest), turns, level]
+    step = 0.5 * env.slew if env.slew > 0 else max(hi - lo, 1e-12) / 100.0
+    pieces = [np.array([points[0]])]
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        n = max(1, int(np.ceil(abs(b - a) / step)))
+        pieces.append(np.linspace(a, b, n + 1)[1:])
+    pieces.append(np.full(_settling_samples(model), level))
+    return np.concatenate(pieces)
+
+
+def _settling_samples(model: Any) -> int:
+    """:data:`CENTRE_HOLD` slowest time constants of L1 and L2, in samples."""
+    radius = max([float(np.max(np.abs(np.roots(np.r_[1.0, a])))) if len(a) else 0.0
+                  for a in (np.asarray(model.a1, float), np.asarray(model.a2, float))])
+    tau = -1.0 / np.log(radius) if 0.0 < radius < 1.0 else 1.0
+    return int(min(np.ceil(CENTRE_HOLD * tau), CENTRE_MAX_HOLD * model.fs)) + 1
+
+
+def _from_centre(model: Any, u: np.ndarray, check: bool) -> np.ndarray:
+    """A model whose rest was not seen, settled at the loop's centre (:func:`centring_input`):
+    at ``u[0]`` for a record that begins at rest, else at the record's mean level and brought
+    to ``u[0]`` along the ramp of :func:`_approach`."""
+    from .identify.prepare import shows_rest
+
+    if shows_rest(u):
+        before = centring_input(model, float(u[0]))
+    else:
+        m, approach = _approach(u)
+        before = np.r_[centring_input(model, m), approach]
+    n = len(before)
+    return model.simulate(np.r_[before, u], check=check).y[n:]
 
 
 def repeat_floor(records: Sequence[Record]) -> float:

@@ -14,7 +14,7 @@ from::
       "rates": [...],                         # multi-Duhem sandwich only (alpha_j)
       "fs": 30000.0,
       "u_rest": 0.0, "offset": 0.0,
-      "envelope": {"u_min": ..., "u_max": ..., "slew": ...} or null,
+      "envelope": {"u_min": ..., "u_max": ..., "slew": ..., "from_rest": true} or null,
       "units": {"u": "V", "y": "um"},
       "provenance": {"hystid_version": "...", "method": "...", "date": "...Z",
                      "record_sha256": "...", "settings": {...}}

@@ -50,26 +50,39 @@ class Envelope:
     slew : float
         Largest input change per sample that the input holds (the :data:`SLEW_QUANTILE`
         quantile of ``|u(k) - u(k-1)|``), in input units per sample.
+    from_rest : bool
+        Whether the record began with the stage at rest (True by default). When it did not,
+        the model's rest level ``u_rest`` is the record's first input, a point of its motion,
+        and the model's state there is nothing a stage rests in:
+        :func:`hystid.baselines.simulate_from_rest` then settles the model at the loop's
+        centre before a record (:func:`hystid.baselines.settled_at_centre`).
     """
 
     u_min: float
     u_max: float
     slew: float
+    from_rest: bool = True
 
     def __post_init__(self) -> None:
         values = (self.u_min, self.u_max, self.slew)
         if not all(np.isfinite(v) for v in values) or self.u_max < self.u_min or self.slew < 0:
             raise ValueError(f"Envelope: expected finite u_min <= u_max and slew >= 0, got "
                              f"{values}")
+        if not isinstance(self.from_rest, bool | np.bool_):
+            raise ValueError(f"Envelope: expected from_rest true or false, got "
+                             f"{self.from_rest!r}")
+        object.__setattr__(self, "from_rest", bool(self.from_rest))
 
     @classmethod
-    def of(cls, u: np.ndarray) -> Envelope:
+    def of(cls, u: np.ndarray, *, from_rest: bool = True) -> Envelope:
         """The envelope of one input signal.
 
         Parameters
         ----------
         u : ndarray
             Input samples.
+        from_rest : bool
+            Whether the record began with the stage at rest.
 
         Returns
         -------
@@ -77,7 +90,8 @@ class Envelope:
         """
         u = np.asarray(u, dtype=float)
         du = np.abs(np.diff(u)) if len(u) > 1 else np.zeros(1)
-        return cls(float(np.min(u)), float(np.max(u)), float(np.quantile(du, SLEW_QUANTILE)))
+        return cls(float(np.min(u)), float(np.max(u)), float(np.quantile(du, SLEW_QUANTILE)),
+                   from_rest)
 
     @property
     def amplitude(self) -> float:
@@ -112,15 +126,15 @@ class Envelope:
                        f"{self.slew:.4g}")
         return out
 
-    def to_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, float | bool]:
         """The envelope as a plain dictionary (``Envelope(**d)`` rebuilds it).
 
         Returns
         -------
-        dict of str to float
-            The fields by name.
+        dict
+            The fields by name: numbers, and ``from_rest`` a bool.
         """
-        return {k: float(v) for k, v in asdict(self).items()}
+        return {k: v if k == "from_rest" else float(v) for k, v in asdict(self).items()}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Envelope:
@@ -129,17 +143,21 @@ class Envelope:
         Parameters
         ----------
         data : mapping
-            Keys ``u_min``, ``u_max``, ``slew``.
+            Keys ``u_min``, ``u_max``, ``slew``; ``from_rest`` optional (true when absent: files
+            written before it was kept).
 
         Returns
         -------
         Envelope
         """
+        from_rest = data.get("from_rest", True)
+        if not isinstance(from_rest, bool):
+            raise ValueError(f"envelope: expected from_rest true or false, got {from_rest!r}")
         try:
             values = [data[k] for k in ("u_min", "u_max", "slew")]
             if any(isinstance(v, bool | str | bytes) for v in values):  # not numbers, though
                 raise TypeError("true, false or text")              # float() takes them
-            return cls(*(float(v) for v in values))
+            return cls(*(float(v) for v in values), from_rest)
         except (KeyError, TypeError, ValueError, OverflowError) as err:
             raise ValueError(f"envelope: expected numbers u_min, u_max, slew, got "
                              f"{str(dict(data))[:120]}") from err

@@ -10,13 +10,15 @@ four held-out records, against the linear model's 0.53-0.54 on all four); starte
 record's mean input level and ramped to its first input, 0.12-0.13 um.
 """
 
+import copy
+import dataclasses
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hystid.baselines import compare, simulate_from_rest
+from hystid.baselines import centring_input, compare, simulate_from_rest
 from hystid.identify.members import member
 from hystid.identify.prepare import rest_level
 from hystid.records import Record
@@ -57,13 +59,21 @@ def test_a_record_that_begins_in_motion_is_predicted_from_its_first_sample_on(fi
 def test_a_record_that_begins_at_rest_elsewhere_starts_from_the_model_s_own_rest(fitted):
     # measured stage A's sine records rest at another level than the training record: the
     # model's slow dynamics follow the move there as the stage's did (see simulate_from_rest)
-    _, model = fitted
+    _, fitted_model = fitted
+    model = copy.deepcopy(fitted_model)
+    model.envelope = dataclasses.replace(model.envelope, from_rest=True)  # a rest it saw
     u = np.r_[np.full(400, model.u_rest + 1.5), model.u_rest + 1.5 + np.sin(np.arange(400) / 9)]
     assert rest_level(u)[1]
     stepped = model.simulate(u, check=False).y
     np.testing.assert_array_equal(simulate_from_rest(model, u, check=False), stepped)
     settled = model.simulate(u, model.settled_state(u[0]), check=False).y
     assert not np.allclose(settled[:50], stepped[:50])  # the two starts differ here
+    # the look-alike's record begins in motion: its model never saw the stage at rest, and
+    # starts the record at its loop's centre at u[0] (tests/test_rest_unseen.py)
+    assert not fitted_model.envelope.from_rest
+    before = centring_input(fitted_model, u[0])
+    centred = fitted_model.simulate(np.r_[before, u], check=False).y[len(before):]
+    np.testing.assert_array_equal(simulate_from_rest(fitted_model, u, check=False), centred)
 
 
 def test_the_settled_state_is_the_steady_state_of_a_held_input(fitted):

@@ -515,5 +515,5 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
             f"({'; '.join(notes)})")
     prep = Prepared(record, u_rest, u_scale, y_ref, y_scale, (u - u_rest) / u_scale,
                     (y - y_ref) / y_scale, weight, at_rest, skip, Envelope.of(u[:1]), notes)
-    prep.envelope = Envelope.of(u[prep.fitted])
+    prep.envelope = Envelope.of(u[prep.fitted], from_rest=at_rest)
     return prep
