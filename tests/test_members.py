@@ -268,6 +268,29 @@ def test_identified_on_a_triangle_record_the_default_says_the_record_does_not_de
     assert all(row["model"] > row["linear"] for row in rows), rows
 
 
+def test_the_warning_that_the_record_does_not_determine_the_model_ignores_units_and_offsets():
+    """The Bouc-Wen look-alike of stage A driven by a 50 Hz triangle is warned (5.0x when this
+    was written); in mV and nm with a 2.5 um sensor offset, and in kV and mm, the same ratio,
+    each in its own units."""
+    import re
+
+    from hystid.testing import with_offset
+
+    rec = stage_a_like("tri50", seconds=1.0, seed=0)
+    other = {"nm": with_offset(with_units(rec, u="mV", y="nm"), 2500.0),
+             "mm": with_units(rec, u="kV", y="mm")}
+    said = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for unit, r in [("um", rec), *other.items()]:
+            said[unit] = identify(r).info["member_selection"]["undetermined"]
+    assert all(s is not None for s in said.values()), said
+    ratio = {u: float(re.search(r"\(([\d.]+)x\)", s).group(1)) for u, s in said.items()}
+    assert ratio["um"] > 3.0 and ratio["nm"] == ratio["um"] == ratio["mm"], ratio
+    for unit, s in said.items():
+        assert f" {unit} off its held-out end" in s and f" {unit} (" in s, s
+
+
 @pytest.mark.parametrize("hysteresis", ["preisach", "maxwell"])
 def test_auto_beats_both_baselines_on_other_hysteresis_operators(hysteresis):
     """The paper-like stage with a Preisach or a Maxwell-slip loop (written unlike any member),
