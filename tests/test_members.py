@@ -16,11 +16,7 @@ from hystid.baselines import compare, rest_zero, simulate_from_rest
 from hystid.identify import identify
 from hystid.identify.members import (
     AUTO_CANDIDATES,
-    HOLDOUT,
     MEMBERS,
-    REFIT_NFEV,
-    _split,
-    _went_astray,
     member,
     select_member,
 )
@@ -138,42 +134,26 @@ def test_auto_reports_every_candidate_and_beats_both_baselines(bouc_wen_stage):
         assert row["model"] < 0.5 * min(row["static_line"], row["linear"]), row
 
 
-def _head_and_whole(rec):
-    """The choice's head split, the pi-stage fit of the head and the whole-record fit started
-    from it (as :func:`select_member` makes them)."""
-    k, _, _ = _split(rec, HOLDOUT)
-    m = MEMBERS["pi-stage"]
+@pytest.mark.skipif(not STAGE_A.exists(), reason=f"measured stage A records absent ({STAGE_A})")
+def test_on_stage_a_with_a_short_rest_the_whole_record_fit_finds_the_slow_pole():
+    """prbn_1 with its 1 s rest cut to 0.1 s: the head fit (70 % of the excitation) put the
+    ``pi-stage`` slow pole at 0.9993, and the whole-record fit started from it stayed there:
+    51 nm of residual and 73-103 nm off the other five records (measured). Fitted from the
+    member's own starts as well, the better of the two is the whole record's optimum (26 nm,
+    the pole at 0.99987): as good as identified on the whole record (25-30 nm)."""
+    full = load_record(STAGE_A / "prbn_1.csv")
+    others = [load_record(STAGE_A / f"{n}.csv")
+              for n in ("prbn_2", "sine50_1", "sine50_2", "tri50_1", "tri50_2")]
+    rec = Record(full.u[9000:], full.y[9000:], full.fs, units=full.units, name="prbn_1[9000:]")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        head = m.fit(rec[:k])
-        whole = m.fit(rec, theta0=head.model.theta, max_nfev=REFIT_NFEV)
-    return k, head, whole
-
-
-def test_the_whole_record_fit_is_judged_on_the_head_s_own_samples():
-    """The fit of the whole record, started from the head fit, is redone from scratch only
-    when it is far worse on the head's samples: not because the whole record (whose end swings
-    wider here, as on stage A) leaves a larger residual than the head."""
-    rec = stage_a_like("prbn", seconds=1.0, seed=0)
-    k, head, whole = _head_and_whole(rec)
-    assert not _went_astray(whole.model, head.model, rec, k)
-    wm = whole.model
-    theta = wm.theta.copy()
-    theta[wm.structure.slices()["mu"]] *= 3.0  # a fit gone astray: three times the loop
-    bad = PISandwich(theta, wm.thresholds, wm.structure, fs=wm.fs, u_rest=wm.u_rest,
-                     offset=wm.offset)
-    assert _went_astray(bad, head.model, rec, k)
-
-
-@pytest.mark.skipif(not STAGE_A.exists(), reason=f"measured stage A records absent ({STAGE_A})")
-def test_on_stage_a_the_whole_record_fit_is_not_redone():
-    # its whole-record residual is 1.8x the head's (20.1 against 11.4 nm: the record's end
-    # swings wider), which the former test took for a fit gone astray and redid from scratch,
-    # to the same optimum (0.6 s of the choice's 2.1 s)
-    rec = load_record(STAGE_A / "prbn_1.csv")
-    k, head, whole = _head_and_whole(rec)
-    assert whole.info["rms_residual"] > 1.5 * head.info["rms_residual"]
-    assert not _went_astray(whole.model, head.model, rec, k)
+        result = identify(rec)
+        fresh = MEMBERS[result.info["model"]].fit(rec)
+        rows = compare(result.model, rec, others).rows
+    assert result.info["model"] == "pi-stage"
+    assert result.info["rms_residual"] <= fresh.info["rms_residual"] * (1 + 1e-9)
+    for row in rows:
+        assert row["model"] < 0.045 and row["model"] < 0.6 * row["linear"], row
 
 
 def test_the_chosen_model_is_placed_like_every_model(bouc_wen_stage):
