@@ -135,3 +135,25 @@ def test_an_envelope_refuses_a_from_rest_that_is_not_true_or_false():
         Envelope(0.0, 1.0, 0.1, 1)
     assert Envelope.from_dict({"u_min": 0, "u_max": 1, "slew": 0.1}).from_rest is True
     assert Envelope(0.0, 1.0, 0.1, False).to_dict()["from_rest"] is False
+
+
+def test_hystid_simulate_starts_the_model_as_the_figures_do(stage_a_cut, tmp_path, capsys):
+    """``hystid simulate --model --input`` writes what the held-out figures score: for a model
+    identified on the cut record, the record at rest simulated from the loop's centre."""
+    from hystid import cli
+    from hystid.records import load_record
+
+    _, cut, held = stage_a_cut
+    model = member("duhem").fit(cut).model
+    model.save(tmp_path / "m.json")
+    held[1].save(tmp_path / "held.csv")
+    rec = load_record(tmp_path / "held.csv")
+    code = cli.main(["simulate", "--model", str(tmp_path / "m.json"), "--input",
+                     str(tmp_path / "held.csv"), "--quiet", "--out", str(tmp_path / "y.csv")])
+    assert code == 0, capsys.readouterr().err
+    written = load_record(tmp_path / "y.csv").y
+    loaded = load_model(tmp_path / "m.json")
+    np.testing.assert_allclose(written, simulate_from_rest(loaded, rec.u, check=False),
+                               rtol=0, atol=1e-9)
+    # from its fictitious rest, stepped to the record's first input, it was far off
+    assert np.max(np.abs(written - loaded.simulate(rec.u, check=False).y)) > 0.1

@@ -3,7 +3,11 @@
 ``hystid simulate --seconds S --seed N [--noise SD] --out REC`` excites the reference stage
 (the paper's eqs. 26-28 at 30 kHz) from rest with the paper's excitation; ``hystid simulate
 --model MODEL.json --input REC [--noise SD --seed N] --out REC`` drives a saved model with the
-input of a record. The record (u, y) is written as CSV, NumPy, MATLAB or HDF5 by its suffix.
+input of a record, started as the accuracy figures start it
+(:func:`hystid.baselines.simulate_from_rest`: from the model's rest at the record's first
+input, a record in motion from its mean level, a model identified on a record that did not
+begin at rest from its loop's centre). The record (u, y) is written as CSV, NumPy, MATLAB or
+HDF5 by its suffix.
 """
 
 from __future__ import annotations
@@ -129,7 +133,9 @@ def _reference_stage_record(args: argparse.Namespace) -> Record:
 
 
 def _model_record(args: argparse.Namespace, progress: Progress) -> Record:
-    """A saved model (``--model``) simulated on a record's input (``--input``)."""
+    """A saved model (``--model``) simulated on a record's input (``--input``), started as every
+    accuracy figure starts it (:func:`~hystid.baselines.simulate_from_rest`)."""
+    from ..baselines import simulate_from_rest
     from ..errors import AdmissibilityWarning, ModelFileError, RecordError
     from ..modelfile import load_model
     from ..records import Record
@@ -149,15 +155,15 @@ def _model_record(args: argparse.Namespace, progress: Progress) -> Record:
     if not np.isclose(rec.fs, model.fs, rtol=1e-9):
         raise CommandError(f"--input {args.input}: sampled at {rec.fs:g} Hz but the model at "
                            f"{model.fs:g} Hz (expected the model's rate)")
-    with warnings.catch_warnings():  # the reasons are in resp.warnings, printed below
-        warnings.simplefilter("ignore", AdmissibilityWarning)
-        resp = model.simulate(rec.u)
-    for reason in resp.warnings:
-        progress.say(f"warning: {reason}")
-    if not np.all(np.isfinite(resp.y)):
+    with warnings.catch_warnings(record=True) as caught:  # printed below
+        warnings.simplefilter("always", AdmissibilityWarning)
+        y = simulate_from_rest(model, rec.u)
+    for w in caught:
+        if issubclass(w.category, AdmissibilityWarning):
+            progress.say(f"warning: {w.message}")
+    if not np.all(np.isfinite(y)):
         raise CommandError(f"--model {args.model}: the simulation diverges on the input of "
                            f"{args.input} (condition 8 fails); nothing written")
-    y = resp.y
     if args.noise:
         y = y + np.random.default_rng(args.seed).normal(0.0, args.noise, len(y))
     with refused(errors=RecordError):  # pragma: no cover - checked above
