@@ -233,10 +233,12 @@ def simulate_from_rest(model: Any, u: np.ndarray, *, check: bool = True) -> np.n
     false) never saw its rest: it starts every record settled at its loop's centre
     (:func:`centring_input`), at ``u[0]`` when the record begins at rest, else at the record's
     mean level and then along the same ramp. Identified on pieces of independently simulated
-    records cut mid-motion and started from that unseen rest, the default model was 0.10-0.32
-    um off records of the stage-A look-alike that begin at rest (0.022-0.044 this way, 0.022-
-    0.072 identified on the whole record) and 0.134 um off the paper-like Preisach stage's
-    (0.023; 0.020); ``tests/test_rest_unseen.py``.
+    records cut mid-motion and started from that unseen rest, the default model was 0.15-0.32
+    um off records of the stage-A look-alike that begin at rest (0.022-0.044 this way, 0.021-
+    0.17 identified on the whole record) and 0.134 um off the paper-like Preisach stage's
+    (0.023; 0.020); on measured stage A's ``prbn_1`` cut mid-motion 0.096-0.335 um and now
+    0.089-0.154, where the linear model fitted on the same piece is 0.109-0.149
+    (``benchmarks/bench_rest_unseen.py``; ``tests/test_rest_unseen.py``).
 
     Parameters
     ----------
@@ -323,8 +325,8 @@ def centring_input(model: Any, level: float) -> np.ndarray:
     ``from_rest`` is false) the rest level ``u_rest`` is the record's first input, a point of
     its motion, and the model's state there is nothing a stage rests in: started from it and
     ramped to another level, the model sits on a branch of its loop that a resting stage need
-    not (on the Bouc-Wen look-alike of stage A cut mid-motion, 0.1-0.3 um off records that
-    begin at rest, the linear model 0.02-0.29). From its rest this input swings about
+    not (on the Bouc-Wen look-alike of stage A cut mid-motion, 0.15-0.32 um off records that
+    begin at rest, the linear model 0.023-0.29). From its rest this input swings about
     ``level`` in a triangle inside the envelope (widened to take ``level`` in), the first swing
     to the envelope's farther end and every later one :data:`CENTRE_DECAY` of the one before,
     down to :data:`CENTRE_LAST` of the first, at half the envelope's slew: every play or relay

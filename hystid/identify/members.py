@@ -359,7 +359,7 @@ def _whole_fit(name: str, record: Record, head_fit: IdentificationResult,
     A's ``prbn_1`` with its rest cut to 0.1 s or 62 ms, the head (its first 70 % of excitation)
     put ``pi-stage``'s slow pole at 0.9993 or 0.9964 instead of 0.99987, and the whole fit
     from there left 51 or 50 nm of residual where a fit from the member's own starts leaves
-    26-27 (73-107 nm held out on the other five records against 25-35). The second fit costs
+    26-27 (73-107 nm held out on the other five records against 25-36). The second fit costs
     about 0.6 s on stage A's 20 001 samples.
     """
     if MEMBERS[name].kind != "pi":
