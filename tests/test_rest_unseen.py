@@ -157,3 +157,26 @@ def test_hystid_simulate_starts_the_model_as_the_figures_do(stage_a_cut, tmp_pat
                                rtol=0, atol=1e-9)
     # from its fictitious rest, stepped to the record's first input, it was far off
     assert np.max(np.abs(written - loaded.simulate(rec.u, check=False).y)) > 0.1
+
+
+def test_compensating_with_a_model_that_never_saw_its_rest_says_so(stage_a_cut):
+    """The compensator starts from the model's rest, here a point of the cut record's motion:
+    the commands over the held-out record's rest were up to 83 V off the input applied there
+    (2 V for the model of the whole record), measured; the warning says why."""
+    from hystid.compensate import CompensationWarning, compensate
+    from hystid.errors import AdmissibilityWarning
+
+    whole, cut, held = stage_a_cut
+    moving = member("duhem").fit(cut).model
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", AdmissibilityWarning)  # its first samples saturate
+        with pytest.warns(CompensationWarning, match="never saw its stage at rest"):
+            result = compensate(moving, held[0].y)
+    assert any("never saw its stage at rest" in w for w in result.warnings)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        seen = compensate(member("duhem").fit(whole).model, held[0].y)
+    assert not any("never saw" in w for w in seen.warnings)
+    rest = rest_level(held[0].u)[2]
+    assert np.max(np.abs(result.u[:rest] - held[0].u[:rest])) > 10 * np.max(
+        np.abs(seen.u[:rest] - held[0].u[:rest]))

@@ -10,7 +10,11 @@ rest, ``at_rest()``)::
 
 * **Placement.** The model's output at rest (its sensor offset plus what L2 makes of the Duhem
   state the stage remembers at rest) is taken off the reference; the command gets the rest
-  level back. The compensator starts from the model's own state at rest.
+  level back. The compensator starts from the model's own state at rest; for a model
+  identified on a record that began in motion (``envelope.from_rest`` false) that rest is a
+  point of the record's motion, which a :class:`CompensationWarning` says (on the stage-A
+  look-alike, such a model's commands were up to 83 V off the applied input over the held-out
+  record's rest, against 2 V for a model that saw its rest).
 * **L2 inverted dynamically**, by its stable inverse
   (:func:`~hystid.compensate.linear_parts.inverse_filter`): exact for a minimum-phase L2; zeros
   outside the unit circle are inverted anti-causally (pre-actuation within
@@ -381,6 +385,14 @@ def compensate(
                      f"model's output at rest ({y_rest:.6g}): the stage cannot jump there, the "
                      "first samples are not tracked (anchor='reference' takes the reference's "
                      "start as the rest)")
+    env = getattr(model, "envelope", None)
+    if env is not None and not env.from_rest:
+        notes.append(f"the model never saw its stage at rest (it was identified on a record "
+                     f"that began in motion): its rest level {model.u_rest:.6g} "
+                     f"{_unit(model, 'u')} and its state there are a point of that record's "
+                     "motion, and the compensator starts from them; the first commands move "
+                     "from there (identify on a record that begins at rest to compensate from "
+                     "rest)")
     run, y_des = plan.run(y, y_rest)
     u = run.u + plan.u_rest
     with warnings.catch_warnings():
