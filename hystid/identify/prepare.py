@@ -490,7 +490,9 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
         else y_med
     if not at_rest:
         notes.append("the record does not start at rest (no leading constant input); the "
-                     "start is simulated but left out of the fit")
+                     "start is simulated but left out of the fit, and the model, which does "
+                     "not see the stage at rest, starts other records at its loop's centre "
+                     "(a record that begins at rest identifies that rest)")
     skip = burn_in(u, at_rest) if skip is None else int(skip)
     if not 0 <= skip < len(u) - 1:
         raise IdentificationDataError(f"record {record.name!r}: skip={skip} leaves no samples "
