@@ -96,7 +96,8 @@ def measure(quick: bool = False) -> dict:
     -------
     dict
         ``cases``: per case the whole record's scores and, per cut, the member chosen, the
-        scores now and ``before`` (RMS in um per held-out record), and the ``pi-stage``
+        scores now and ``before`` (RMS in um per held-out record), the on-line identifier's
+        (``method="online"``, its member and scores), and the ``pi-stage``
         member's fit on the cut (its scores and the drift of the sensor's zero it estimated,
         um/s).
     """
@@ -116,9 +117,12 @@ def measure(quick: bool = False) -> dict:
                 model = result.model
                 model.envelope = dataclasses.replace(model.envelope, from_rest=True)
                 before = _scores(model, train, held)["model"]
+                online = identify(train, method="online")
                 pi = member("pi-stage").fit(train)
                 row["cuts"].append({"seconds": cut, "member": result.info.get("model"),
                                     "u0": float(train.u[0]), **now, "before": before,
+                                    "online": _scores(online.model, train, held)["model"],
+                                    "online_member": online.info.get("model"),
                                     "pi_stage": _scores(pi.model, train, held)["model"],
                                     "pi_stage_drift": pi.info["drift_per_second"]})
         out.append(row)
@@ -152,9 +156,12 @@ def render(payload: dict) -> str:
         beats = sum(m < lin for k in cuts for m, lin in zip(k["model"], k["linear"],
                                                              strict=True))
         better = sum(m < b for k in cuts for m, b in zip(k["model"], k["before"], strict=True))
+        online = [v for k in cuts for v in k["online"]]
+        ratio = max(o / m for k in cuts for o, m in zip(k["online"], k["model"], strict=True))
         rows.append([c["case"], ", ".join(f"{k['seconds']:.4g}" for k in cuts),
                      _span(before), f"**{_span(now)}**", _span(c["whole"]["model"]),
                      _span(linear), f"{better} of {len(now)}", f"{beats} of {len(now)}",
+                     f"{_span(online)} ({ratio:.2f}x)",
                      ", ".join(sorted({k["member"] for k in cuts}))])
         worse = [(k["seconds"], i) for k in cuts
                  for i, (m, lin) in enumerate(zip(k["model"], k["linear"], strict=True))
@@ -169,7 +176,8 @@ def render(payload: dict) -> str:
                          f"{_span(pi)} um off, with a drift of the sensor's zero of "
                          f"{_span(drifts)} um/s estimated.")
     head = ["case", "cut at [s]", "before [um]", "now [um]", "whole record [um]",
-            "linear [um]", "better than before", "beats linear", "chosen"]
+            "linear [um]", "better than before", "beats linear",
+            "on-line [um] (worst ratio to now)", "chosen"]
     return "\n".join([table(rows, head), *([""] + lines if lines else [])])
 
 

@@ -172,9 +172,11 @@ class Member:
         r = RULES[rule](record.u[prep.fitted], self.structure.n_operators)
         base = {"thresholds": r, "structure": self.structure, "fs": record.fs}
         if is_stage_structure(self.structure):
-            return PIStageOnline(**{**base, "warmup": short_record_warmup(record.u, self.n_params),
-                                    "settle_at_end": True, "offset": 0.0, "skip": prep.skip,
-                                    **settings})
+            # the warm-up reaches past the default burn-in (a skip given is checked as given)
+            warmup = short_record_warmup(record.u, self.n_params,
+                                         0 if "skip" in settings else prep.skip)
+            return PIStageOnline(**{**base, "warmup": warmup, "settle_at_end": True,
+                                    "offset": 0.0, "skip": prep.skip, **settings})
         return PIRecursiveIdentifier(**{**base, "u_rest": 0.0, "offset": 0.0, **settings})
 
 
@@ -187,7 +189,7 @@ WARMUP_SHARE = 0.5
 WARMUP_PER_PARAMETER = 5
 
 
-def short_record_warmup(u: np.ndarray, n_params: int) -> int:
+def short_record_warmup(u: np.ndarray, n_params: int, skip: int = 0) -> int:
     """Warm-up of the ``pi-stage`` on-line identifier for a record's input.
 
     Parameters
@@ -196,19 +198,27 @@ def short_record_warmup(u: np.ndarray, n_params: int) -> int:
         The record's input.
     n_params : int
         Parameters of the member.
+    skip : int
+        Leading samples run but not learned from (the burn-in of a record that does not begin
+        at rest).
 
     Returns
     -------
     int
         :data:`WARMUP`, or :data:`WARMUP_SHARE` of the excited samples (those from the first
         that leaves ``u[0]``) when that is fewer, but at least
-        :data:`WARMUP_PER_PARAMETER` ``n_params`` (a record too short for that is refused by
-        the identifier, which says so).
+        :data:`WARMUP_PER_PARAMETER` ``n_params`` of them after ``skip`` (a record too short
+        for that is refused by the identifier, which says so). A piece of measured stage A's
+        ``prbn_1`` cut 0.05 s into its excitation has a burn-in of 2 375 samples, longer than
+        :data:`WARMUP`: the warm-up had nothing left to learn from and ``identify(...,
+        method="online")`` refused the record.
     """
     u = np.asarray(u, float)
     moved = np.flatnonzero(np.abs(u - u[0]) > 0.0) if u.size else np.array([], int)
-    excited = u.size - int(moved[0]) if moved.size else 0
-    return int(max(WARMUP_PER_PARAMETER * n_params, min(WARMUP, WARMUP_SHARE * excited)))
+    first = int(moved[0]) if moved.size else u.size
+    excited = u.size - first
+    least = WARMUP_PER_PARAMETER * n_params
+    return int(max(least, min(WARMUP, WARMUP_SHARE * excited), skip - first + least))
 
 
 #: Evaluations of a PI member's polishing solve. On stage A's records the fit's optimum is the
