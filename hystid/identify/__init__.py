@@ -322,6 +322,16 @@ def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
     return result
 
 
+def _scored(record: Record, prep: Any) -> Any:
+    """The samples the batch fit scores on ``record`` (its fitted span, the weighted samples
+    with a finite output), as a boolean mask."""
+    import numpy as np
+
+    scored = np.zeros(record.n, bool)
+    scored[prep.fitted] = True
+    return scored & np.asarray(prep.weight, bool) & np.isfinite(record.y)
+
+
 #: The on-line model of ``model="auto"`` is given up for the batch fit of the choice when its
 #: error on its own record (simulated from rest, over the samples the fit scores) exceeds this
 #: many times the batch fit's.
@@ -342,9 +352,7 @@ def _online_astray(model: Any, batch: Any, record: Record) -> str | None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         prep = prepare(record)
-    scored = np.zeros(record.n, bool)
-    scored[prep.fitted] = True
-    scored &= np.asarray(prep.weight, bool) & np.isfinite(record.y)
+    scored = _scored(record, prep)
     rms = []
     for m in (model, batch):
         with np.errstate(all="ignore"), warnings.catch_warnings():
@@ -482,9 +490,7 @@ def place_after_run(model: Any, record: Record, prep: Any) -> dict[str, float] |
     # records at its loop's centre, which forgets the memory (fitted there, it took any value:
     # -6.6e7 um on a piece of stage A's prbn_1 cut mid-motion, and the model ran away from rest)
     duhem = isinstance(model, DuhemSandwich) and bool(prep.at_rest)
-    scored = np.zeros(record.n, bool)
-    scored[prep.fitted] = True
-    scored &= np.asarray(prep.weight, bool) & np.isfinite(record.y)
+    scored = _scored(record, prep)
     if np.count_nonzero(scored) < 3:
         return None
     unit = float(prep.y_scale)
