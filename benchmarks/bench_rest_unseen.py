@@ -3,9 +3,10 @@
 A record that does not begin at rest gives the model a rest level it never saw (the record's
 first input, a point of its motion). Each case below is identified with defaults on the whole
 record and on pieces of it cut where the input is at neither end of its range, and scored
-(:func:`hystid.baselines.compare`) on held-out records that begin at rest, beside the linear
-model; ``before`` is the same model started as it was before it knew that its rest was unseen
-(from that rest, ramped to the record's rest level: ``envelope.from_rest`` set true).
+(:func:`hystid.baselines.compare`) on held-out records that begin at rest, beside the static
+line and the linear model fitted on the same record; ``before`` is the same model started as
+it was before it knew that its rest was unseen (from that rest, ramped to the record's rest
+level: ``envelope.from_rest`` set true).
 
 Measured stage A (``../shared/data/real/stageA/``, when present): ``prbn_1`` (1 s of rest, 1 s
 of excitation) cut at five points of its excitation, the other five records held out. The other
@@ -81,7 +82,7 @@ def cases() -> list[tuple[str, Record, list[Record], tuple[float, ...]]]:
 
 def _scores(model, train: Record, held: list[Record]) -> dict:
     rows = compare(model, train, held).rows
-    return {"model": [r["model"] for r in rows], "linear": [r["linear"] for r in rows]}
+    return {key: [r[key] for r in rows] for key in ("model", "linear", "static_line")}
 
 
 def measure(quick: bool = False) -> dict:
@@ -135,7 +136,7 @@ def _span(values: list[float]) -> str:
 
 
 def render(payload: dict) -> str:
-    """The table: per case, the held-out RMS ranges before, now, whole record, linear.
+    """The table: per case, the held-out RMS ranges before, now, whole record, both baselines.
 
     Parameters
     ----------
@@ -153,15 +154,21 @@ def render(payload: dict) -> str:
         now = [v for k in cuts for v in k["model"]]
         before = [v for k in cuts for v in k["before"]]
         linear = [v for k in cuts for v in k["linear"]]
+        static = [v for k in cuts for v in k["static_line"]]
         beats = sum(m < lin for k in cuts for m, lin in zip(k["model"], k["linear"],
                                                              strict=True))
+        beats_line = sum(m < s for k in cuts for m, s in zip(k["model"], k["static_line"],
+                                                            strict=True))
         better = sum(m < b for k in cuts for m, b in zip(k["model"], k["before"], strict=True))
         online = [v for k in cuts for v in k["online"]]
         ratio = max(o / m for k in cuts for o, m in zip(k["online"], k["model"], strict=True))
+        online_line = sum(o < s for k in cuts for o, s in zip(k["online"], k["static_line"],
+                                                              strict=True))
         rows.append([c["case"], ", ".join(f"{k['seconds']:.4g}" for k in cuts),
                      _span(before), f"**{_span(now)}**", _span(c["whole"]["model"]),
-                     _span(linear), f"{better} of {len(now)}", f"{beats} of {len(now)}",
-                     f"{_span(online)} ({ratio:.2f}x)",
+                     _span(static), _span(linear), f"{better} of {len(now)}",
+                     f"{beats_line} / {beats} of {len(now)}",
+                     f"{_span(online)} ({ratio:.2f}x; {online_line} of {len(now)})",
                      ", ".join(sorted({k["member"] for k in cuts}))])
         worse = [(k["seconds"], i) for k in cuts
                  for i, (m, lin) in enumerate(zip(k["model"], k["linear"], strict=True))
@@ -169,6 +176,10 @@ def render(payload: dict) -> str:
         if worse:
             lines.append(f"* {c['case']}: loses to the linear model on "
                          f"{len(worse)} of {len(now)} (cut, record) pairs.")
+        if beats_line < len(now) or online_line < len(now):
+            lines.append(f"* {c['case']}: loses to the static line on "
+                         f"{len(now) - beats_line} of {len(now)} (cut, record) pairs, on-line "
+                         f"on {len(now) - online_line}.")
         pi = [v for k in cuts for v in k["pi_stage"]]
         if all(k["member"] != "pi-stage" for k in cuts):
             drifts = [abs(k["pi_stage_drift"]) for k in cuts]
@@ -176,8 +187,9 @@ def render(payload: dict) -> str:
                          f"{_span(pi)} um off, with a drift of the sensor's zero of "
                          f"{_span(drifts)} um/s estimated.")
     head = ["case", "cut at [s]", "before [um]", "now [um]", "whole record [um]",
-            "linear [um]", "better than before", "beats linear",
-            "on-line [um] (worst ratio to now)", "chosen"]
+            "static line [um]", "linear [um]", "better than before",
+            "beats static line / linear", "on-line [um] (worst ratio to now; beats static line)",
+            "chosen"]
     return "\n".join([table(rows, head), *([""] + lines if lines else [])])
 
 
