@@ -13,6 +13,12 @@ ordinary ones, after which the residual's level stays moved by as much:
   MAD) of all of them, and at least the robust spread of the residual itself;
 * the level: the residual's median over :data:`LEVEL_SECONDS` after the change less the one
   before it is :data:`PERSIST` of the change (a spike, a burst or a transient returns);
+* alone: no other change over :data:`LEVEL_SECONDS` on either side, but those within
+  :data:`SMEAR` samples of it (a sensor's filter spreads a step), is :data:`ISOLATION` of it
+  or more. A model that misses a mode leaves a residual ringing at it, every change of the
+  ringing as large as the largest: on a piece of stage A's ``prbn_1`` cut 0.05 s into its
+  excitation, the on-line ``pi-stage`` model's residual rang at 0.5 um, and one of its swings,
+  0.23 um in a sample and its level moved as much, was taken for a moved zero;
 * not within two such windows of the record's ends or of an input jump
   (:data:`~hystid.identify.prepare.JUMP_SLEWS` times the input's 99 % slew), where the
   model's own error changes fast.
@@ -31,8 +37,8 @@ import numpy as np
 from ..records import Record
 from .prepare import JUMP_SLEWS, rest_level
 
-__all__ = ["JUMP_Z", "LEVEL_SECONDS", "PERSIST", "OutputJump", "find_output_jump",
-           "residual_after_rest", "without_jump"]
+__all__ = ["ISOLATION", "JUMP_Z", "LEVEL_SECONDS", "PERSIST", "SMEAR", "OutputJump",
+           "find_output_jump", "residual_after_rest", "without_jump"]
 
 #: A change of the residual this many times the robust spread of its changes is a step.
 JUMP_Z = 12.0
@@ -41,6 +47,11 @@ JUMP_Z = 12.0
 LEVEL_SECONDS = 0.02
 #: The level's move, as a share of the step, that makes it lasting.
 PERSIST = (0.6, 1.6)
+
+#: A step stands alone: every change of the residual over :data:`LEVEL_SECONDS` on either side,
+#: but those within :data:`SMEAR` samples of it, is under this share of it.
+ISOLATION = 0.5
+SMEAR = 2
 
 #: Whether :func:`hystid.identify.identify` looks for a step after its fit (off inside the
 #: fits it runs itself: the outermost call looks once).
@@ -136,6 +147,9 @@ def find_output_jump(e: np.ndarray, u: np.ndarray, fs: float) -> OutputJump | No
         return None
     moved = float(np.nanmedian(e[k + 1:k + 1 + window]) - np.nanmedian(e[k + 1 - window:k + 1]))
     if not PERSIST[0] <= moved / step <= PERSIST[1]:
+        return None
+    around = np.r_[size[max(0, k - window):max(0, k - SMEAR)], size[k + SMEAR + 1:k + window + 1]]
+    if around.size and float(np.max(around)) >= ISOLATION * abs(step):
         return None
     return OutputJump(k + 1, step, abs(step) / spread)
 
