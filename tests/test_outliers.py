@@ -26,6 +26,7 @@ import warnings
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from hystid.baselines import compare
 from hystid.identify import identify
@@ -161,6 +162,22 @@ def test_an_input_the_stage_followed_is_not_a_glitch():
     u2 = u.copy()
     u2[1500:1510] = 500.0  # ten samples: a drive, not a glitch, whatever the output did
     assert [r for r in input_glitches(u2, y)[0] if r[0] == 1500] == []
+
+
+@pytest.mark.parametrize("hz", [2.0, 5.0, 10.0, 20.0])
+def test_the_corners_of_a_raster_triangle_are_no_glitch(hz):
+    """An AFM raster: a triangle in mV at 20 kHz after a rest. At 10 Hz each peak, one slew
+    above its neighbours, lay ten slews beyond the input's 99 % quantile and was interpolated
+    away (nine warnings, and the training input's range shrank)."""
+    fs = 20_000.0
+    t = np.arange(int(0.9 * fs)) / fs
+    phase = (t * hz) % 1.0
+    u = np.r_[np.full(1000, 1000.0), 1000.0 + 8000.0 * np.where(phase < 0.5, 2 * phase,
+                                                                 2 - 2 * phase)]
+    y = 1e-3 * signal.lfilter([0.05], [1.0, -0.95], u)  # nm, lagging the command
+    assert input_glitches(u, y)[0] == []
+    u[5000] = 9000.0 + 3 * 8000.0  # a glitch on a ramp is still one
+    assert input_glitches(u, y)[0] == [(5000, 5001)]
 
 
 def test_an_input_the_stage_followed_while_moving_is_not_a_glitch():

@@ -341,13 +341,17 @@ def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]],
     A run of at most :data:`MAX_GLITCH` samples, inside the record, more than
     :data:`FAR_SPREADS` input spreads (2 % to 98 % quantiles) from the median input, or beyond
     the input's 1 % to 99 % quantiles by more than :data:`JUMP_SLEWS` times its slew (99 %
-    quantile of its steps: a sample 100 V above the range of a stage driven over 170 V), while
-    the output over the run and the samples after it stays within the spread of its own
+    quantile of its steps: a sample 100 V above the range of a stage driven over 170 V), reached
+    by a jump of the input into the run and left by one out of it (each more than
+    :data:`JUMP_SLEWS` times its slew or its spread: the turning point of a slow triangle, a
+    step of one slew from its neighbours, lies that far beyond the quantiles once a ramp holds
+    1 000 samples, and a 10 Hz raster at 20 kHz had every peak interpolated away), while the
+    output over the run and the samples after it stays within the spread of its own
     sample-to-sample steps, about its own course (the chord from the sample before the run to
-    the end of the window: an output moving steadily is not one that reacts) or about its
-    level before the run (an input that really went there would move the stage). A model run
-    through such a sample would carry its memory (the hysteresis state, the filters) for the
-    rest of the record.
+    the end of the window: an output moving steadily is not one that reacts) or about its level
+    before the run (an input that really went there would move the stage). A model run through
+    such a sample would carry its memory (the hysteresis state, the filters) for the rest of the
+    record.
 
     Parameters
     ----------
@@ -378,7 +382,9 @@ def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]],
         while stop < len(u) and far[stop]:
             stop += 1
         inside = k > 0 and stop < len(u)
-        if inside and stop - k <= MAX_GLITCH:
+        jumps = inside and min(abs(u[k] - u[k - 1]), abs(u[stop - 1] - u[stop])) > min(
+            beyond, spread)
+        if inside and jumps and stop - k <= MAX_GLITCH:
             window = y[k - 1:min(len(y), stop + 5 * MAX_GLITCH)]
             chord = np.linspace(window[0], window[-1], len(window))
             moved = min(np.max(np.abs(window - y[k - 1])), np.max(np.abs(window - chord)))
