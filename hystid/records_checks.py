@@ -88,11 +88,14 @@ def _bursts(u: np.ndarray, y: np.ndarray, longest: float) -> list[tuple[tuple[in
     leaps = [k for k in np.flatnonzero(np.abs(dy) > limit)
              if du[max(k - 2, 0):k + 3].max(initial=0.0) <= 1.5 * u_slew]
     out = []
+    closed = -1  # the leap back of the last burst: it and the leaps before it open none
     for i, k in enumerate(leaps):
+        if k <= closed:
+            continue
         back = [j for j in leaps[i + 1:] if j - k <= longest * len(y)
                 and np.sign(dy[j]) == -np.sign(dy[k]) and abs(dy[j]) > 0.5 * abs(dy[k])]
         if back:
-            j = back[0]
+            j = closed = back[0]
             out.append(((k + 1, j + 1),
                         f"the output leaps by {dy[k]:+.4g} at sample {k + 1} and back by "
                         f"{dy[j]:+.4g} at sample {j + 1} ({j - k} samples) while the input "

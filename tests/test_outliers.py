@@ -32,6 +32,7 @@ from hystid.baselines import compare
 from hystid.identify import identify
 from hystid.identify.prepare import input_glitches, without_input_glitches
 from hystid.records import Record, RecordError
+from hystid.records_checks import burst_spans
 from hystid.testing import as_measured_suite, stage_a_like, stage_b_like
 
 #: Largest ratio of the faulty record's held-out RMS to the clean record's. Leaving out a
@@ -199,6 +200,21 @@ def test_an_output_burst_is_left_out_and_said(clean, name, model):
     y[k:k + 100] += 5.0  # a loose connector: 100 samples 5 um off (the output spans 6 um)
     _check(clean, name, model, _faulty(train, y=y, what="burst"),
            ("leaps by", f"at sample {k} ", "leave those samples out"))
+
+
+def test_two_spikes_of_opposite_signs_are_not_one_burst():
+    """A spike down and, 922 samples later, a spike up: the leap back of the first spike was
+    taken to open a burst that the second spike's leap down closed, and the 922 good samples
+    between were left out of the fit (an independently simulated Preisach stage, 5 kHz)."""
+    rng = np.random.default_rng(1)
+    n = 16_000
+    u = 5.0 + 4.0 * np.sin(np.linspace(0.0, 60.0, n))
+    y = 0.5 * u + 0.002 * rng.standard_normal(n)
+    y[8092] -= 43.0
+    y[9014] += 43.0
+    spans = burst_spans(u, y)
+    assert (8092, 8093) in spans and (9014, 9015) in spans
+    assert all(stop - first == 1 for first, stop in spans), spans
 
 
 @pytest.mark.parametrize("model", MODELS)
