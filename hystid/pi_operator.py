@@ -412,3 +412,27 @@ def _initial_states(p0, n: int) -> np.ndarray:
     if p.shape != (n,) or not np.all(np.isfinite(p)):
         raise ValueError(f"p0: expected {n} finite operator states, got shape {p.shape}")
     return p
+
+
+def admissible_weights(mu: np.ndarray, floor: float = 1e-3) -> np.ndarray:
+    """Weights with a positive loading slope: every cumulative sum at least ``floor`` times the
+    largest one (those below are raised to it, the others kept).
+
+    Parameters
+    ----------
+    mu : ndarray
+        Weights ``mu_0 .. mu_N-1`` of the play operators, thresholds increasing.
+    floor : float
+        Smallest cumulative sum kept, relative to the largest.
+
+    Returns
+    -------
+    ndarray
+        The weights, unchanged when already admissible.
+    """
+    mu = np.asarray(mu, dtype=float)
+    c = np.cumsum(mu)
+    low = floor * max(float(np.max(c)), float(np.sum(np.abs(mu))), 1e-300)
+    if np.all(c >= low):
+        return mu.copy()
+    return np.diff(np.r_[0.0, np.maximum(c, low)])

@@ -546,6 +546,16 @@ def c_sources(
     mhead, msrc = _model_part(model)
     try:
         fhead, fsrc = _ff_part(ff_plan(model, **dict(compensator or {})), model)
+        if isinstance(model, PISandwich) and not len(model.poly) \
+                and not np.all(np.cumsum(model.mu) > 0):
+            approx = ("the model's PI operator has no exact inverse (a partial sum of its "
+                      "weights is not positive): the compensator inverts the nearest operator "
+                      "whose partial sums are (hystid.compensate.linear_parts."
+                      "invertible_weights); hystid compensate gives the model's output from "
+                      "its command")
+            fhead = f"\n/* Approximate feed-forward: {approx}. */\n" + fhead
+            if notes is not None:
+                notes.append(f"approximate feed-forward compensator: {approx}")
     except ValueError as err:
         if compensator:  # options asked for explicitly: their error is the answer
             raise

@@ -504,12 +504,35 @@ def fit_pi_output_error(
                        u_rest=prep.u_rest, offset=prep.offset(fit.y0), envelope=prep.envelope,
                        units=record.units)
     info = {**fit.info(r, su, sy), "offset": model.offset, "at_rest": prep.at_rest,
-            "skip": prep.skip, "warnings": list(prep.notes) + _drift_note(fit, prep, record)}
+            "skip": prep.skip, "warnings": list(prep.notes) + _drift_note(fit, prep, record)
+            + _inverse_note(model)}
     info["drift_per_second"] = _drift_per_second(fit, prep, record)
     info["drift_pieces"] = fit.pieces if drift else 0
     settings = {"n_operators": len(r), "offset": offset, "drift": drift, "skip": prep.skip,
                 "max_nfev": max_nfev, "tol": tol, "samples": record.n}
     return IdentificationResult(model, "pi-batch", settings, info=info)
+
+
+def _inverse_note(model: PISandwich) -> list[str]:
+    """What a fit whose PI block has no exact inverse means for compensation (the batch fit
+    leaves the weights free: a loading curve that falls somewhere fits some stages best)."""
+    if model.is_invertible() or not (model.thresholds[0] == 0
+                                     and np.all(np.diff(model.thresholds) > 0)):
+        return []
+    low = float(np.min(np.cumsum(model.mu)))
+    if len(model.poly):
+        return [f"the model's PI block has no inverse (its least branch slope "
+                f"{model.branch_slope_min():.4g} is not positive): hystid compensate refuses "
+                "it; identify with model='pi-stage' to compensate"]
+    high = float(np.max(np.cumsum(model.mu)))
+    if not high > 0:
+        return ["the model's PI operator has no inverse (no partial sum of its weights is "
+                "positive: no branch rises): hystid compensate refuses it"]
+    return [f"the model's PI operator has no exact inverse (a partial sum of its weights is "
+            f"{low / high:.2g} times the largest, not positive: its loading curve falls "
+            "somewhere); compensate inverts "
+            "the nearest operator whose partial sums are positive and gives the model's output "
+            "from that command"]
 
 
 #: A drift of the sensor's zero estimated beside the model is said when it moves the output by

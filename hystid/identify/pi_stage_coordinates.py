@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..pi import PIStructure
+from ..pi_operator import admissible_weights
 from .pi_online_kernels import _KMAX, _theta_rows
 
 __all__ = ["admissible_weights", "is_stage_structure", "stage_from_theta", "theta_from_stage"]
@@ -100,27 +101,3 @@ def stage_from_theta(theta: np.ndarray, n_operators: int) -> np.ndarray:
     (h, n1), *_ = np.linalg.lstsq(A, b - base, rcond=None)
     m1 = n1 / h if abs(h) > 1e-12 else 0.0
     return np.r_[theta[:n], 1.0 - h, np.arctanh(np.array([p, k1, c2]) / _KMAX), m1]
-
-
-def admissible_weights(mu: np.ndarray, floor: float = 1e-3) -> np.ndarray:
-    """Weights with a positive loading slope: every cumulative sum at least ``floor`` times the
-    largest one (those below are raised to it, the others kept).
-
-    Parameters
-    ----------
-    mu : ndarray
-        Weights ``mu_0 .. mu_N-1`` of the play operators, thresholds increasing.
-    floor : float
-        Smallest cumulative sum kept, relative to the largest.
-
-    Returns
-    -------
-    ndarray
-        The weights, unchanged when already admissible.
-    """
-    mu = np.asarray(mu, dtype=float)
-    c = np.cumsum(mu)
-    low = floor * max(float(np.max(c)), float(np.sum(np.abs(mu))), 1e-300)
-    if np.all(c >= low):
-        return mu.copy()
-    return np.diff(np.r_[0.0, np.maximum(c, low)])
