@@ -17,6 +17,7 @@ import pytest
 
 from hystid import cli
 from hystid.cli import identify as identify_command
+from hystid.records import Record
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MEASURED = DATA / "real" / "piezo_sine_150V_1Hz" / "hysteresis_v_150_1hz.csv"
@@ -379,6 +380,28 @@ def test_a_holdout_that_leaves_too_little_to_fit_names_the_option(tmp_path, caps
     line = err.splitlines()[-1]
     assert code == 2 and line.startswith("hystid identify: error: --holdout 0.99: leaves")
     assert "expected at least 60 for --method batch" in line
+
+
+def test_a_holdout_past_a_long_rest_counts_the_excitation_left(tmp_path, capsys, never_fit):
+    """A record resting for 1 000 samples: --holdout 0.999 left 15 samples of excitation (and
+    the rest) to fit, which the check counted as 1 015 and let through."""
+    from hystid.testing import stage_a_like
+
+    stage_a_like("prbn", seconds=0.5, rest_seconds=0.1, seed=1).save(tmp_path / "a.csv")
+    code, _, err = run(["identify", tmp_path / "a.csv", "--holdout", "0.999"], capsys)
+    line = err.splitlines()[-1]
+    assert code == 2 and line.startswith("hystid identify: error: --holdout 0.999: leaves 5 ")
+    assert "samples of excitation" in line
+
+
+def test_a_constant_input_is_refused_as_such_with_a_holdout(tmp_path, capsys, never_fit):
+    """It was refused as "too short to hold out a part of it" (its whole input is a rest)."""
+    n = 4000
+    y = 0.1 + 1e-3 * np.random.default_rng(0).standard_normal(n)
+    Record(np.full(n, 5.0), y, 200.0, name="constant").save(tmp_path / "c.csv")
+    code, _, err = run(["identify", tmp_path / "c.csv"], capsys)
+    line = err.splitlines()[-1]
+    assert code == 2 and "the input u is constant (5)" in line and "c.csv" in line
 
 
 @pytest.mark.parametrize("member", ["pi-stage", "gduhem"])

@@ -278,8 +278,10 @@ def _split_for_validation(rec: Record, val: Record | None,
     share = getattr(args, "holdout", 0.0) or 0.0
     if share == 0.0:
         return rec, rec, 0
-    from ..identify.prepare import held_out_from
+    from ..identify.prepare import check_excitation, held_out_from, rest_level
 
+    with refused():  # a constant input is refused as such, not as a record too short
+        check_excitation(rec)
     k = held_out_from(rec.u, share)
     if k < 2 or rec.n - k < 2:
         raise CommandError(f"--holdout {share:g}: record {rec.name!r} is too short to hold out "
@@ -287,6 +289,12 @@ def _split_for_validation(rec: Record, val: Record | None,
     from ..identify import min_samples
 
     need = min_samples(args.method or "batch")
+    _, at_rest, lead = rest_level(rec.u)
+    moving = k - (lead if at_rest else 0)  # samples of excitation left to identify on
+    if moving < need:
+        raise CommandError(f"--holdout {share:g}: leaves {moving} samples of excitation of "
+                           f"record {rec.name!r} to identify on (expected at least {need} for "
+                           f"--method {args.method or 'batch'}: a smaller --holdout, or --val)")
     if k < need:
         raise CommandError(f"--holdout {share:g}: leaves {k} of the {rec.n} samples of record "
                            f"{rec.name!r} to identify on (expected at least {need} for --method "
