@@ -160,7 +160,33 @@ def record_warnings(u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
     -------
     list of str
     """
-    return output_bursts(u, y) + output_is_drift(np.arange(len(y)) / fs, y)
+    return rate_note(fs) + output_bursts(u, y) + output_is_drift(np.arange(len(y)) / fs, y)
+
+
+#: Below this sampling rate [Hz] a record is said to be unlike a positioning stage's (their
+#: records are sampled at 100 Hz to 100 kHz; a time column in milliseconds reads as 1000x less).
+SLOWEST_RATE = 50.0
+
+
+def rate_note(fs: float) -> list[str]:
+    """Whether a sampling rate is implausibly slow for a positioning stage.
+
+    Parameters
+    ----------
+    fs : float
+        Sampling rate in Hz.
+
+    Returns
+    -------
+    list of str
+        One sentence below :data:`SLOWEST_RATE`, else none. A time column ``t`` in
+        milliseconds (a 5 kHz record read as 5 Hz) was taken as seconds without a word.
+    """
+    if not fs < SLOWEST_RATE:
+        return []
+    return [f"the record is sampled at {fs:.4g} Hz, slower than a positioning stage's records "
+            "(100 Hz to 100 kHz): if its time column is not in seconds (milliseconds read "
+            "1000x slower), convert it to seconds"]
 
 
 def one_rate(u: np.ndarray, fs: float) -> tuple[float, float] | None:

@@ -399,6 +399,29 @@ def test_output_burst_and_drift_are_warned_about():
     assert any("straight line in time" in w for w in result.info["warnings"])
 
 
+def test_a_time_column_in_milliseconds_is_said(tmp_path, capsys):
+    """A 5 kHz record whose ``t`` column is in milliseconds read as 5 Hz without a word."""
+    from hystid.testing import stage_a_like
+
+    rec = stage_a_like("prbn", seconds=0.3, rest_seconds=0.05, seed=2)
+    path = tmp_path / "ms.csv"
+    np.savetxt(path, np.c_[1e3 * rec.t, rec.u, rec.y], delimiter=",", header="t,u,y",
+               comments="")
+    code, _, err = run(["identify", path, "--model", "duhem", "--quiet"], capsys)
+    assert code == 0
+    said = [line for line in err.splitlines() if "sampled at 10 Hz" in line]
+    assert len(said) == 1 and "milliseconds" in said[0]
+    code, _, err = run(["identify", folder_of(rec, tmp_path), "--model", "duhem", "--quiet"],
+                       capsys)
+    assert code == 0 and "sampled at" not in err
+
+
+def folder_of(rec: Record, tmp_path: Path) -> Path:
+    """The record saved as it is (t in seconds)."""
+    rec.save(tmp_path / "s.csv")
+    return tmp_path / "s.csv"
+
+
 def test_the_drift_check_is_not_decided_by_a_few_wild_samples():
     rec = reference_record(0.2, seed=1, noise=1e-3)
     spiked = rec.y.copy()
