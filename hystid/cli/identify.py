@@ -479,6 +479,11 @@ def _identify(args: argparse.Namespace) -> int:
             print(f"held-out RMS [{rec.units.get('y', '')}]: model {model_rms}, static line "
                   f"{row['static_line']:.4g}, linear model {row['linear']:.4g}"
                   + ("" if row["beats"] else "  -> the hysteresis model does NOT beat them"))
+        if b["rows"] and b.get("zero") == "rest":
+            print("(on a held-out record that begins at rest, each prediction, the model's and "
+                  "both baselines', is put on its measured output at rest: the static line is "
+                  "then its gain through that point, not the offset fitted on the training "
+                  "record)")
         if b["repeat_floor"] is not None:
             print(f"repeat floor (no deterministic model beats it): {b['repeat_floor']:.4g} {yu}")
         if report["converged_at"] is not None:
