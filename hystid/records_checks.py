@@ -41,7 +41,8 @@ def _robust_sigma(x: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(x - np.median(x))))
 
 
-def output_bursts(u: np.ndarray, y: np.ndarray, longest: float = 0.1) -> list[str]:
+def output_bursts(u: np.ndarray, y: np.ndarray, longest: float = 0.1,
+                  quiet: np.ndarray | None = None) -> list[str]:
     """Stretches where the output leaps away and back while the input does not leap.
 
     Parameters
@@ -50,16 +51,20 @@ def output_bursts(u: np.ndarray, y: np.ndarray, longest: float = 0.1) -> list[st
         Input and output samples.
     longest : float
         Longest burst, as a share of the record.
+    quiet : ndarray of bool, optional
+        Samples where no burst is looked for (the stage's own transient after an input jump,
+        which the fit leaves out: a lightly damped mode rings there).
 
     Returns
     -------
     list of str
         One sentence per burst found (at most three).
     """
-    return [note for _, note in _bursts(u, y, longest)]
+    return [note for _, note in _bursts(u, y, longest, quiet)]
 
 
-def burst_spans(u: np.ndarray, y: np.ndarray, longest: float = 0.1) -> list[tuple[int, int]]:
+def burst_spans(u: np.ndarray, y: np.ndarray, longest: float = 0.1,
+                quiet: np.ndarray | None = None) -> list[tuple[int, int]]:
     """The samples of each burst of :func:`output_bursts`, ``(first, stop)``.
 
     Parameters
@@ -68,16 +73,19 @@ def burst_spans(u: np.ndarray, y: np.ndarray, longest: float = 0.1) -> list[tupl
         Input and output samples.
     longest : float
         Longest burst, as a share of the record.
+    quiet : ndarray of bool, optional
+        Samples where no burst is looked for (see :func:`output_bursts`).
 
     Returns
     -------
     list of (int, int)
         The first sample away and the first sample back, per burst.
     """
-    return [span for span, _ in _bursts(u, y, longest)]
+    return [span for span, _ in _bursts(u, y, longest, quiet)]
 
 
-def _bursts(u: np.ndarray, y: np.ndarray, longest: float) -> list[tuple[tuple[int, int], str]]:
+def _bursts(u: np.ndarray, y: np.ndarray, longest: float,
+            quiet: np.ndarray | None = None) -> list[tuple[tuple[int, int], str]]:
     if len(y) < 8:
         return []
     dy, du = np.diff(y), np.abs(np.diff(u))
@@ -86,7 +94,8 @@ def _bursts(u: np.ndarray, y: np.ndarray, longest: float) -> list[tuple[tuple[in
     limit = max(BURST_SIGMAS * _robust_sigma(dy), 0.2 * spread)
     u_slew = float(np.quantile(du, 0.999)) if len(du) else 0.0
     leaps = [k for k in np.flatnonzero(np.abs(dy) > limit)
-             if du[max(k - 2, 0):k + 3].max(initial=0.0) <= 1.5 * u_slew]
+             if du[max(k - 2, 0):k + 3].max(initial=0.0) <= 1.5 * u_slew
+             and (quiet is None or not quiet[k + 1])]
     out = []
     closed = -1  # the leap back of the last burst: it and the leaps before it open none
     for i, k in enumerate(leaps):
@@ -146,7 +155,8 @@ def output_is_drift(t: np.ndarray, y: np.ndarray) -> list[str]:
     return []
 
 
-def record_warnings(u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
+def record_warnings(u: np.ndarray, y: np.ndarray, fs: float,
+                    quiet: np.ndarray | None = None) -> list[str]:
     """Every check of this module on one record.
 
     Parameters
@@ -155,12 +165,15 @@ def record_warnings(u: np.ndarray, y: np.ndarray, fs: float) -> list[str]:
         Input and output samples.
     fs : float
         Sampling rate in Hz.
+    quiet : ndarray of bool, optional
+        Samples where no burst is looked for (see :func:`output_bursts`).
 
     Returns
     -------
     list of str
     """
-    return rate_note(fs) + output_bursts(u, y) + output_is_drift(np.arange(len(y)) / fs, y)
+    return (rate_note(fs) + output_bursts(u, y, quiet=quiet)
+            + output_is_drift(np.arange(len(y)) / fs, y))
 
 
 #: Below this sampling rate [Hz] a record is said to be unlike a positioning stage's (their

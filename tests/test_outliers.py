@@ -202,6 +202,28 @@ def test_an_output_burst_is_left_out_and_said(clean, name, model):
            ("leaps by", f"at sample {k} ", "leave those samples out"))
 
 
+def test_the_ringing_after_a_step_out_of_rest_is_no_spike():
+    """A 1.8 kHz mode (damping 0.02) sampled at 5 kHz, stepped out of rest by 2.5 V (eight
+    times the input's 99.9 % slew): its ringing was reported as four output spikes, and left
+    out, on a clean record. A spike later on is still one."""
+    from hystid.identify.prepare import prepare
+
+    fs, n = 5000.0, 16_000
+    rng = np.random.default_rng(3)
+    smooth = signal.lfilter(*signal.butter(4, 80 / (fs / 2)), rng.standard_normal(n - 1000))
+    u = np.r_[np.full(1000, 2.5), 5.0 + 4.5 * smooth / np.max(np.abs(smooth))]
+    w = 2 * np.pi * 1800.0 / fs
+    pole = np.exp(-0.02 * w) * np.exp(1j * w * np.sqrt(1 - 0.02 ** 2))
+    den = np.real(np.poly([pole, np.conj(pole)]))
+    y = signal.lfilter([np.sum(den)], den, u - 2.5) + 1e-3 * rng.standard_normal(n)
+    rec = Record(u, y, fs, name="ringing")
+    assert not any("spike" in note or "leaps" in note for note in prepare(rec).notes)
+    y2 = y.copy()
+    y2[9000] += 3.0 * np.ptp(y)
+    spiked = prepare(Record(u, y2, fs, name="spiked")).notes
+    assert any("far outside" in note or "spike" in note for note in spiked), spiked
+
+
 def test_two_spikes_of_opposite_signs_are_not_one_burst():
     """A spike down and, 922 samples later, a spike up: the leap back of the first spike was
     taken to open a burst that the second spike's leap down closed, and the 922 good samples

@@ -276,7 +276,24 @@ def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, f
     return u_scale, float(med), y_scale
 
 
-def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
+#: An input step of more than this many times the input's 99.9 % slew sets the stage ringing:
+#: no output spike or burst is looked for in the samples after it (:func:`_input_jumps`).
+STEP_SLEWS = 3.0
+
+
+def _input_jumps(u: np.ndarray, slews: float = JUMP_SLEWS) -> list[tuple[int, int]]:
+    """``(j, n)`` per jump of the input inside the record (more than ``slews`` times its
+    99.9 % slew, from sample ``j - 1`` to ``j``) and the samples after it until the input has
+    travelled half its range (:func:`burn_in`): with :data:`JUMP_SLEWS`, those the fit leaves
+    out."""
+    du = np.abs(np.diff(u))
+    slew = np.quantile(du, 0.999) if len(du) else 0.0
+    return [(int(j), burn_in(u[j:], False, sweeps=0.5))
+            for j in np.flatnonzero(du[:-1] > slews * max(slew, 1e-300)) + 1]
+
+
+def bad_samples(y: np.ndarray, quiet: np.ndarray | None = None
+                ) -> tuple[np.ndarray, list[str]]:
     """Samples of ``y`` that a deterministic model should not be fitted to.
 
     * far values: more than :data:`FAR_SPREADS` output spreads (2 % to 98 % quantiles) from
@@ -292,6 +309,11 @@ def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
     ----------
     y : ndarray
         Output samples.
+    quiet : ndarray of bool, optional
+        Samples where no spike is looked for: the stage's own transient after an input jump
+        (left out of the fit by :func:`prepare`), where a lightly damped mode rings from one
+        sample to the next (an independently simulated 1.8 kHz mode at 5 kHz, after a step
+        out of rest, was reported as four output spikes on a clean record).
 
     Returns
     -------
@@ -310,6 +332,8 @@ def bad_samples(y: np.ndarray) -> tuple[np.ndarray, list[str]]:
     sigma = 1.4826 * float(np.median(np.abs(local - np.median(local)))) + 1e-300
     spike = ((np.abs(local) > SPIKE_SIGMAS * sigma) & (np.abs(local) > 0.05 * spread)
              & (apart < np.abs(local) / 3.0) & ~far)
+    if quiet is not None:
+        spike &= ~np.asarray(quiet, bool)
     if far.any():
         notes.append(f"{int(far.sum())} output samples lie far outside the output's range "
                      f"(e.g. {y[far][0]:.4g} at sample {int(np.flatnonzero(far)[0])}); left out "
@@ -488,9 +512,14 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     u_rest, at_rest, n_lead = rest_level(u)
     u_scale, y_med, y_scale = scales(u, y, u_rest)
     _check_scales(record, u_scale)
-    bad, notes = bad_samples(y)
-    notes += record_warnings(u, y, record.fs) + one_rate_note(u[n_lead:], record.fs)
-    for first, stop in burst_spans(u, y):
+    jumps = _input_jumps(u)
+    transient = np.zeros(len(u), bool)  # the stage's own transient after an input step
+    for j, n in _input_jumps(u, STEP_SLEWS):
+        transient[j:j + n] = True
+    bad, notes = bad_samples(y, quiet=transient)
+    notes += record_warnings(u, y, record.fs, quiet=transient) + one_rate_note(u[n_lead:],
+                                                                               record.fs)
+    for first, stop in burst_spans(u, y, quiet=transient):
         bad[first:stop] = True
     y_ref = float(np.median(y[:n_lead][~bad[:n_lead]])) if at_rest and (~bad[:n_lead]).any() \
         else y_med
@@ -511,8 +540,7 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
         weight[-1] = False
         notes.append(f"the input jumps by {du[-1]:.4g} on its last sample (a generator "
                      "wrapping round?); that sample is left out of the fit")
-    for j in np.flatnonzero(du[:-1] > JUMP_SLEWS * max(slew, 1e-300)) + 1:
-        n = burn_in(u[j:], False, sweeps=0.5)
+    for j, n in jumps:
         weight[j:j + n] = False
         notes.append(f"the input jumps by {du[j - 1]:.4g} at sample {j}, {du[j - 1] / slew:.0f} "
                      f"times the slew it otherwise holds; the {n} samples after it (until the "
