@@ -36,6 +36,10 @@ SLOW_START_SPAN = 0.25
 SLOW_START_GAIN = 0.5
 #: The label of that start.
 SLOW_START = "ARX mode + slow branch"
+#: The fit from that start is kept only when its slowest pole's time constant is at most this
+#: many times the excitation it was fitted on (a slower pole is a drift the record cannot tell
+#: from creep).
+SLOW_START_LONGEST = 2.0
 #: Ridge on the weights in the off-line fits: the cost is ``sum r^2 + RIDGE m |mu_n|^2`` on
 #: normalised signals (``m`` samples in the cost, ``mu_n`` the weights in normalised units, so
 #: the same in any units). Operators that the input moves only once (on the ramp out of rest)
@@ -171,6 +175,7 @@ def _solve_normalised(
     un: np.ndarray, yn: np.ndarray, weight: np.ndarray, r: np.ndarray, structure: PIStructure,
     theta0: np.ndarray | None, fit_offset: bool, max_nfev: int, tol: float,
     screen_nfev: int = SCREEN_NFEV, drift: bool = False, knot: int | None = None,
+    slow_start: bool = False,
 ) -> _NormalisedFit:
     """Output-error least squares on normalised signals, from several starts.
 
@@ -189,7 +194,8 @@ def _solve_normalised(
     """
     rows = np.flatnonzero(weight)
     problem = _PIOutputError(un, yn, rows, r, structure, fit_offset, drift and fit_offset, knot)
-    starts = _starts(un, yn, rows, r, structure, theta0, fit_offset, drift and fit_offset, knot)
+    starts = _starts(un, yn, rows, r, structure, theta0, fit_offset, drift and fit_offset, knot,
+                     slow_start)
     screened = []
     for label, (theta, y0) in starts.items():
         sol = problem.solve(problem.to_z(theta, y0),
@@ -203,7 +209,10 @@ def _solve_normalised(
         if len(starts) > 1:
             sol = problem.solve(sol.x, max_nfev, tol)
         polished.append((sol.cost, label, sol))
-    _, label, sol = min(polished, key=lambda item: item[0])
+    kept = [item for item in polished if item[1] != SLOW_START
+            or _slowest_tau(problem.split(item[2].x)[0], structure) <= SLOW_START_LONGEST
+            * _excitation_span(un, rows)]
+    _, label, sol = min(kept or polished, key=lambda item: item[0])
     theta, y0 = problem.split(sol.x)
     rms = float(np.sqrt(np.mean(problem.evaluate(sol.x)["data"] ** 2)))
     moved, pieces = problem.moved(sol.x)
@@ -213,12 +222,12 @@ def _solve_normalised(
 
 def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
             structure: PIStructure, theta0: np.ndarray | None,
-            fit_offset: bool, drift: bool = False, knot: int | None = None
-            ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+            fit_offset: bool, drift: bool = False, knot: int | None = None,
+            slow_start: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """``theta0`` alone when given; else ``L1 = L2 = z^-1``, the linear sandwich's ARX
-    blocks and, for the ``pi-stage`` shape, those blocks with a slow branch
-    (:func:`_slow_branch_start`), each with the weights (and offset) that fit best for its
-    blocks."""
+    blocks and, for the ``pi-stage`` shape with ``slow_start`` (a record that begins at rest),
+    those blocks with a slow branch (:func:`_slow_branch_start`), each with the weights (and
+    offset) that fit best for its blocks."""
     if theta0 is not None:
         if not PISandwich(theta0, r, structure).is_stable():
             raise ValueError("theta0: the start must have stable L1 and L2")
@@ -233,7 +242,7 @@ def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
         blocks["L1 = z^-1, ARX L2"] = np.where(np.isin(np.arange(len(arx)), l1), 0.0, arx)
         blocks["ARX L1, L2 = z^-1"] = np.where(np.isin(np.arange(len(arx)), l1), arx, 0.0)
     unique: dict[str, np.ndarray] = {}  # a structure without free L1 terms makes mixtures twins
-    if arx is not None and is_stage_structure(structure):
+    if slow_start and arx is not None and is_stage_structure(structure):
         slow = _slow_branch_start(arx, structure, int(rows[-1] - rows[0] + 1))
         if slow is not None:
             blocks[SLOW_START] = slow
@@ -243,6 +252,19 @@ def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
     return {label: _weights_given_blocks(theta, un, yn, rows, r, structure, fit_offset, drift,
                                          knot)
             for label, theta in unique.items()}
+
+
+def _slowest_tau(theta: np.ndarray, structure: PIStructure) -> float:
+    """The time constant of L2's slowest pole, in samples (``inf`` on the unit circle)."""
+    n = structure.n_operators + structure.n_poly
+    radius = float(np.max(np.abs(np.roots(np.r_[1.0, theta[n:n + structure.n2a]]))))
+    return -1.0 / np.log(radius) if 0.0 < radius < 1.0 else float("inf")
+
+
+def _excitation_span(un: np.ndarray, rows: np.ndarray) -> int:
+    """Samples from the first that leaves the first input to the last fitted one."""
+    moved = np.flatnonzero(un != un[0])
+    return int(rows[-1] - (moved[0] if moved.size else rows[0]) + 1)
 
 
 def _slow_branch_start(arx: np.ndarray, structure: PIStructure, span: int) -> np.ndarray | None:
@@ -256,7 +278,14 @@ def _slow_branch_start(arx: np.ndarray, structure: PIStructure, span: int) -> np
     constant of tens of samples: on measured stage A's ``prbn_1`` with its rest cut to 20 ms
     or 5 ms (0.989 against the 0.99988 of the fit), where the output-error fit from there
     stopped at 43-45 nm of residual and 80-110 nm off the other five records, against 27 nm and
-    23-41 nm from this start."""
+    23-41 nm from this start. Only on a record that begins at rest: on one in motion nothing
+    anchors the slow branch (a drift of the sensor's zero is fitted beside it), and from this
+    start a paper-like Maxwell-slip stage cut mid-motion was 0.058-0.061 um off against
+    0.057. And only when the fit from it puts L2's slowest time constant within
+    :data:`SLOW_START_LONGEST` times the excitation: from it the fit of the measured piezo's
+    first 60 % (2.7 s of a 1 Hz sine after a rest) put the pole at 0.99998 (10 s) and was
+    0.45 um off its last 40 %, where the fit kept without it (the pole at 0.99987) is 0.07 off
+    as the Duhem sandwich; on stage A the pole is 0.83 s for 1 s of excitation."""
     n = structure.n_operators + structure.n_poly
     a = arx[n:n + 3]
     roots = np.roots(np.r_[1.0, a])
@@ -434,10 +463,11 @@ def fit_pi_output_error(
     model stays stable. A small ridge (:data:`RIDGE`, on the normalised weights) keeps the
     weights of operators the input hardly moves from drifting. The starts: ``L1 = L2 = z^-1``,
     the linear sandwich's ARX blocks and the two mixtures, and for the ``pi-stage`` shape the
-    ARX blocks with a slow branch (:func:`_slow_branch_start`), each with the weights and the
-    offset fitted by linear least squares (the output is linear in both); each runs for
-    :data:`~hystid.identify.offline.SCREEN_NFEV` evaluations and the :data:`POLISHED` best
-    (and the slow branch's start) are polished, as in the off-line Duhem fit.
+    ARX blocks with a slow branch (:func:`_slow_branch_start`; on a record that begins at
+    rest), each with the weights and the offset fitted by linear least squares (the output
+    is linear in both); each runs for :data:`~hystid.identify.offline.SCREEN_NFEV`
+    evaluations and the :data:`POLISHED` best (and the slow branch's start) are polished, as
+    in the off-line Duhem fit.
 
     Parameters
     ----------
@@ -499,7 +529,7 @@ def fit_pi_output_error(
         np.asarray(theta0, dtype=float).ravel(), s, 1.0 / sy, 1.0 / su)
     knot = max(1, int(round(DRIFT_KNOT_SECONDS * record.fs)))
     fit = _solve_normalised(prep.un, prep.yn, prep.weight, r / su, s, theta0_n, offset,
-                            max_nfev, tol, drift=drift, knot=knot)
+                            max_nfev, tol, drift=drift, knot=knot, slow_start=prep.at_rest)
     model = PISandwich(_scale_weights(fit.theta, s, sy, su), r, s, fs=record.fs, name=name,
                        u_rest=prep.u_rest, offset=prep.offset(fit.y0), envelope=prep.envelope,
                        units=record.units)
