@@ -330,7 +330,10 @@ def compensate(
         An identified model (batch or on-line), with its rest level, sensor offset, envelope
         and units; L1 must be minimum phase, L2 must have no zero on the unit circle. Every
         member has an inverse: the plain Duhem block with its reversal planner, the PI operator
-        its exact inverse, the generalised Duhem block (``gduhem``) and the parallel Duhem
+        its exact inverse (when a partial sum of its weights is not positive, the nearest
+        invertible operator's, said in the warnings:
+        :func:`~hystid.compensate.linear_parts.invertible_weights`), the generalised Duhem
+        block (``gduhem``) and the parallel Duhem
         operators (``mduhem``) their per-sample inverse without look-ahead
         (:mod:`~hystid.compensate.member_inverse`: a reversal the block cannot make in one step
         is approximate for a few samples, flagged in :attr:`Compensation.status`).
