@@ -397,15 +397,13 @@ def compensate(
                      "from there (identify on a record that begins at rest to compensate from "
                      "rest)")
     weights = getattr(model, "mu", None)
-    if weights is not None and not len(getattr(model, "poly", ())) \
-            and not np.all(np.cumsum(weights) > 0):
+    if weights is not None and not len(getattr(model, "poly", ())) and not model.is_invertible():
         sums = np.cumsum(weights)
         notes.append(f"the model's PI operator has no exact inverse (a partial sum of its "
                      f"weights is {float(np.min(sums) / np.max(sums)):.2g} times the largest, "
                      "not positive: its loading curve falls somewhere); the command inverts "
-                     "the nearest "
-                     "operator whose partial sums are positive, and the model's output from it "
-                     "(y_pred, relative_error) says how far that is off")
+                     "the nearest operator whose partial sums are positive, and the model's "
+                     "output from it (y_pred, relative_error) says how far that is off")
     run, y_des = plan.run(y, y_rest)
     u = run.u + plan.u_rest
     with warnings.catch_warnings():

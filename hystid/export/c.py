@@ -546,8 +546,7 @@ def c_sources(
     mhead, msrc = _model_part(model)
     try:
         fhead, fsrc = _ff_part(ff_plan(model, **dict(compensator or {})), model)
-        if isinstance(model, PISandwich) and not len(model.poly) \
-                and not np.all(np.cumsum(model.mu) > 0):
+        if isinstance(model, PISandwich) and not len(model.poly) and not model.is_invertible():
             approx = ("the model's PI operator has no exact inverse (a partial sum of its "
                       "weights is not positive): the compensator inverts the nearest operator "
                       "whose partial sums are (hystid.compensate.linear_parts."

@@ -255,7 +255,8 @@ def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
 
 
 def _slowest_tau(theta: np.ndarray, structure: PIStructure) -> float:
-    """The time constant of L2's slowest pole, in samples (``inf`` on the unit circle)."""
+    """The time constant of L2's slowest pole, in samples (``inf`` on the unit circle), for
+    the ``pi-stage`` shape (a static L1: L2's denominator follows the weights)."""
     n = structure.n_operators + structure.n_poly
     radius = float(np.max(np.abs(np.roots(np.r_[1.0, theta[n:n + structure.n2a]]))))
     return -1.0 / np.log(radius) if 0.0 < radius < 1.0 else float("inf")
@@ -279,13 +280,14 @@ def _slow_branch_start(arx: np.ndarray, structure: PIStructure, span: int) -> np
     or 5 ms (0.989 against the 0.99988 of the fit), where the output-error fit from there
     stopped at 43-45 nm of residual and 80-110 nm off the other five records, against 27 nm and
     23-41 nm from this start. Only on a record that begins at rest: on one in motion nothing
-    anchors the slow branch (a drift of the sensor's zero is fitted beside it), and from this
-    start a paper-like Maxwell-slip stage cut mid-motion was 0.058-0.061 um off against
-    0.057. And only when the fit from it puts L2's slowest time constant within
-    :data:`SLOW_START_LONGEST` times the excitation: from it the fit of the measured piezo's
-    first 60 % (2.7 s of a 1 Hz sine after a rest) put the pole at 0.99998 (10 s) and was
-    0.45 um off its last 40 %, where the fit kept without it (the pole at 0.99987) is 0.07 off
-    as the Duhem sandwich; on stage A the pole is 0.83 s for 1 s of excitation."""
+    anchors the slow branch (a drift of the sensor's zero is fitted beside it), and with this
+    start the on-line model of a paper-like Maxwell-slip stage cut mid-motion was up to
+    2.64 um off held-out records (0.062-0.075 without it). And only when the fit from it puts
+    L2's slowest time constant within :data:`SLOW_START_LONGEST` times the excitation: on the
+    measured piezo's first 60 % (2.7 s of a 1 Hz sine after a rest) the fit from it put the
+    pole at 0.99998 (10 s), the member choice then took ``pi-stage`` and the model was 0.45 um
+    off the last 40 %, where the Duhem sandwich it keeps otherwise is 0.07. On stage A the
+    pole is 0.83 s for 1 s of excitation."""
     n = structure.n_operators + structure.n_poly
     a = arx[n:n + 3]
     roots = np.roots(np.r_[1.0, a])
