@@ -81,7 +81,14 @@ def finite_signal(
         k = int(bad[0])
         shown = repr(raw[k].strip()) if raw is not None else str(arr[k])
         if locate is not None:
-            raise error(f"value {shown} is not finite (expected a finite number)", **locate(k))
+            where = locate(k)
+            more = ""
+            if bad.size > 1:  # every bad line named (the first few), not only the first
+                key = "line" if "line" in where else "index"
+                others = [str(locate(int(j)).get(key)) for j in bad[1:6]]
+                more = (f"; {bad.size - 1} more further on ({key}s {', '.join(others)}"
+                        f"{', ...' if bad.size > 6 else ''})")
+            raise error(f"value {shown} is not finite (expected a finite number){more}", **where)
         raise error(f"{argname} has a non-finite value {shown} at sample {k} "
                     "(expected finite numbers)")
     return arr

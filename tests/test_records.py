@@ -269,6 +269,19 @@ def test_csv_bad_value_names_line_and_column(tmp_path, text, parts):
     raises(["bad.csv", f"line {17 + 1}", "column 'y'", *parts], load_record, path)
 
 
+def test_csv_several_non_finite_values_are_all_named(tmp_path):
+    """Four NaN lines: the refusal named the first only, and the user fixed them one run at a
+    time."""
+    lines = csv_lines(30)
+    for k in (5, 11, 17, 23):
+        row = lines[k].split(",")
+        row[2] = "nan"
+        lines[k] = ",".join(row)
+    path = write_lines(tmp_path / "nans.csv", lines)
+    raises(["nans.csv", "line 6", "column 'y'", "3 more further on (lines 12, 18, 24)"],
+           load_record, path)
+
+
 def test_csv_bad_value_in_headerless_file_names_role(tmp_path):
     lines = ["# comment", *[f",{k / 4!r},{k * 2},{k}" for k in range(8)]]
     lines[4] = ",0.75,oops,3"
