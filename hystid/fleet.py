@@ -46,7 +46,7 @@ __all__ = ["KINDS", "RECORD_SUFFIXES", "WORKERS_PER_CORE", "FailedSeed", "FleetE
 #: What a fleet can do with each record.
 KINDS = ("identify", "diagnose")
 #: File name endings taken as records when a folder is given.
-RECORD_SUFFIXES = (".csv", ".txt", ".npz", ".mat", ".h5", ".hdf5")
+RECORD_SUFFIXES = (".csv", ".txt", ".tsv", ".npz", ".mat", ".h5", ".hdf5")
 #: Columns every result row has (parameters follow as ``param_<name>``).
 BASE_COLUMNS = ("name", "status", "error", "train", "val", "held_out", "method", "model",
                 "samples", "fs", "u_rest", "offset", "rms_model", "rms_static_line", "rms_linear",

@@ -17,7 +17,7 @@ from hystid.records import (
 )
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-FORMATS = [".csv", ".txt", ".npz", ".mat", ".h5", ".hdf5"]
+FORMATS = [".csv", ".txt", ".tsv", ".npz", ".mat", ".h5", ".hdf5"]
 
 
 def make_record(n: int = 200, fs: float = 1000.0, name: str = "demo") -> Record:
@@ -185,6 +185,16 @@ def test_npz_loads_without_pickle(tmp_path):
     with np.load(path, allow_pickle=False) as data:
         assert set(data.files) == {"u", "y", "fs", "name", "units"}
         assert data["name"].shape == () and data["name"].dtype.kind == "U"
+
+
+def test_a_tab_separated_tsv_file_loads_and_saves_with_tabs(tmp_path):
+    """``.tsv`` was refused while the same tab-separated text loaded as ``.txt``."""
+    path = write_lines(tmp_path / "scan.tsv", ["t\tu\ty", *[f"{k / 100}\t{k % 7}\t{k % 5}"
+                                                            for k in range(50)]])
+    rec = load_record(path)
+    assert rec.fs == pytest.approx(100.0) and rec.u[8] == 1.0 and rec.y[8] == 3.0
+    rec.save(tmp_path / "again.tsv")
+    assert "t\tu\ty" in (tmp_path / "again.tsv").read_text()
 
 
 def test_save_unknown_extension(tmp_path):

@@ -3,7 +3,7 @@
 A :class:`Record` holds one experiment: the input ``u`` (typically the amplifier voltage), the
 output ``y`` (typically the measured displacement), both sampled uniformly at ``fs`` Hz.
 
-:func:`load_record` reads a record from CSV (``.csv``, ``.txt``), NumPy (``.npz``), MATLAB
+:func:`load_record` reads a record from CSV (``.csv``, ``.txt``, ``.tsv``), NumPy (``.npz``), MATLAB
 (``.mat``) or HDF5 (``.h5``, ``.hdf5``, optionally ``file.h5:group/path``) files, and
 :meth:`Record.save` writes the same formats. Every problem with the input data raises a
 :class:`RecordError` whose message names the file, the line and the column (or the array and the

@@ -107,7 +107,7 @@ def load_record(
     Parameters
     ----------
     path : str, bytes or os.PathLike
-        The file. ``.csv`` and ``.txt``: delimited text; ``.npz``; ``.mat``; ``.h5`` and
+        The file. ``.csv``, ``.txt`` and ``.tsv``: delimited text; ``.npz``; ``.mat``; ``.h5`` and
         ``.hdf5``, where ``file.h5:group/path`` reads the datasets of that group.
     fs : float, optional
         Sampling rate in Hz. Required when the file has neither a time vector ``t`` nor a stored

@@ -30,7 +30,7 @@ MAX_EXPANSION = 20
 #: Decoded bytes always allowed, whatever the file size (64 MiB).
 EXPANSION_FLOOR = 64 << 20
 
-_CSV_SUFFIXES = (".csv", ".txt")
+_CSV_SUFFIXES = (".csv", ".txt", ".tsv")
 _H5_SUFFIXES = (".h5", ".hdf5")
 _SUFFIXES = (*_CSV_SUFFIXES, ".npz", ".mat", *_H5_SUFFIXES)
 _ROLES = ("t", "u", "y")
@@ -275,7 +275,7 @@ class Record:
             the same folder and renamed over ``path`` once complete, so a failure (a full disk)
             leaves any previous file as it was:
 
-            - ``.csv`` or ``.txt``: a comment line
+            - ``.csv``, ``.txt`` or ``.tsv`` (tab-separated): a comment line
               ``# hystid record: name=..., fs=..., units u=V y=um``, the header ``t,u,y`` and one
               row per sample, numbers with 17 significant digits (exact round trip);
             - ``.npz``: arrays ``u``, ``y``, ``fs`` and 0-d unicode arrays ``name`` and ``units``
@@ -322,10 +322,11 @@ def _meta_line(rec: Record) -> str:
 
 
 def _save_csv(rec: Record, path: str | os.PathLike[str]) -> None:
+    sep = "\t" if Path(path).suffix.lower() == ".tsv" else ","
     with atomic_open(path, "w", newline="\n") as out:
         out.write(_meta_line(rec))
-        out.write("t,u,y\n")
-        np.savetxt(out, np.column_stack([rec.t, rec.u, rec.y]), fmt="%.17g", delimiter=",")
+        out.write(sep.join("tuy") + "\n")
+        np.savetxt(out, np.column_stack([rec.t, rec.u, rec.y]), fmt="%.17g", delimiter=sep)
 
 
 def _save_npz(rec: Record, path: str | os.PathLike[str]) -> None:
