@@ -171,6 +171,7 @@ def tracking_metrics(
     skip: int = 0,
     bins: int = 40,
     central: float = 0.9,
+    unit: str = "um",
 ) -> TrackingMetrics:
     """Maximum error, RMS error and the hysteresis loop width left.
 
@@ -185,6 +186,8 @@ def tracking_metrics(
     central : float
         Fraction of the reference range used for the loop width (the turning points, where
         both branches meet anyway, are left out).
+    unit : str
+        The output's unit (how :class:`TrackingMetrics` shows the figures).
 
     Returns
     -------
@@ -222,4 +225,5 @@ def tracking_metrics(
             mean_r = np.bincount(idx[rising], e[rising], minlength=bins)[both] / count_r[both]
             mean_f = np.bincount(idx[falling], e[falling], minlength=bins)[both] / count_f[both]
             width = float(np.max(np.abs(mean_f - mean_r)))
-    return TrackingMetrics(float(np.max(np.abs(e))), float(np.sqrt(np.mean(e**2))), width, len(e))
+    return TrackingMetrics(float(np.max(np.abs(e))), float(np.sqrt(np.mean(e**2))), width, len(e),
+                           str(unit))
