@@ -577,6 +577,23 @@ def baseline_orders(structure: Any) -> tuple[int, int, int]:
     return na, max(s.n1b + s.n2b, na), s.q1 + s.q2
 
 
+def _check_like(model: Any, train: Record, rec: Record) -> None:
+    """Refuse a held-out record at another sampling rate than the model's or in other units
+    than the training record's (they were scored without a word: a 10 kHz model on a 200 Hz
+    record, metres beside micrometres)."""
+    fs = float(getattr(model, "fs", train.fs))
+    if not np.isclose(rec.fs, fs, rtol=1e-9, atol=0.0):
+        raise ValueError(f"record {rec.name!r}: sampled at {rec.fs:g} Hz, the model at {fs:g} Hz "
+                         "(expected records of the same stage at the model's rate; resample "
+                         "the record or identify at its rate)")
+    for key in ("u", "y"):
+        mine, theirs = (train.units or {}).get(key), (rec.units or {}).get(key)
+        if mine and theirs and mine != theirs:
+            raise ValueError(f"record {rec.name!r}: {key} in {theirs}, the training record "
+                             f"{train.name!r} in {mine} (expected the same units; convert the "
+                             "record or give its units as the training record's)")
+
+
 def compare(model: Any, train: Record, records: Sequence[Record],
             orders: tuple[int, int, int] | None = None,
             repeats: Sequence[Record] | None = None, zero: str = "rest") -> BaselineComparison:
@@ -609,6 +626,12 @@ def compare(model: Any, train: Record, records: Sequence[Record],
     Returns
     -------
     BaselineComparison
+
+    Raises
+    ------
+    ValueError
+        For a held-out record at another sampling rate than the model's or in other units
+        than ``train``.
     """
     if zero not in ZEROS:
         raise ValueError(f"zero: expected one of {', '.join(ZEROS)}, got {zero!r}")
@@ -621,6 +644,7 @@ def compare(model: Any, train: Record, records: Sequence[Record],
 
     for item in records:
         rec, k = item if isinstance(item, tuple) else (item, None)
+        _check_like(model, train, rec)
         if k is None:
             k = burn_in(rec.u, rest_level(rec.u)[1])
         with np.errstate(over="ignore", invalid="ignore"):

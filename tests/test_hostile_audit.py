@@ -399,6 +399,25 @@ def test_output_burst_and_drift_are_warned_about():
     assert any("straight line in time" in w for w in result.info["warnings"])
 
 
+def test_compare_refuses_a_record_at_another_rate_or_in_other_units():
+    """A 10 kHz model scored on a 200 Hz record, or metres beside micrometres, gave figures
+    without a word."""
+    from hystid.baselines import compare
+    from hystid.testing import stage_a_like, with_units
+
+    train = stage_a_like("prbn", seconds=0.3, rest_seconds=0.05, seed=2)
+    held = stage_a_like("sine50", seconds=0.3, rest_seconds=0.05, seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = identify(train, model="duhem").model
+    slow = Record(held.u[::50], held.y[::50], held.fs / 50, units=held.units, name="slow")
+    with pytest.raises(ValueError, match=r"record 'slow': sampled at 200 Hz, the model at 10000"):
+        compare(model, train, [slow])
+    with pytest.raises(ValueError, match=r"y in m, the training record .* in um"):
+        compare(model, train, [with_units(held, y="m")])
+    assert len(compare(model, train, [held]).rows) == 1
+
+
 def test_a_time_column_in_milliseconds_is_said(tmp_path, capsys):
     """A 5 kHz record whose ``t`` column is in milliseconds read as 5 Hz without a word."""
     from hystid.testing import stage_a_like
