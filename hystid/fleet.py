@@ -49,7 +49,8 @@ KINDS = ("identify", "diagnose")
 RECORD_SUFFIXES = (".csv", ".txt", ".tsv", ".npz", ".mat", ".h5", ".hdf5")
 #: Columns every result row has (parameters follow as ``param_<name>``).
 BASE_COLUMNS = ("name", "status", "error", "train", "val", "held_out", "method", "model",
-                "samples", "fs", "u_rest", "offset", "rms_model", "rms_static_line", "rms_linear",
+                "samples", "fs", "u_rest", "offset", "unit", "rms_model", "rms_static_line",
+                "rms_linear",
                 "beats_baselines", "accepted", "best", "rms_nominal", "rms_final", "noise_floor",
                 "gap_closed", "seed", "seconds", "worker", "fingerprint")
 
@@ -332,6 +333,7 @@ def _diagnose_row(train, vals, settings: dict[str, Any]) -> dict[str, Any]:
 def _model_columns(model, fit_on) -> dict[str, Any]:
     return {"samples": fit_on.n, "fs": fit_on.fs, "u_rest": float(getattr(model, "u_rest", 0.0)),
             "offset": float(getattr(model, "offset", 0.0)),
+            "unit": str((fit_on.units or {}).get("y", "")),
             **{f"param_{k}": float(v) for k, v in model.params.items()}}
 
 

@@ -165,8 +165,12 @@ def test_command_line_on_an_existing_scheduler(client, fleet_dir, tmp_path, caps
     pattern = str(fleet_dir / "held" / "*.npz")
     status = main(["fleet", "identify", pattern, "--out", str(out), "--scheduler",
                    client.scheduler.address, "--quiet"])
-    assert status == 0, capsys.readouterr()
+    said = capsys.readouterr().out
+    assert status == 0, said
     assert sorted(_table(out).index) == sorted(f"{c}.npz" for c in CASES)
+    # one median per output unit (nm and um pooled into one median meant nothing)
+    assert _table(out).loc["units.npz", "unit"] == "nm"
+    assert "[nm]: median" in said and "[um]: median" in said and "over 2 records" in said
     # bad input: a clear message and exit status 2, nothing written
     assert main(["fleet", "identify", str(fleet_dir / "none*.csv"), "--out",
                  str(tmp_path / "x"), "--scheduler", client.scheduler.address]) == 2

@@ -183,8 +183,14 @@ def _fleet(args: argparse.Namespace) -> int:
     print(f"{len(table)} records: {len(ok)} ok, {len(failed)} failed")
     if len(ok):
         beats = int(ok["beats_baselines"].astype(bool).sum())
-        print(f"held-out RMS of the model: median {ok['rms_model'].median():.4g}, worst "
-              f"{ok['rms_model'].max():.4g}; beats both baselines on {beats} of {len(ok)}")
+        # one median per output unit: records in metres and in micrometres do not pool
+        units = ok["unit"].fillna("") if "unit" in ok else None
+        groups = [("", ok)] if units is None or units.nunique() <= 1 else list(ok.groupby(units))
+        for unit, rows in groups:
+            shown = f" [{unit}]" if unit else ""
+            print(f"held-out RMS of the model{shown}: median {rows['rms_model'].median():.4g}, "
+                  f"worst {rows['rms_model'].max():.4g} over {len(rows)} records")
+        print(f"beats both baselines on {beats} of {len(ok)}")
     for _, r in failed.head(10).iterrows():
         print(f"  failed {r['name']}: {r['error']}")
     if len(failed) > 10:
