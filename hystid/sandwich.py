@@ -532,7 +532,7 @@ class Sandwich(Placed):
         """
         from .response import SandwichResponse
 
-        u = finite_signal(u, "u")
+        u = finite_signal(u, "u", min_size=1)
         if x0 is not None and not isinstance(x0, InitialCondition):
             raise TypeError(f"x0: expected a hystid.InitialCondition (past signal values) or "
                             f"None (at rest), got {type(x0).__name__}")

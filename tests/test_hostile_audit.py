@@ -418,6 +418,23 @@ def test_compare_refuses_a_record_at_another_rate_or_in_other_units():
     assert len(compare(model, train, [held]).rows) == 1
 
 
+def test_an_unknown_setting_and_an_empty_input_are_named():
+    """``identify(rec, foo=1)`` raised a TypeError naming an internal function, and
+    ``model.simulate([])`` an error from inside numpy's reductions."""
+    from hystid.testing import stage_a_like
+
+    rec = stage_a_like("prbn", seconds=0.2, rest_seconds=0.05, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for kwargs in ({"model": "duhem"}, {"model": "pi-stage"},
+                       {"method": "online", "model": "duhem"}):
+            with pytest.raises(ValueError, match=r"^foo: not a setting of method="):
+                identify(rec, foo=1, **kwargs)
+        model = identify(rec, model="duhem").model
+    with pytest.raises(ValueError, match=r"u is empty \(expected at least 1 sample\)"):
+        model.simulate(np.array([]))
+
+
 def test_a_time_column_in_milliseconds_is_said(tmp_path, capsys):
     """A 5 kHz record whose ``t`` column is in milliseconds read as 5 Hz without a word."""
     from hystid.testing import stage_a_like

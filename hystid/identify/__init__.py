@@ -122,8 +122,23 @@ def identify(
         result.info["warnings"] = list(result.info.get("warnings", [])) + _rate_notes(
             record, result)
         return result
+    except TypeError as err:
+        unknown = _unknown_setting(err, settings)
+        if unknown is None:
+            raise
+        raise ValueError(f"{unknown}: not a setting of method={method!r}, model={model!r} "
+                         f"(it was passed on as {err}; see the estimator's parameters)") from err
     finally:
         CHECKING.reset(token)
+
+
+def _unknown_setting(err: TypeError, settings: dict[str, Any]) -> str | None:
+    """The setting a :class:`TypeError` says the estimator does not take, or None (a
+    setting the user gave was named as an internal function's unexpected keyword)."""
+    import re
+
+    found = re.search(r"unexpected keyword argument '([^']+)'", str(err))
+    return found.group(1) if found and found.group(1) in settings else None
 
 
 def _identify_record(record: Record, method: str, structure: Any, model: str | None,
