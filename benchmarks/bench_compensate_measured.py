@@ -8,7 +8,10 @@ stable inverse) computes the command for the record's measured displacement. Its
 to the applied voltage is set beside two linear inverses given the same desired output: the
 sandwich with its hysteresis replaced by the central line (``compensation="linear"``), and the
 output-error linear model of the sandwich's orders fitted on ``prbn_1`` (the baseline of
-``hystid identify``), inverted by its stable inverse.
+``hystid identify``), inverted by its stable inverse; and a static inverse, the least-squares
+line ``y = k u + c`` fitted on ``prbn_1``, inverted (the central line passes through the
+rest point; on an independently simulated stage a least-squares line's inverse tracked better
+than it).
 
 The measured displacement is asked for smoothed over ``--smooth`` samples without lag (a
 Hann window; the sensor noise would otherwise dither the hysteresis inverse, which wipes the
@@ -41,7 +44,7 @@ import control as ct
 import numpy as np
 from _common import table, write_json
 
-from hystid.baselines import LinearModel
+from hystid.baselines import LinearModel, StaticLine
 from hystid.compensate import compensate, smoothing_model, stable_inverse
 from hystid.identify import identify
 from hystid.records import Record, load_record
@@ -110,6 +113,7 @@ def measure(smooth: int = 21, member: str = "auto", zero: str = "model") -> dict
         model = identify(train, model=member).model
     s = model.structure
     lin_model = LinearModel.fit(train, s.n1a + s.n2a, s.n1b + s.n2b, s.q1 + s.q2)
+    line = StaticLine.fit(train)
     smoother = smoothing_model(smooth, model.dt) if smooth else None
     rows = []
     for name in HELD_OUT:
@@ -124,8 +128,10 @@ def measure(smooth: int = 21, member: str = "auto", zero: str = "model") -> dict
             raw = compensate(model, rec.y)
             exact = compensate(model, rec.y, anchor="reference")
         u_lin = linear_model_inverse(lin_model, inv.y_des, model.dt)
+        u_line = (inv.y_des - line.offset) / line.gain  # the least-squares line, inverted
         errs = {k: rec.u - u for k, u in (("inverse", inv.u), ("central_line", central.u),
-                                           ("linear_model", u_lin), ("inverse_raw", raw.u))}
+                                           ("linear_model", u_lin), ("static_line", u_line),
+                                           ("inverse_raw", raw.u))}
         row = {"record": name, "rest_samples": k0, "zero_shift": shift,
                "rms_V": {k: _rms(e) for k, e in errs.items()},
                "rms_V_excited": {k: _rms(e[k0:]) for k, e in errs.items()},
@@ -138,7 +144,8 @@ def measure(smooth: int = 21, member: str = "auto", zero: str = "model") -> dict
                "exact_share": float(np.mean(inv.exact)),
                "warnings": inv.warnings}
         v = row["rms_V"]
-        row["ratio"] = {k: v["inverse"] / v[k] for k in ("central_line", "linear_model")}
+        row["ratio"] = {k: v["inverse"] / v[k]
+                        for k in ("central_line", "linear_model", "static_line")}
         row["goals"] = {
             "within_2.5_V": v["inverse"] <= GOAL_VOLTS,
             "half_central_line": row["ratio"]["central_line"] <= GOAL_RATIO,
@@ -174,7 +181,9 @@ def render(payload: dict) -> str:
         out.append([r["record"], f"{v['inverse']:.2f} ({ve['inverse']:.2f})",
                     f"{v['central_line']:.2f} ({ve['central_line']:.2f})",
                     f"{v['linear_model']:.2f} ({ve['linear_model']:.2f})",
-                    f"{ratio['central_line']:.2f} / {ratio['linear_model']:.2f}",
+                    f"{v['static_line']:.2f} ({ve['static_line']:.2f})",
+                    f"{ratio['central_line']:.2f} / {ratio['linear_model']:.2f} / "
+                    f"{ratio['static_line']:.2f}",
                     f"{v['inverse_raw']:.2f}",
                     f"{r['self_relative']['exact']:.1e}",
                     f"{r['self_relative']['exact_settled']:.1e} ({r['settle']})",
@@ -182,7 +191,8 @@ def render(payload: dict) -> str:
                     "yes" if all(r["goals"].values()) else
                     "no: " + ", ".join(k for k, ok in r["goals"].items() if not ok)])
     return table(out, ["record", "inverse: V RMS (excited part)", "central line",
-                       "linear model", "inverse / central line / linear model",
+                       "linear model", "static line",
+                       "inverse / central line / linear model / static line",
                        "inverse, raw y", "self exact", "self exact from settle (settle)",
                        "self as used", "goals met"])
 
