@@ -114,3 +114,20 @@ def test_initial_condition_is_shared():
     assert list(x0.window("u", 3)) == [0.0, 1.0, 2.0]
     with pytest.raises(TypeError, match="p0"):
         duhem_member().simulate(np.zeros(5), p0=[0.0])
+
+
+
+def test_a_prefix_of_the_identification_input_stays_inside_the_envelope():
+    """A 200 Hz training input: a 3.5 V step out of rest, then a triangle with three level
+    steps of 1.5-1.9 V. Its first 4 000 of 4 200 samples read a 99.9 % slew of about 1.5 V
+    per sample against the whole record's and were warned about (the quantile of four
+    isolated steps moves with the record's length); an input faster throughout still is."""
+    t = np.arange(4001) / 200.0
+    u = np.r_[np.zeros(199), 3.5 + 2.0 * np.abs(((t + 0.25) % 1.0) - 0.5) * 2.0]
+    for k, jump in ((1800, 1.91), (2600, 1.56), (3400, 1.55)):
+        u[k:] += jump
+    env = Envelope.of(u)
+    old = Envelope.of(u[:4000]).slew > 1.1 * env.slew  # what the quantile alone said
+    assert old and env.violations(u[:4000]) == [] and env.violations(u) == []
+    faster = u[::4]  # the same input, four times as fast
+    assert any("slews" in v for v in env.violations(faster))
