@@ -277,19 +277,20 @@ def scales(u: np.ndarray, y: np.ndarray, u_rest: float) -> tuple[float, float, f
 
 
 #: An input step of more than this many times the input's 99.9 % slew sets the stage ringing:
-#: no output spike or burst is looked for in the samples after it (:func:`_input_jumps`).
+#: no output spike or burst is looked for in the samples after it (:func:`_input_steps`).
 STEP_SLEWS = 3.0
 
 
-def _input_jumps(u: np.ndarray, slews: float = JUMP_SLEWS) -> list[tuple[int, int]]:
-    """``(j, n)`` per jump of the input inside the record (more than ``slews`` times its
-    99.9 % slew, from sample ``j - 1`` to ``j``) and the samples after it until the input has
-    travelled half its range (:func:`burn_in`): with :data:`JUMP_SLEWS`, those the fit leaves
-    out."""
+def _input_steps(u: np.ndarray) -> list[tuple[int, int, float]]:
+    """``(j, n, size)`` per step of the input inside the record of more than
+    :data:`STEP_SLEWS` times its 99.9 % slew (from sample ``j - 1`` to ``j``, ``size`` in
+    slews) and the samples after it until the input has travelled half its range
+    (:func:`burn_in`). Those of more than :data:`JUMP_SLEWS` are the jumps whose samples after
+    them the fit leaves out."""
     du = np.abs(np.diff(u))
-    slew = np.quantile(du, 0.999) if len(du) else 0.0
-    return [(int(j), burn_in(u[j:], False, sweeps=0.5))
-            for j in np.flatnonzero(du[:-1] > slews * max(slew, 1e-300)) + 1]
+    slew = max(float(np.quantile(du, 0.999)) if len(du) else 0.0, 1e-300)
+    return [(int(j), burn_in(u[j:], False, sweeps=0.5), float(du[j - 1] / slew))
+            for j in np.flatnonzero(du[:-1] > STEP_SLEWS * slew) + 1]
 
 
 def bad_samples(y: np.ndarray, quiet: np.ndarray | None = None
@@ -512,9 +513,10 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     u_rest, at_rest, n_lead = rest_level(u)
     u_scale, y_med, y_scale = scales(u, y, u_rest)
     _check_scales(record, u_scale)
-    jumps = _input_jumps(u)
+    steps = _input_steps(u)
+    jumps = [(j, n) for j, n, size in steps if size > JUMP_SLEWS]
     transient = np.zeros(len(u), bool)  # the stage's own transient after an input step
-    for j, n in _input_jumps(u, STEP_SLEWS):
+    for j, n, _ in steps:
         transient[j:j + n] = True
     bad, notes = bad_samples(y, quiet=transient)
     notes += record_warnings(u, y, record.fs, quiet=transient) + one_rate_note(u[n_lead:],
