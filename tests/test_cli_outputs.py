@@ -461,3 +461,21 @@ def test_diagnose_refuses_a_model_file_of_another_rate(tmp_path, capsys):
     code, _, err = run(["diagnose", tmp_path / "a.csv", "--model", tmp_path / "m.json"], capsys)
     line = err.splitlines()[-1]
     assert code == 2 and "--model" in line and "expected the same rate" in line
+
+
+def test_a_python_warning_during_a_command_is_said_as_one_line_of_the_command(capsys):
+    """An estimator's (or numpy's) warning is the command's own line, not Python's two lines
+    with the library's file and source line."""
+    import argparse
+    import warnings
+
+    from hystid.cli.support import run_command
+
+    def steps(args):
+        warnings.warn("eria: the estimate left the admissible set", RuntimeWarning,
+                      stacklevel=1)
+        return 0
+
+    assert run_command(argparse.Namespace(prog="hystid identify"), steps) == 0
+    err = capsys.readouterr().err
+    assert err == "hystid identify: warning: eria: the estimate left the admissible set\n"

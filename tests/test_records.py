@@ -607,3 +607,34 @@ def test_units_stated_on_load_replace_the_default_label(tmp_path):
     assert load_record(path, units={"y": "nm"}).units == {"u": "V", "y": "nm"}
     with pytest.raises(RecordError, match=r"bw.csv.*units=.*expected a mapping of 'u'"):
         load_record(path, units={"x": "m"})
+
+
+@pytest.mark.parametrize("header, units", [
+    ("t,cmd_mV,pos_nm", {"u": "mV", "y": "nm"}),   # columns named, units after an underscore
+    ("t,u [V],y [nm]", {"u": "V", "y": "nm"}),     # the role and its unit in brackets
+    ("t,u (mV),y/um", {"u": "mV", "y": "um"}),
+    ("t,drive_signal,y", {"u": "V", "y": "um"}),   # 'signal' is no unit: the default label
+])
+def test_units_named_in_the_header_label_the_record(tmp_path, header, units):
+    path = tmp_path / "stage.csv"
+    path.write_text(f"{header}\n0,1,0.5\n0.001,2,1.0\n0.002,1,0.5\n")
+    u, y = header.split(",")[1:]
+    columns = None if u.startswith("u") else {"u": u, "y": y}
+    rec = load_record(path, columns=columns)
+    assert rec.units == units and rec.fs == 1000.0
+    assert load_record(path, columns=columns, units={"y": "m"}).units == {**units, "y": "m"}
+
+
+@pytest.mark.parametrize("label, scale", [("t_ms", 1e3), ("t [us]", 1e6), ("t (s)", 1.0)])
+def test_a_time_column_labelled_in_ms_or_us_is_read_in_that_unit(tmp_path, label, scale):
+    path = tmp_path / "stage.csv"
+    t = np.arange(50) / 5000.0 * scale  # 5 kHz, written in the label's unit
+    np.savetxt(path, np.c_[t, np.sin(t), np.cos(t)], delimiter=",", header=f"{label},u,y",
+               comments="")
+    assert load_record(path).fs == pytest.approx(5000.0, rel=1e-9)
+
+
+def test_a_saved_record_keeps_its_stated_units_over_its_header(tmp_path):
+    rec = Record(np.arange(5.0), np.arange(5.0), 100.0, {"u": "N", "y": "m"}, "saved")
+    rec.save(tmp_path / "r.csv")
+    assert load_record(tmp_path / "r.csv").units == {"u": "N", "y": "m"}

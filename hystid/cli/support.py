@@ -26,6 +26,7 @@ import json
 import re
 import sys
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
@@ -59,7 +60,8 @@ IDENTIFY_KERNELS = (("hystid.kernels", "simulate_into"), ("hystid.kernels", "sen
 RECORD_FILES: dict[str, str] = {}
 #: Help of ``--units``.
 UNITS_HELP = ("units of the input and output, e.g. u=N,y=m (default: those stored in the "
-              "file, else V and um; they label the numbers, the fit does not depend on them)")
+              "file, else those its CSV header names, as in cmd_mV or y [nm], else V and um; "
+              "they label the numbers, the fit does not depend on them)")
 
 #: A command's steps: the parsed command line in, the exit status out (``None`` for 0).
 Steps = Callable[[argparse.Namespace], int | None]
@@ -101,7 +103,9 @@ def run_command(args: argparse.Namespace, steps: Steps) -> int:
     safeio._CLAIMS.clear()  # the outputs of an earlier command run in this process
     RECORD_FILES.clear()  # and the records it loaded
     try:
-        return int(steps(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line(args)
+            return int(steps(args) or 0)
     except (CommandError, safeio.OutputError) as err:
         tell(args, str(err), "error")
         return EXIT_BAD_INPUT
@@ -112,6 +116,16 @@ def run_command(args: argparse.Namespace, steps: Steps) -> int:
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
+
+
+def _one_line(args: argparse.Namespace) -> Callable[..., None]:
+    """A :func:`warnings.showwarning` that says a Python warning raised during a command (an
+    estimator's, numpy's) as the command's own line, ``hystid COMMAND: warning: MESSAGE``,
+    not as Python prints it (the source file, its line, the code)."""
+    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+             file: Any = None, line: str | None = None) -> None:
+        tell(args, str(message), "warning")
+    return show
 
 
 @contextlib.contextmanager

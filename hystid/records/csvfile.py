@@ -38,6 +38,9 @@ def _load_csv(file: str, fs: float | None, roles: dict[str, str | int],
                           file=file)
     linenos, raw = _split_rows(rows, data, positions, fields, file)
     values = {role: _parse_column(raw[role], linenos, labels[role], file) for role in raw}
+    named = {} if headerless else header_units(labels)
+    if "t" in values and named.get("t", "s") != "s":
+        values["t"] = values["t"] / _TIME_UNITS[named["t"]]
     stated = _stated_fs(fs, file)
     stated_by = "fs=" if stated is not None else ""
     if stated is None and meta.get("fs") is not None:
@@ -54,9 +57,61 @@ def _load_csv(file: str, fs: float | None, roles: dict[str, str | int],
         u=values["u"],
         y=values["y"],
         fs=rate,
-        units=meta.get("units") or dict(_DEFAULT_UNITS),
+        units=meta.get("units") or {**_DEFAULT_UNITS,
+                                    **{r: v for r, v in named.items() if r in ("u", "y")}},
         name=name if name is not None else meta.get("name", Path(file).stem),
     )
+
+
+#: A unit a time column's header may name (``t_ms``, ``time [us]``), and how many of it make a
+#: second.
+_TIME_UNITS = {"s": 1.0, "ms": 1e3, "us": 1e6, "\u00b5s": 1e6}
+#: Units a header may name for the input or the output: voltages, currents, forces, lengths
+#: and angles (a name outside this list is taken for part of the column's name).
+_SIGNAL_UNITS = ("V", "mV", "kV", "uV", "A", "mA", "N", "mN", "m", "mm", "um", "\u00b5m", "nm",
+                 "pm", "rad", "mrad", "urad", "deg")
+#: A unit at the end of a header field: ``pos_nm``, ``pos nm``, ``pos [nm]``, ``pos (nm)``,
+#: ``pos/nm``.
+_UNIT_IN_LABEL = re.compile(r"(?:^|[_\s/\-]|[\[(]\s*)([A-Za-z\u00b5]+)\s*[\])]?\s*$")
+
+
+def header_units(labels: dict[str, str]) -> dict[str, str]:
+    """The units a CSV header names in its column labels (``cmd_mV``, ``pos [nm]``, ``t_ms``).
+
+    Only units this module knows are read (:data:`_TIME_UNITS` for ``t``,
+    :data:`_SIGNAL_UNITS` for ``u`` and ``y``, case as written), so that a label such as
+    ``drive_signal`` names none. A file that states its units in a hystid comment line, or
+    units given by the caller, take precedence.
+
+    Parameters
+    ----------
+    labels : dict
+        Role (``t``, ``u``, ``y``) to the header field read for it.
+
+    Returns
+    -------
+    dict
+        Role to unit, for the roles whose label ends in a known unit.
+    """
+    found = {}
+    for role, label in labels.items():
+        match = _UNIT_IN_LABEL.search(str(label).strip())
+        if match is None or match.start(1) == 0:
+            continue
+        unit = match[1]
+        known = _TIME_UNITS if role == "t" else _SIGNAL_UNITS
+        if unit in known:
+            found[role] = unit
+    return found
+
+
+def _without_unit(label: str, role: str) -> str:
+    """A header field less a unit :func:`header_units` knows at its end (``u [V]`` -> ``u``),
+    casefolded; the field casefolded when it names none."""
+    match = _UNIT_IN_LABEL.search(label)
+    if match is None or match.start(1) == 0 or not header_units({role: label}):
+        return label.casefold()
+    return label[:match.start()].strip().casefold()
 
 
 def _read_lines(file: str) -> list[str]:
@@ -161,6 +216,8 @@ def _header_positions(header: list[str], line_index: int, roles: dict[str, str |
     for role in _ROLES:
         wanted = str(roles.get(role, role))
         hits = [k for k, name in enumerate(folded) if name == wanted.casefold()]
+        if not hits and role not in roles:  # ``u [V]``, ``y_nm``, ``t (ms)``: the role and a unit
+            hits = [k for k, name in enumerate(found) if _without_unit(name, role) == role]
         if len(hits) > 1:
             raise RecordError(f"column {wanted!r} appears {len(hits)} times in the header "
                               "(expected once)", file=file, line=line_index + 1)

@@ -124,14 +124,18 @@ def load_record(
         the HDF5 group appended).
     units : mapping, optional
         The units of ``u`` and ``y``, e.g. ``{"u": "N", "y": "m"}``; they replace what the file
-        states. Without them and without units stored in the file the record says V and um,
-        which only labels the numbers (the fits do not depend on the units).
+        states. Without them, the units stored in the file (files written by
+        :meth:`Record.save`), else those a CSV header names at the end of a column's label
+        (``cmd_mV``, ``y [nm]``), else V and um, which only label the numbers (the fits do not
+        depend on the units). A CSV time column labelled in ms or us (``t_ms``, ``t [us]``)
+        is read in that unit; a header field ``u [V]`` is column ``u``.
 
     Returns
     -------
     Record
         The loaded record. Units come from ``units``, else from the file when it stores them
-        (files written by :meth:`Record.save`), else the :class:`Record` default.
+        (files written by :meth:`Record.save`), else from a CSV header's labels, else the
+        :class:`Record` default.
 
     Raises
     ------
