@@ -53,7 +53,7 @@ def test_stage_coordinates_round_trip_and_predict_as_the_sandwich():
     st = np.zeros((12, 20))
     yhat, err = np.empty(len(u)), np.empty(len(u))
     _run(phi, np.eye(25), 1.0, 1.0, 1.0, r, 0, u, np.zeros(len(u)), st, False,
-         np.zeros((0, 25)), yhat, err, np.zeros((0, 25)))
+         np.zeros((0, 25)), yhat, err, np.zeros((0, 25)), 0)
     y = model.simulate(u).y
     np.testing.assert_allclose(yhat, y, atol=1e-9 * np.max(np.abs(y)))
 
@@ -214,7 +214,7 @@ def test_branch_gradients_are_the_derivatives_of_the_prediction():
     def run(p):
         J, yhat, err = np.empty((len(u), 25)), np.empty(len(u)), np.empty(len(u))
         _run(p, np.eye(25), 1.0, 1.0, 1.0, r, 0, u, np.zeros(len(u)), np.zeros((12, 20)), False,
-             J, yhat, err, np.zeros((0, 25)))
+             J, yhat, err, np.zeros((0, 25)), 0)
         return yhat, J
 
     _, J = run(phi)

@@ -199,8 +199,9 @@ def test_on_line_identification_of_a_measured_piece_cut_mid_motion(cut):
     0.22-0.24 um where the batch fit (the Duhem sandwich there) is 0.11-0.15 and the static
     line 0.16-0.19 (measured: past issue 21's 1.25x, and worse than the static line). At
     0.23 s the on-line ``pi-stage`` identifier took the slow pole for a drift of -157 um/s and
-    was 3.1-3.2 um off: ``auto`` now says it went astray and returns its batch fit on the
-    record's first part (0.10-0.15 um)."""
+    was 3.1-3.2 um off: ``auto`` said it went astray and returned its batch fit on the
+    record's first part (0.10-0.15 um). With the arrival cost's information halved at every
+    re-solve (``PIStageOnline``'s ``arrival_decay``) it no longer goes astray there."""
     from hystid.records import load_record
 
     full = load_record(STAGE_A / "prbn_1.csv")
@@ -217,7 +218,7 @@ def test_on_line_identification_of_a_measured_piece_cut_mid_motion(cut):
     placement = online.info.get("placement") or {}
     assert placement.get("rest_memory", 0.0) == 0.0
     astray = [w for w in online.info["warnings"] if "went astray" in w]
-    assert len(astray) == (cut == 12_345), online.info["warnings"]
+    assert not astray, online.info["warnings"]
     for r, r_ref in zip(rows, ref, strict=True):
         assert np.isfinite(r["model"]) and r["model"] < 0.3, (r, r_ref)
         assert r["model"] < 2.0 * r_ref["model"], (r, r_ref)

@@ -176,8 +176,32 @@ class Member:
             warmup = short_record_warmup(record.u, self.n_params,
                                          0 if "skip" in settings else prep.skip)
             return PIStageOnline(**{**base, "warmup": warmup, "settle_at_end": True,
-                                    "offset": 0.0, "skip": prep.skip, **settings})
+                                    "offset": 0.0, "skip": prep.skip,
+                                    "left_out": left_out_spans(prep.weight, prep.skip),
+                                    **settings})
         return PIRecursiveIdentifier(**{**base, "u_rest": 0.0, "offset": 0.0, **settings})
+
+
+def left_out_spans(weight: np.ndarray, skip: int = 0) -> list[tuple[int, int]]:
+    """The spans ``[first, stop)`` of samples a batch fit leaves out of its cost (``weight``
+    false), after the burn-in of ``skip`` samples.
+
+    Parameters
+    ----------
+    weight : ndarray of bool
+        The samples the batch fit scores (:func:`~hystid.identify.prepare.prepare`).
+    skip : int
+        The burn-in, left out already.
+
+    Returns
+    -------
+    list of (int, int)
+        The spans, in order.
+    """
+    out = np.r_[False, ~np.asarray(weight, bool), False]
+    out[1:skip + 1] = False
+    edges = np.flatnonzero(np.diff(out.astype(np.int8)))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 #: Warm-up of the ``pi-stage`` on-line identifier, in excited samples (0.2 s at 10 kHz), and

@@ -174,14 +174,15 @@ def _rpem_step(phi, P, psi, e, s2, lam, max_step, nplay, n, Pg, old):
 
 
 @njit(cache=True)
-def _run(phi, P, s2, lam, max_step, r, npoly, u, y, st, learn, J, yhat, err, kept):
+def _run(phi, P, s2, lam, max_step, r, npoly, u, y, st, learn, J, yhat, err, kept, nslope):
     """Run the branches over ``u`` from the state ``st`` (updated in place); the operators are
     the plays of thresholds ``r`` and ``npoly`` polynomial terms after them.
 
     With ``learn`` each sample with a finite ``y`` updates ``phi`` and ``P``; ``J`` (one row per
     sample, or zero rows) receives the gradients; ``yhat`` and ``err`` the predictions and the
     errors (NaN where ``y`` is not finite); ``kept`` (one row per sample, or zero rows) the
-    search coordinates after each sample.
+    search coordinates after each sample. A learning step keeps the smallest cumulative sum of
+    the first ``nslope`` weights positive (or no lower than it was; 0: no such bound).
     """
     nplay = r.shape[0]
     n = nplay + npoly
@@ -202,6 +203,6 @@ def _run(phi, P, s2, lam, max_step, r, npoly, u, y, st, learn, J, yhat, err, kep
             e = y[k] - yh
             err[k] = e
             if learn:
-                _rpem_step(phi, P, psi, e, s2, lam, max_step, nplay, n, Pg, old)
+                _rpem_step(phi, P, psi, e, s2, lam, max_step, nslope, n, Pg, old)
         if track:
             kept[k, :] = phi
