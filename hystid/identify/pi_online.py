@@ -35,21 +35,32 @@ The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
    the first input value;
 2. warm-up: the first ``warmup`` excited samples (and the last samples of the rest) are fitted
    off-line once (:func:`~hystid.identify.pi_recursive.fit_pi_output_error`'s solver), a
-   bounded one-time cost;
-3. every sample: the branch states and their sensitivities are propagated and the estimate is
+   bounded one-time cost. When the model it gives predicts none of the next chunk
+   (:data:`REWARM_RATIO`), it is fitted again on every sample so far (while they are all in
+   the window), and said;
+3. two starts (``two_starts``), on a record that begins at rest: a warm-up of 0.1-0.2 s
+   cannot place a creep of a second, and its fit uses the slow branch for something faster.
+   A second identifier, started from the same fit with its slow branch as the batch fit's
+   slow-branch start, runs beside it until the window is full; the one whose model runs
+   closer to the output from rest over every sample so far is kept;
+4. every sample: the branch states and their sensitivities are propagated and the estimate is
    updated by a recursive Gauss-Newton step (a recursive prediction-error method) with a
    bounded step, kept admissible;
-4. every ``every`` excited samples (a chunk), a *background* re-solve of bounded size: a few
+5. every ``every`` excited samples (a chunk), a *background* re-solve of bounded size: a few
    Levenberg-Marquardt iterations on the last ``window`` samples, from the branch states at
    the window's start, with an arrival cost (a moving-horizon estimator): each chunk of
    samples that leaves the window is folded into a quadratic prior, linearised at the
-   estimate of the time. Its cost, ``O(window n^2)`` per iteration, is spread over the
+   estimate of the time, and the prior's information is halved at every re-solve
+   (:data:`ARRIVAL_DECAY`). Its cost, ``O(window n^2)`` per iteration, is spread over the
    samples that follow (:class:`~hystid.identify.horizon.HorizonSolve`, ``resolve_rate``
    simulated samples of work per sample), and its estimate taken at the first chunk
    boundary after it finished, the branches carried forward over the samples since its
    window ended: no ``update()`` call carries a whole re-solve, and the estimates depend on
-   sample counts only. With the default ``window`` (1 s at 10 kHz) the last re-solve on a
-   record with 1 s of excitation spans all of it.
+   sample counts only. With the default ``window`` (1 s, at least 10 000 samples) the last
+   re-solve on a record with 1 s of excitation spans all of it.
+
+Samples the caller knows to be bad (``left_out``; ``identify`` gives those its batch fit
+leaves out: the transient after a jump of the input, outliers) are run but not learned from.
 
 The drift, on a record that begins in motion (no rest pins the sensor's zero): its clock
 ``t(k)`` runs 1 over the window and is moved to 0 at every chunk boundary (``c`` is then the
@@ -62,11 +73,14 @@ straight pieces). Taken from the warm-up only, a drift that began after it was f
 stage (measured on the stage-B look-alike, a drift of 0.1 um/s from 10 s: 0.38-1.14 um
 held-out with the means removed, nothing said; now 0.069-0.081, the drift-free record's).
 
-Admissible: L2 stable (by construction) and a positive loading slope, every cumulative sum of
-the weights ``mu_0 + .. + mu_i > 0``: the warm-up fit is moved into that set
-(:func:`admissible_weights`) and a step that would leave it is halved (the re-solve damps it).
-Whatever the weights, a stable L2 after play operators keeps the output bounded for a bounded
-input: a larger input cannot make the model diverge.
+Admissible: L2 stable (by construction); with ``monotone``, a positive loading slope as well,
+every cumulative sum of the weights ``mu_0 + .. + mu_i > 0``: the warm-up fit is moved into
+that set (:func:`admissible_weights`) and a step that would leave it is halved (the re-solve
+damps it). The batch fit does not impose it, and by default neither does this identifier: on
+the helper's Bouc-Wen stage (exponent 2) the batch fit's first weight is -0.49 of the loop's
+slope, and held at 0 the on-line model was 1.2-4.3x the batch fit's held-out error off
+(0.95-1.35x without). Whatever the weights, a stable L2 after play operators keeps the output
+bounded for a bounded input: a larger input cannot make the model diverge.
 """
 
 from __future__ import annotations
@@ -858,7 +872,14 @@ class PIStageOnline(Estimator):
     def _xp_most(self) -> float:
         """The slow pole's largest search coordinate a re-solve may move to: a time constant
         of :data:`~hystid.identify.pi_batch.SLOW_START_LONGEST` times the excited samples so
-        far (the batch fit keeps its slow-branch start's fit only within that)."""
+        far (the batch fit keeps its slow-branch start's fit only within that), on a record
+        that begins at rest. Without a bound, the slow pole ran to 1.0 on the Maxwell-slip
+        creep stage of ``tests/test_pi_online_creep.py`` (6-16x the batch fit's held-out
+        error, 0.91-0.97x with it). On a record in motion there is no bound: the
+        stage-A look-alike cut 0.2 s into its excitation was 0.032-0.13 um off held-out
+        records with it, 0.019-0.11 without."""
+        if self._tracks_drift:
+            return math.inf
         seen = max(1, self.k - (self.excited_at or 0))
         return float(np.arctanh(np.exp(-1.0 / (SLOW_START_LONGEST * seen)) / _KMAX))
 
