@@ -129,9 +129,9 @@ WARMUP_SCREEN = 10
 WARMUP_NFEV = 25
 #: Default work of the running re-solve per processed sample, in simulated samples (6-10 us a
 #: sample on stage A: 20 operators, 140-250 ns a simulated sample). A re-solve there takes some
-#: 42 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
-#: window, most trials refused), so most end within the 2 000 samples of a chunk (the default
-#: ``every``); the rest of a longer one is done at its boundary. With a re-solve every 500
+#: 88 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
+#: window for each of its two starts), more than the 80 000 granted over the 2 000 samples of a
+#: chunk (the default ``every``): the rest is done at its boundary. With a re-solve every 500
 #: samples (and 150 here) the held-out figures on stage A were the same and the identifier 3x
 #: slower.
 RESOLVE_RATE = 40.0
