@@ -118,3 +118,27 @@ def test_identify_leaves_out_of_the_on_line_fit_what_it_leaves_out_of_the_batch_
     spans = online.settings["left_out"]
     assert spans and spans[0][0] == 2000  # the transient after the jump
     assert any("jumps" in w for w in online.info["warnings"])
+
+
+def test_the_monotone_bound_is_an_option():
+    rng = np.random.default_rng(4)
+    stage = creep_stage()
+    u = np.r_[np.zeros(500), noise(rng, 8000, 300.0)]
+    rec = record(stage, u, rng, "noise")
+    thresholds = pi_thresholds(u, 8)
+    bound = PIStageOnline(thresholds, fs=FS, warmup=1000, monotone=True)
+    result = quiet(bound.fit, rec)
+    assert np.min(np.cumsum(result.model.theta[:8])) > 0.0
+    assert result.info["loading_slope_min"] > 0.0 and bound.settings["monotone"] is True
+    assert PIStageOnline(thresholds, fs=FS).settings["monotone"] is False
+
+
+def test_the_start_kept_is_said():
+    rng = np.random.default_rng(1)
+    stage = creep_stage()
+    u = np.r_[np.zeros(2000), noise(rng, int(1.5 * FS), 300.0)]
+    est = PIStageOnline(pi_thresholds(u, 20), fs=FS, warmup=2000)
+    result = quiet(est.fit, record(stage, u, rng, "noise"))
+    errors = result.info["start_errors"]
+    assert set(errors) == {"warm-up fit", "slow branch"}
+    assert result.info["started_from"] == min(errors, key=errors.get) == "slow branch"

@@ -254,8 +254,7 @@ class PIStageOnline(Estimator):
         On a record that begins at rest, run a second identifier beside this one, started as
         ``slow_start`` does, until the window is full (or :meth:`settle`); then keep the one
         whose model, run from rest over every sample so far, is closer to the output (the
-        batch fit chooses among its starts alike). Twice the work per sample until then. See
-        :data:`TWO_STARTS`.
+        batch fit chooses among its starts alike). Twice the work per sample until then.
     max_step : float
         Largest change of the search coordinates in one sample (normalised units).
     epsilon : float
@@ -274,6 +273,12 @@ class PIStageOnline(Estimator):
     n_rewarms : int
         Warm-ups fitted again because the warm-up's model predicted nothing
         (:data:`REWARM_RATIO`); each is said in the result's warnings.
+    started_from : str
+        ``"warm-up fit"`` or ``"slow branch"``: the start the estimate comes from
+        (``two_starts``).
+    start_errors_ : dict
+        Once the two starts were compared: each one's RMS error run from rest over the
+        samples then, output units.
     resolve_work_ : float
         Work the re-solves have done so far, in simulated samples
         (:attr:`~hystid.identify.horizon.HorizonSolve.spent`).
@@ -481,6 +486,7 @@ class PIStageOnline(Estimator):
                 two_starts=False, monotone=self.monotone, max_step=self.max_step,
                 epsilon=self.epsilon, fs=self.fs)
         self.started_from = "warm-up fit"  # which start the estimate comes from
+        self.start_errors_: dict[str, float] | None = None
         self.n_rewarms = 0  # warm-ups fitted again (see REWARM_RATIO) ..
         self._rewarm_notes: list[str] = []  # .. and what was said of each
         self._kept_rest: np.ndarray | None = None  # the rest, while a warm-up may be redone
@@ -562,7 +568,7 @@ class PIStageOnline(Estimator):
         chunk would leave it): every excited sample is still in the chunks."""
         if self._phi is None or self._twin is None:
             return
-        if self._twin._phi is None:  # the twin's warm-up is this one's: a record in motion
+        if self._twin._phi is None:  # the twin has not warmed up yet
             return
         if len(self._chunks) >= self._keep():
             self._choose()
@@ -992,6 +998,8 @@ class PIStageOnline(Estimator):
             "drift_per_second": self.drift_per_second_,
             "drift_range": self.drift_range_,
             "rewarms": self.n_rewarms,
+            "started_from": self.started_from,
+            "start_errors": self.start_errors_,
             "warnings": drift_note(self.drift_per_second_, self.drift_range_, self._warm_rms,
                                    _output_unit(record),
                                    "samples so far: its range; the rate is the last window's")
