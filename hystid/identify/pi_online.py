@@ -56,7 +56,7 @@ The identifier (:class:`PIStageOnline`), in the recursion's normalised units:
    simulated samples of work per sample), and its estimate taken at the first chunk
    boundary after it finished, the branches carried forward over the samples since its
    window ended: no ``update()`` call carries a whole re-solve, and the estimates depend on
-   sample counts only. With the default ``window`` (1 s, at least 10 000 samples) the last
+   sample counts only. With the default ``window`` (1 s, 10 000-20 000 samples) the last
    re-solve on a record with 1 s of excitation spans all of it.
 
 Samples the caller knows to be bad (``left_out``; ``identify`` gives those its batch fit
@@ -142,6 +142,11 @@ RESOLVE_RATE = 40.0
 #: batch fit's held-out error off, 20 000 samples 0.9-1.03x.
 WINDOW_SECONDS = 1.0
 WINDOW = 10_000
+#: ... and at most this many samples: a re-solve's work grows with its window. With 1 s at
+#: 30 kHz (30 000 samples) it would be some 3 x 88 000 simulated samples on stage A's
+#: operators, about the 290 000 that 12 trials a start took there (:data:`ITERATIONS`), when
+#: the identifier ran 25 000 samples a second, below that rate.
+WINDOW_MOST = 20_000
 #: Default Levenberg-Marquardt trials per start of a re-solve. Without the monotone bound on
 #: the weights (``monotone``) a re-solve on stage A used all of its trials (12 then): 290 000
 #: simulated samples of work against 29 000 with the bound, and the identifier took 25 000
@@ -194,7 +199,8 @@ class PIStageOnline(Estimator):
         samples before the input first moves, is not counted).
     window : int, optional
         Samples of the moving-horizon re-solve (the last ``window`` samples); by default
-        :data:`WINDOW_SECONDS` of the record, at least :data:`WINDOW` samples.
+        :data:`WINDOW_SECONDS` of the record, at least :data:`WINDOW` and at most
+        :data:`WINDOW_MOST` samples.
     every : int, optional
         Excited samples between two re-solves; by default :data:`EVERY`, or the window when
         that is shorter.
@@ -356,8 +362,8 @@ class PIStageOnline(Estimator):
         self.thresholds, self.structure = r, s
         self.warmup = int(warmup)
         self.window = None if window is None else int(window)
-        self._window = (max(WINDOW, int(round(WINDOW_SECONDS * fs))) if window is None
-                        else self.window)
+        self._window = (min(WINDOW_MOST, max(WINDOW, int(round(WINDOW_SECONDS * fs))))
+                        if window is None else self.window)
         self.every = None if every is None else int(every)
         self._every = min(EVERY, self._window) if every is None else int(every)
         self.iterations, self.resolve_rate = int(iterations), float(resolve_rate)
