@@ -138,8 +138,8 @@ RESOLVE_RATE = 40.0
 #: Default window of the re-solves (:class:`PIStageOnline`'s ``window``): this many seconds,
 #: at least :data:`WINDOW` samples. A window shorter than the creep's time constant leaves the
 #: slow branch to the arrival cost: on a Maxwell-slip stage with a creep of 0.5 s at 20 kHz
-#: (``tests/test_pi_online_start.py``), 10 000 samples left the on-line model 1.3-5.2x the
-#: batch fit's held-out error off, 20 000 samples 0.9-1.03x.
+#: (``tests/test_pi_online_creep.py``), 10 000 samples left the on-line model 1.3-5.2x the
+#: batch fit's held-out error off, 20 000 samples 0.93-1.14x.
 WINDOW_SECONDS = 1.0
 WINDOW = 10_000
 #: ... and at most this many samples: a re-solve's work grows with its window. With 1 s at
