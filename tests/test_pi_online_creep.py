@@ -53,6 +53,20 @@ def record(stage, u, rng, name):
     return Record(u, stage.simulate(u)["y"] + 1e-3 * rng.standard_normal(len(u)), FS, name=name)
 
 
+def creep_records(seconds: float) -> tuple[Record, list[Record]]:
+    """The creep stage's training record (a rest, then ``seconds`` of noise) and two held-out
+    records (a 10 Hz triangle, slower noise), seed 1."""
+    rng = np.random.default_rng(1)
+    stage = creep_stage()
+    n = int(seconds * FS)
+    train = record(stage, np.r_[np.zeros(2000), noise(rng, n, 300.0)], rng, "noise")
+    t = np.arange(n) / FS
+    tri = 5.0 + 4.0 * signal.sawtooth(2 * np.pi * 10 * t, 0.5)
+    held = [record(stage, np.r_[np.zeros(1000), np.linspace(0.0, tri[0], 200), tri], rng, "tri"),
+            record(stage, np.r_[np.zeros(1000), noise(rng, n, 100.0)], rng, "slow noise")]
+    return train, held
+
+
 def quiet(fn, *args, **kwargs):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -60,14 +74,7 @@ def quiet(fn, *args, **kwargs):
 
 
 def test_a_creep_slower_than_the_warm_up_is_identified_on_line_as_in_the_batch_fit():
-    rng = np.random.default_rng(1)
-    stage = creep_stage()
-    n = int(1.5 * FS)
-    train = record(stage, np.r_[np.zeros(2000), noise(rng, n, 300.0)], rng, "noise")
-    t = np.arange(n) / FS
-    tri = 5.0 + 4.0 * signal.sawtooth(2 * np.pi * 10 * t, 0.5)
-    held = [record(stage, np.r_[np.zeros(1000), np.linspace(0.0, tri[0], 200), tri], rng, "tri"),
-            record(stage, np.r_[np.zeros(1000), noise(rng, n, 100.0)], rng, "slow noise")]
+    train, held = creep_records(1.5)
     batch = quiet(identify, train, model="pi-stage")
     online = quiet(identify, train, model="pi-stage", method="online")
     rows_b = compare(batch.model, train, held).rows
@@ -148,14 +155,7 @@ def test_the_batch_fit_finds_a_creep_half_as_long_as_its_record():
     """One second of excitation, a creep of 0.5 s: the slow-branch start needs more than the
     40 evaluations the other starts are polished for (113-124 nm off before, against the
     linear model's 207-287)."""
-    rng = np.random.default_rng(1)
-    stage = creep_stage()
-    n = int(1.0 * FS)
-    train = record(stage, np.r_[np.zeros(2000), noise(rng, n, 300.0)], rng, "noise")
-    t = np.arange(n) / FS
-    tri = 5.0 + 4.0 * signal.sawtooth(2 * np.pi * 10 * t, 0.5)
-    held = [record(stage, np.r_[np.zeros(1000), np.linspace(0.0, tri[0], 200), tri], rng, "tri"),
-            record(stage, np.r_[np.zeros(1000), noise(rng, n, 100.0)], rng, "slow noise")]
+    train, held = creep_records(1.0)
     batch = quiet(identify, train, model="pi-stage")
     assert batch.info["start"] == "ARX mode + slow branch"
     for row in compare(batch.model, train, held).rows:

@@ -97,36 +97,22 @@ from ..records import Record
 from .base import Estimator, record_signals, sample_arrays, sample_floats
 from .horizon import HorizonSolve, covariance, drain, run_steps
 from .pi_batch import (
-    DRIFT_KNOT_SECONDS,
-    SLOW_START_GAIN,
-    SLOW_START_LONGEST,
-    SLOW_START_SPAN,
-    _scale_weights,
     drift_note,
 )
-from .pi_online_kernels import _KMAX, _STATE_ROWS, _l2_stable, _run, _slope, _theta_rows
+from .pi_online_arrival import ARRIVAL_DECAY, ArrivalAndDrift
+from .pi_online_kernels import _STATE_ROWS, _l2_stable, _run, _slope, _theta_rows
+from .pi_online_warmup import _REST_KEPT, WarmUp
 from .pi_stage_coordinates import (
     admissible_weights,
     is_stage_structure,
     stage_from_theta,
     theta_from_stage,
 )
-from .prepare import REST_SAMPLES
 from .result import IdentificationResult, converged_at
 
 __all__ = ["PIStageOnline", "admissible_weights", "is_stage_structure", "stage_from_theta",
            "theta_from_stage"]
 
-#: Rest samples kept before the excitation for the warm-up fit.
-_REST_KEPT = 200
-#: Evaluations of the warm-up fit: each start screened for :data:`WARMUP_SCREEN`, the best
-#: polished for at most :data:`WARMUP_NFEV` (the batch fit's 25 and 200). The warm-up only
-#: starts the recursion: the first re-solve, in the same call, solves its samples again, and
-#: every later one the growing window. On stage A the held-out figures are the same to 0.1 nm
-#: with 254 evaluations or 45, and the warm-up call takes a fifth of the time
-#: (``benchmarks/bench_pi_online.py``).
-WARMUP_SCREEN = 10
-WARMUP_NFEV = 25
 #: Default work of the running re-solve per processed sample, in simulated samples (6-10 us a
 #: sample on stage A: 20 operators, 140-250 ns a simulated sample). A re-solve there takes some
 #: 88 000 on average (``benchmarks/bench_pi_online.py``; a few simulations of the 10 000-sample
@@ -156,31 +142,10 @@ WINDOW_MOST = 20_000
 ITERATIONS = 4
 #: Default samples between two re-solves (:class:`PIStageOnline`'s ``every``).
 EVERY = 2000
-#: The warm-up is fitted again (on every excited sample so far, while they all are in the
-#: window) when the prediction errors over a chunk after it exceed both this many times the
-#: warm-up fit's residual and :data:`REWARM_SPREAD` of the output's spread over that chunk:
-#: its model predicts nothing. On the helper's Maxwell-slip stage (20 kHz) a record that ramps
-#: for 2 000 samples before 10 s of band-limited noise was warmed up on the ramp alone: the
-#: flexure's coordinates went where their gradient vanishes, the prediction errors stayed at
-#: 93-100 % of the output's spread (700-1 700x the warm-up's residual) for 10 s, and the model
-#: was 1.3-2.0 um off held-out records (0.16-0.27 the batch fit's). On the other stages
-#: measured, the prediction error over a chunk stayed under 11x the warm-up's residual.
-REWARM_RATIO = 30.0
-REWARM_SPREAD = 0.5
-#: Default factor on the arrival cost's information at every re-solve
-#: (:class:`PIStageOnline`'s ``arrival_decay``): the information of a chunk halves with every
-#: ``every`` samples after it left the window. A chunk is folded in linearised at the
-#: estimate of the time, and the slow branch's share and pole trade off along a curved valley:
-#: kept whole, that quadratic held the estimate where it was folded. On the helper's
-#: Maxwell-slip stage (20 kHz, 1 s of excitation) the re-solve's window cost at the batch
-#: fit's estimate was 0.35 against 1.18 at the on-line one, its arrival cost 22 against 1.1:
-#: the on-line model stayed 1.31-1.53x the batch fit off held-out records, 0.96-1.05x with
-#: the decay. On measured stage A (its 1 s of excitation fits in one window) nothing changes.
-ARRIVAL_DECAY = 0.5
 
 
 # =========================================================================== the identifier
-class PIStageOnline(Estimator):
+class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
     """On-line identification of the ``pi-stage`` sandwich (see the module docstring).
 
     Keeps the estimator contract (:class:`~hystid.identify.base.Estimator`): :meth:`update`
@@ -428,25 +393,6 @@ class PIStageOnline(Estimator):
                           offset=self.offset_)
 
     @property
-    def drift_per_second_(self) -> float:
-        """The drift of the output's zero over the last window, output units per second (see
-        the class)."""
-        if not self._tracks_drift:
-            return 0.0
-        return float(self._phi[len(self.names) + 1]) * self._tick * self._sy * self.fs
-
-    @property
-    def drift_range_(self) -> float:
-        """How far the output's zero moved (its largest less its least value) over the samples
-        so far, output units: the warm-up's straight line, then the zero at each chunk's end."""
-        return (self._zeros[1] - self._zeros[0]) * self._sy
-
-    @property
-    def _tracks_drift(self) -> bool:
-        """Whether the offset and the drift are search coordinates (a record in motion)."""
-        return self._phi is not None and len(self._phi) > len(self.names)
-
-    @property
     def offset_(self) -> float:
         """The sensor's output at rest: :attr:`offset` (or the one taken from the record)
         corrected by the estimate; where the drift is tracked, the zero at the next sample."""
@@ -568,40 +514,6 @@ class PIStageOnline(Estimator):
             self._apply()
         return self.theta
 
-    # ----------------------------------------------------------------- two starts
-    def _choose_when_full(self) -> None:
-        """Choose between this identifier and its twin once the window is full (the next
-        chunk would leave it): every excited sample is still in the chunks."""
-        if self._phi is None or self._twin is None:
-            return
-        if self._twin._phi is None:  # the twin has not warmed up yet
-            return
-        if len(self._chunks) >= self._keep():
-            self._choose()
-
-    def _free_run_rms(self) -> float:
-        """RMS error of the current estimate run from rest over every sample so far (the rest
-        kept, then the window's chunks and the open one), output units."""
-        u = np.concatenate([c[0] for c in self._chunks] + [self._open[0, :self._n_open]])
-        y = np.concatenate([c[1] for c in self._chunks] + [self._open[1, :self._n_open]])
-        err = self._simulate(self._phi, self._wstate.copy(), u, y)[0]
-        err = err[np.isfinite(err)]
-        return float(np.sqrt(np.mean(err ** 2))) * self._sy if err.size else math.inf
-
-    def _choose(self) -> None:
-        """Keep this identifier or take over its twin's state, whichever's model runs closer
-        to the output from rest (:meth:`_free_run_rms`); the twin is dropped."""
-        twin, self._twin = self._twin, None
-        mine, its = self._free_run_rms(), twin._free_run_rms()
-        self.start_errors_ = {"warm-up fit": mine, "slow branch": its}
-        if its < mine:
-            keep = {name: getattr(self, name) for name in self.settings if hasattr(self, name)}
-            keep.update(thresholds=self.thresholds, structure=self.structure,
-                        two_starts=self.two_starts, start_errors_=self.start_errors_)
-            self.__dict__.update(twin.__dict__)
-            self.__dict__.update(keep)
-            self.started_from = "slow branch"
-
     def _process(self, u: np.ndarray, y: np.ndarray,
                  history: np.ndarray | None = None, errors: np.ndarray | None = None,
                  progress: Callable[[int, int], None] | None = None) -> None:
@@ -695,166 +607,9 @@ class PIStageOnline(Estimator):
         self._chunk_sq, self._chunk_n = 0.0, 0
         return True
 
-    def _predicts_nothing(self) -> bool:
-        """Whether the open chunk, just complete, says that the warm-up went wrong: its
-        prediction errors above :data:`REWARM_RATIO` times the warm-up fit's residual and
-        above :data:`REWARM_SPREAD` of the output's spread over the chunk; checked only
-        while every excited sample is still in the window (a warm-up can be fitted again)."""
-        if self._kept_rest is None or not self._chunk_n:
-            return False
-        rms = math.sqrt(self._chunk_sq / self._chunk_n)
-        yn = self._open[1, :self._n_open]
-        spread = float(np.std(yn[np.isfinite(yn)])) if np.isfinite(yn).sum() > 1 else 0.0
-        bad = rms > REWARM_RATIO * self._warm_rms / self._sy and rms > REWARM_SPREAD * spread
-        if bad:
-            self._rewarm_notes.append(
-                f"the warm-up's model predicted none of the next {self._n_open} samples "
-                f"(prediction error {rms / max(spread, 1e-300):.0%} of the output's spread, "
-                f"{rms * self._sy / max(self._warm_rms, 1e-300):.0f}x the warm-up fit's "
-                f"residual): the warm-up was fitted again on every excited sample so far")
-        return bad
-
-    def _rewarm(self) -> None:
-        """Fit the warm-up again on the rest kept and every excited sample so far (all still
-        in the window's chunks and the open one); the recursion and the re-solves start
-        again from that fit."""
-        parts = [c for c in self._chunks] + [self._open[:, :self._n_open]]
-        u = np.concatenate([c[0] for c in parts]) * self._su + (self._u0 or 0.0)
-        y = np.concatenate([c[1] for c in parts]) * self._sy + self._y0
-        self._rest = [tuple(row) for row in self._kept_rest]
-        self._buffer = list(zip(u.tolist(), y.tolist(), strict=True))
-        self._chunks, self._n_open, self._job = [], 0, None
-        self.n_rewarms += 1
-        self._warm_start()
-
-    # ----------------------------------------------------------------- warm start
-    def _warm_start(self) -> None:
-        """Fit the rest kept and the warm-up samples off-line; replay them as chunks."""
-        from .pi_batch import _fit_normalised_from_zero
-
-        t0 = time.perf_counter()
-        n = self._n_weights
-        rest = np.array(self._rest).reshape(-1, 2)
-        exc = np.array(self._buffer)
-        self._kept_rest = rest.copy()
-        if not np.isfinite(exc[:, 1]).any():
-            raise ValueError(f"the warm-up's {len(exc)} outputs are all skipped (skip={self.skip}) "
-                             "or not finite: nothing to fit; expected a skip shorter than the "
-                             "samples before the warm-up ends")
-        if self.offset is None:  # the output at rest: the leading rest's, else the first
-            seen = np.r_[rest[:, 1], exc[:, 1]]
-            seen = seen[np.isfinite(seen)]
-            at_rest = rest[:, 1][np.isfinite(rest[:, 1])]
-            self._y0 = (float(np.median(at_rest)) if at_rest.size else
-                        float(seen[0]) if seen.size else 0.0)
-        u = np.r_[rest[:, 0], exc[:, 0]] - (self._u0 or 0.0)
-        y = np.r_[rest[:, 1], exc[:, 1]] - self._y0
-        in_motion = len(rest) < REST_SAMPLES  # no rest pins the output's zero
-        if in_motion:  # the slow-branch start is for a record that begins at rest
-            self._twin = None
-        fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure,
-                                                max_nfev=WARMUP_NFEV, screen_nfev=WARMUP_SCREEN,
-                                                offset=in_motion, drift=in_motion)
-        self._su, self._sy, self._rn = su, sy, self.thresholds / su
-        self._to_record = _scale_weights(np.ones(n + 5), self.structure, sy, su)
-        phi = stage_from_theta(fit.theta, n)
-        nplay = self.structure.n_operators
-        if self.monotone:
-            phi[:nplay] = admissible_weights(phi[:nplay])
-        if self.slow_start and not in_motion:  # the slow branch as the batch fit's start
-            phi[n] = SLOW_START_GAIN
-            phi[n + 1] = np.arctanh(np.exp(-1.0 / (SLOW_START_SPAN * self._window)) / _KMAX)
-        un, yn = u / su, y / sy
-        st0 = np.zeros((_STATE_ROWS, n + 1))
-        if in_motion:  # the offset and the drift's rate: search coordinates from here on
-            phi = np.r_[phi, fit.y0, self._start_clock(fit, y, st0)]
-        self._warm_rms = fit.rms * sy
-        nr = len(rest)
-        self._wstate = self._simulate(phi, st0, un[:nr], yn[:nr])[2]
-        err, J, st = self._simulate(phi, self._wstate, un[nr:], yn[nr:])
-        seen = np.isfinite(err)
-        s2 = max(float(np.mean(err[seen] ** 2)), 1e-12)
-        # the recursion is scale-free: information in plain sums of squares, the prior's
-        # variance P0 relative to the warm-up fit's residual variance
-        self._prior = s2 / self.P0
-        self._arrival = (phi.copy(), np.eye(len(phi)) * self._prior)
-        for a in range(0, len(exc) - self._every + 1, self._every):
-            self._chunks.append((un[nr + a:nr + a + self._every],
-                                 yn[nr + a:nr + a + self._every]))
-        done = len(self._chunks) * self._every
-        left = len(exc) - done
-        self._open[0, :left], self._open[1, :left] = un[nr + done:], yn[nr + done:]
-        self._n_open = left
-        self._phi, self._st, self._solved = phi, st, phi.copy()
-        self._P = covariance(J[seen].T @ J[seen] + self._arrival[1])
-        self._buffer, self._rest = [], []
-        if self._chunks and not self._n_open:  # a first re-solve, in the warm-up's time
-            self._rereference()
-            self._launch((self._phi, self._phi))
-            self._apply()
-        self.warmup_seconds_ = time.perf_counter() - t0
-
-    def _start_clock(self, fit: Any, y: np.ndarray, st0: np.ndarray) -> float:
-        """Start the drift's clock in ``st0`` (0 at the middle of the warm-up's fitted samples,
-        1 over the window) and return the warm-up's rate per unit of it. The window spans at
-        most :data:`~hystid.identify.pi_batch.DRIFT_KNOT_SECONDS` (the batch fit's straight
-        pieces): the drift is a straight line over the window."""
-        n = self._n_weights
-        knot = max(1, int(round(DRIFT_KNOT_SECONDS * self.fs / self._every)))
-        self._span = self._every * min(self._keep(), knot)
-        self._tick = 1.0 / self._span
-        rows = np.flatnonzero(np.isfinite(y))
-        middle = 0.5 * (rows[0] + rows[-1])
-        st0[0, n], st0[1, n] = -middle * self._tick, self._tick
-        rate = fit.drift / fit.span / self._tick
-        first = fit.y0 - rate * middle * self._tick
-        last = fit.y0 + rate * (len(y) - 1 - middle) * self._tick
-        self._zeros = (min(first, last), max(first, last))
-        return rate
-
     # ----------------------------------------------------------------- moving horizon
     def _keep(self) -> int:
         return max(1, self._span // self._every)
-
-    def _rereference(self, *others: np.ndarray) -> list[np.ndarray]:
-        """Move the drift's clock to 0 at the next sample (the offset coordinate becomes the
-        zero there): the estimates, the arrival cost, the covariance and the states move with
-        it, and so do ``others`` (returned). Without a drift, nothing moves."""
-        if not self._tracks_drift:
-            return list(others)
-        n, c = self._n_weights, len(self.names)
-        shift = float(self._st[0, n])
-        T = np.eye(len(self._phi))
-        T[c, c + 1] = shift  # c' = c + d shift
-        Ti = np.eye(len(self._phi))
-        Ti[c, c + 1] = -shift
-        self._phi, self._solved = T @ self._phi, T @ self._solved
-        phi_a, R_a = self._arrival
-        self._arrival = (T @ phi_a, Ti.T @ R_a @ Ti)
-        self._P = T @ self._P @ T.T
-        for st in (self._st, self._wstate):
-            st[0, n] -= shift
-        zero = float(self._phi[c])
-        self._zeros = (min(self._zeros[0], zero), max(self._zeros[1], zero))
-        return [T @ v for v in others]
-
-    def _forget(self, arrival: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray,
-                                                                       np.ndarray]:
-        """The arrival cost once the chunks leaving the window are folded in and before the
-        window is solved: its information times :attr:`arrival_decay`, and the offset and the
-        drift's rate marginalised out (their prior restored), so that the window alone fixes
-        the drift's straight line: a rate that changes is followed once the window has passed
-        the change."""
-        phi_a, R = arrival
-        R = R * self.arrival_decay
-        if not self._tracks_drift:
-            return phi_a, R
-        c = len(self.names)
-        m, d = slice(0, c), slice(c, c + 2)
-        out = np.zeros_like(R)
-        out[m, m] = R[m, m] - R[m, d] @ np.linalg.solve(R[d, d], R[d, m])
-        out[d, d] = np.eye(2) * self._prior
-        return phi_a, out
 
     def _close_chunk(self) -> None:
         """The open chunk is complete: keep it in the window and open the next one; the
@@ -886,21 +641,6 @@ class PIStageOnline(Estimator):
         after = _slope(trial, nplay)
         return bool((after > 0 or after >= _slope(phi, nplay)) and _l2_stable(trial, n)
                     and (trial[n + 1] <= self._xp_most or trial[n + 1] <= phi[n + 1]))
-
-    @property
-    def _xp_most(self) -> float:
-        """The slow pole's largest search coordinate a re-solve may move to: a time constant
-        of :data:`~hystid.identify.pi_batch.SLOW_START_LONGEST` times the excited samples so
-        far (the batch fit keeps its slow-branch start's fit only within that), on a record
-        that begins at rest. Without a bound, the slow pole ran to 1.0 on the Maxwell-slip
-        creep stage of ``tests/test_pi_online_creep.py`` (6-16x the batch fit's held-out
-        error, 0.91-0.97x with it). On a record in motion there is no bound: the
-        stage-A look-alike cut 0.2 s into its excitation was 0.032-0.13 um off held-out
-        records with it, 0.019-0.11 without."""
-        if self._tracks_drift:
-            return math.inf
-        seen = max(1, self.k - (self.excited_at or 0))
-        return float(np.arctanh(np.exp(-1.0 / (SLOW_START_LONGEST * seen)) / _KMAX))
 
     def _launch(self, starts: tuple[np.ndarray, ...]) -> HorizonSolve:
         """A re-solve of the window's last ``window // every`` chunks (the older ones folded

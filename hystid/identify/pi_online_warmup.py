@@ -1,0 +1,196 @@
+"""The ``pi-stage`` on-line identifier's start: the warm-up fit, a warm-up fitted again when
+its model predicts nothing, the second start beside it, and the bound on the slow pole (see
+:mod:`hystid.identify.pi_online`).
+
+:class:`WarmUp` holds these steps of :class:`~hystid.identify.pi_online.PIStageOnline`, which
+inherits them; they read and set its state.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from .horizon import covariance
+from .pi_batch import SLOW_START_GAIN, SLOW_START_LONGEST, SLOW_START_SPAN, _scale_weights
+from .pi_online_kernels import _KMAX, _STATE_ROWS
+from .pi_stage_coordinates import admissible_weights, stage_from_theta
+from .prepare import REST_SAMPLES
+
+__all__ = ["REWARM_RATIO", "REWARM_SPREAD", "WARMUP_NFEV", "WARMUP_SCREEN", "WarmUp"]
+
+#: Rest samples kept before the excitation for the warm-up fit.
+_REST_KEPT = 200
+#: Evaluations of the warm-up fit: each start screened for :data:`WARMUP_SCREEN`, the best
+#: polished for at most :data:`WARMUP_NFEV` (the batch fit's 25 and 200). The warm-up only
+#: starts the recursion: the first re-solve, in the same call, solves its samples again, and
+#: every later one the growing window. On stage A the held-out figures are the same to 0.1 nm
+#: with 254 evaluations or 45, and the warm-up call takes a fifth of the time
+#: (``benchmarks/bench_pi_online.py``).
+WARMUP_SCREEN = 10
+WARMUP_NFEV = 25
+#: The warm-up is fitted again (on every excited sample so far, while they all are in the
+#: window) when the prediction errors over a chunk after it exceed both this many times the
+#: warm-up fit's residual and :data:`REWARM_SPREAD` of the output's spread over that chunk:
+#: its model predicts nothing. On the helper's Maxwell-slip stage (20 kHz) a record that ramps
+#: for 2 000 samples before 10 s of band-limited noise was warmed up on the ramp alone: the
+#: flexure's coordinates went where their gradient vanishes, the prediction errors stayed at
+#: 93-100 % of the output's spread (700-1 700x the warm-up's residual) for 10 s, and the model
+#: was 1.3-2.0 um off held-out records (0.16-0.27 the batch fit's). On the other stages
+#: measured, the prediction error over a chunk stayed under 11x the warm-up's residual.
+REWARM_RATIO = 30.0
+REWARM_SPREAD = 0.5
+
+
+class WarmUp:
+    """The warm-up, the re-warm, the two starts and the slow pole's bound of
+    :class:`~hystid.identify.pi_online.PIStageOnline` (a mixin: the state is the
+    identifier's)."""
+
+    def _choose_when_full(self) -> None:
+        """Choose between this identifier and its twin once the window is full (the next
+        chunk would leave it): every excited sample is still in the chunks."""
+        if self._phi is None or self._twin is None:
+            return
+        if self._twin._phi is None:  # the twin has not warmed up yet
+            return
+        if len(self._chunks) >= self._keep():
+            self._choose()
+
+    def _free_run_rms(self) -> float:
+        """RMS error of the current estimate run from rest over every sample so far (the rest
+        kept, then the window's chunks and the open one), output units."""
+        u = np.concatenate([c[0] for c in self._chunks] + [self._open[0, :self._n_open]])
+        y = np.concatenate([c[1] for c in self._chunks] + [self._open[1, :self._n_open]])
+        err = self._simulate(self._phi, self._wstate.copy(), u, y)[0]
+        err = err[np.isfinite(err)]
+        return float(np.sqrt(np.mean(err ** 2))) * self._sy if err.size else math.inf
+
+    def _choose(self) -> None:
+        """Keep this identifier or take over its twin's state, whichever's model runs closer
+        to the output from rest (:meth:`_free_run_rms`); the twin is dropped."""
+        twin, self._twin = self._twin, None
+        mine, its = self._free_run_rms(), twin._free_run_rms()
+        self.start_errors_ = {"warm-up fit": mine, "slow branch": its}
+        if its < mine:
+            keep = {name: getattr(self, name) for name in self.settings if hasattr(self, name)}
+            keep.update(thresholds=self.thresholds, structure=self.structure,
+                        two_starts=self.two_starts, start_errors_=self.start_errors_)
+            self.__dict__.update(twin.__dict__)
+            self.__dict__.update(keep)
+            self.started_from = "slow branch"
+
+    def _predicts_nothing(self) -> bool:
+        """Whether the open chunk, just complete, says that the warm-up went wrong: its
+        prediction errors above :data:`REWARM_RATIO` times the warm-up fit's residual and
+        above :data:`REWARM_SPREAD` of the output's spread over the chunk; checked only
+        while every excited sample is still in the window (a warm-up can be fitted again)."""
+        if self._kept_rest is None or not self._chunk_n:
+            return False
+        rms = math.sqrt(self._chunk_sq / self._chunk_n)
+        yn = self._open[1, :self._n_open]
+        spread = float(np.std(yn[np.isfinite(yn)])) if np.isfinite(yn).sum() > 1 else 0.0
+        bad = rms > REWARM_RATIO * self._warm_rms / self._sy and rms > REWARM_SPREAD * spread
+        if bad:
+            self._rewarm_notes.append(
+                f"the warm-up's model predicted none of the next {self._n_open} samples "
+                f"(prediction error {rms / max(spread, 1e-300):.0%} of the output's spread, "
+                f"{rms * self._sy / max(self._warm_rms, 1e-300):.0f}x the warm-up fit's "
+                f"residual): the warm-up was fitted again on every excited sample so far")
+        return bad
+
+    def _rewarm(self) -> None:
+        """Fit the warm-up again on the rest kept and every excited sample so far (all still
+        in the window's chunks and the open one); the recursion and the re-solves start
+        again from that fit."""
+        parts = [c for c in self._chunks] + [self._open[:, :self._n_open]]
+        u = np.concatenate([c[0] for c in parts]) * self._su + (self._u0 or 0.0)
+        y = np.concatenate([c[1] for c in parts]) * self._sy + self._y0
+        self._rest = [tuple(row) for row in self._kept_rest]
+        self._buffer = list(zip(u.tolist(), y.tolist(), strict=True))
+        self._chunks, self._n_open, self._job = [], 0, None
+        self.n_rewarms += 1
+        self._warm_start()
+
+    def _warm_start(self) -> None:
+        """Fit the rest kept and the warm-up samples off-line; replay them as chunks."""
+        from .pi_batch import _fit_normalised_from_zero
+
+        t0 = time.perf_counter()
+        n = self._n_weights
+        rest = np.array(self._rest).reshape(-1, 2)
+        exc = np.array(self._buffer)
+        self._kept_rest = rest.copy()
+        if not np.isfinite(exc[:, 1]).any():
+            raise ValueError(f"the warm-up's {len(exc)} outputs are all skipped (skip={self.skip}) "
+                             "or not finite: nothing to fit; expected a skip shorter than the "
+                             "samples before the warm-up ends")
+        if self.offset is None:  # the output at rest: the leading rest's, else the first
+            seen = np.r_[rest[:, 1], exc[:, 1]]
+            seen = seen[np.isfinite(seen)]
+            at_rest = rest[:, 1][np.isfinite(rest[:, 1])]
+            self._y0 = (float(np.median(at_rest)) if at_rest.size else
+                        float(seen[0]) if seen.size else 0.0)
+        u = np.r_[rest[:, 0], exc[:, 0]] - (self._u0 or 0.0)
+        y = np.r_[rest[:, 1], exc[:, 1]] - self._y0
+        in_motion = len(rest) < REST_SAMPLES  # no rest pins the output's zero
+        if in_motion:  # the slow-branch start is for a record that begins at rest
+            self._twin = None
+        fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure,
+                                                max_nfev=WARMUP_NFEV, screen_nfev=WARMUP_SCREEN,
+                                                offset=in_motion, drift=in_motion)
+        self._su, self._sy, self._rn = su, sy, self.thresholds / su
+        self._to_record = _scale_weights(np.ones(n + 5), self.structure, sy, su)
+        phi = stage_from_theta(fit.theta, n)
+        nplay = self.structure.n_operators
+        if self.monotone:
+            phi[:nplay] = admissible_weights(phi[:nplay])
+        if self.slow_start and not in_motion:  # the slow branch as the batch fit's start
+            phi[n] = SLOW_START_GAIN
+            phi[n + 1] = np.arctanh(np.exp(-1.0 / (SLOW_START_SPAN * self._window)) / _KMAX)
+        un, yn = u / su, y / sy
+        st0 = np.zeros((_STATE_ROWS, n + 1))
+        if in_motion:  # the offset and the drift's rate: search coordinates from here on
+            phi = np.r_[phi, fit.y0, self._start_clock(fit, y, st0)]
+        self._warm_rms = fit.rms * sy
+        nr = len(rest)
+        self._wstate = self._simulate(phi, st0, un[:nr], yn[:nr])[2]
+        err, J, st = self._simulate(phi, self._wstate, un[nr:], yn[nr:])
+        seen = np.isfinite(err)
+        s2 = max(float(np.mean(err[seen] ** 2)), 1e-12)
+        # the recursion is scale-free: information in plain sums of squares, the prior's
+        # variance P0 relative to the warm-up fit's residual variance
+        self._prior = s2 / self.P0
+        self._arrival = (phi.copy(), np.eye(len(phi)) * self._prior)
+        for a in range(0, len(exc) - self._every + 1, self._every):
+            self._chunks.append((un[nr + a:nr + a + self._every],
+                                 yn[nr + a:nr + a + self._every]))
+        done = len(self._chunks) * self._every
+        left = len(exc) - done
+        self._open[0, :left], self._open[1, :left] = un[nr + done:], yn[nr + done:]
+        self._n_open = left
+        self._phi, self._st, self._solved = phi, st, phi.copy()
+        self._P = covariance(J[seen].T @ J[seen] + self._arrival[1])
+        self._buffer, self._rest = [], []
+        if self._chunks and not self._n_open:  # a first re-solve, in the warm-up's time
+            self._rereference()
+            self._launch((self._phi, self._phi))
+            self._apply()
+        self.warmup_seconds_ = time.perf_counter() - t0
+
+    @property
+    def _xp_most(self) -> float:
+        """The slow pole's largest search coordinate a re-solve may move to: a time constant
+        of :data:`~hystid.identify.pi_batch.SLOW_START_LONGEST` times the excited samples so
+        far (the batch fit keeps its slow-branch start's fit only within that), on a record
+        that begins at rest. Without a bound, the slow pole ran to 1.0 on the Maxwell-slip
+        creep stage of ``tests/test_pi_online_creep.py`` (6-16x the batch fit's held-out
+        error, 0.91-0.97x with it). On a record in motion there is no bound: the
+        stage-A look-alike cut 0.2 s into its excitation was 0.032-0.13 um off held-out
+        records with it, 0.019-0.11 without."""
+        if self._tracks_drift:
+            return math.inf
+        seen = max(1, self.k - (self.excited_at or 0))
+        return float(np.arctanh(np.exp(-1.0 / (SLOW_START_LONGEST * seen)) / _KMAX))
