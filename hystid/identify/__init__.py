@@ -391,7 +391,11 @@ def _run_recursive(record: Record, method: str, structure: Structure | None,
     elif method == "online":
         from .online import OnlineIdentifier as estimator
     else:
-        from .ekf import KalmanIdentifier as estimator
+        from .ekf import KalmanIdentifier, ScaledRun, stated_in_units
+
+        return run_placed(record, lambda relative: ScaledRun(
+            KalmanIdentifier(structure, record.fs, **settings), relative,
+            scale=not stated_in_units(settings)), progress)
     return run_placed(record, lambda relative: estimator(structure, record.fs, **settings),
                       progress)
 

@@ -31,6 +31,12 @@ or exploding covariance or state is detected and the filter restarts from the la
 with the initial covariance (``n_resets``). The random walk of theta starts larger
 (``q_anneal``) and decays, which keeps the gain open while the estimate is far off.
 
+Units: the defaults (``r``, the variances, ``alpha_min``, the uninformed start 0.01) are
+absolute, tuned on the reference stage's records (volts and micrometres). :func:`hystid.identify.
+identify` runs the filter on the record brought to those magnitudes by powers of ten
+(:class:`ScaledRun`) and maps the model back, so that a record in mV and nm gives the model it
+gives in V and um; :class:`KalmanIdentifier` used directly takes its samples as they come.
+
 This is a baseline: joint EKF estimation converges only locally. Figures on the reference stage
 are in ``benchmarks/bench_ekf.py``.
 """
@@ -52,7 +58,8 @@ from ..validate import check_plain_duhem
 from ._recursive import admissible
 from .base import Estimator, as_sample, record_signals
 from .constraints import is_admissible, project_admissible
-from .offline import initial_theta, linear_start
+from .offline import initial_theta, linear_start, to_physical
+from .prepare import scales
 from .result import HistoryRecorder, IdentificationResult
 
 __all__ = ["KalmanIdentifier", "state_sizes", "transition"]
@@ -600,3 +607,116 @@ class KalmanIdentifier(Estimator):
         return IdentificationResult(self.model, "ekf", settings, history=history,
                                     converged_at=rec.converged_at, info=info,
                                     history_index=index)
+
+
+#: The input and output scales (:func:`~hystid.identify.prepare.scales`: the 99.9 % quantile of
+#: the input's excursion, half the output's 2-98 % spread) of the reference stage's records, in
+#: volts and micrometres (6.7-6.8 and 0.9-2.9 for 0.1-1 s records): the magnitudes the
+#: defaults of :class:`KalmanIdentifier` are tuned at.
+TUNED_SCALES = (6.8, 1.5)
+
+
+def decade_factors(record: Record) -> tuple[float, float]:
+    """The powers of ten that bring a record's input and output scales nearest to
+    :data:`TUNED_SCALES`.
+
+    A change of units (mV for V, nm for um, m for um) is a power of ten, so it changes these
+    factors and not the record they give.
+
+    Parameters
+    ----------
+    record : Record
+        A record whose input is relative to its rest level.
+
+    Returns
+    -------
+    tuple of float
+        ``(u_factor, y_factor)``; 1 for a signal without a finite positive scale.
+    """
+    u, y = record.u[np.isfinite(record.u)], record.y[np.isfinite(record.y)]
+    if not (u.size and y.size):
+        return 1.0, 1.0
+    su, _, sy = scales(u, y, 0.0)
+    return tuple(10.0 ** round(np.log10(tuned / scale)) if np.isfinite(scale) and scale > 0
+                 else 1.0 for scale, tuned in zip((su, sy), TUNED_SCALES, strict=True))
+
+
+#: Settings stated in the record's units: when one is given, :class:`ScaledRun` leaves the
+#: record as it is.
+UNIT_SETTINGS = frozenset({"r", "P0_theta", "P0_state", "q_theta", "q_anneal", "q_state",
+                           "alpha_min"})
+
+
+def stated_in_units(settings: Mapping[str, Any]) -> bool:
+    """Whether settings of :class:`KalmanIdentifier` carry the record's units: one of
+    :data:`UNIT_SETTINGS`, or a start given as a vector or a dict.
+
+    Parameters
+    ----------
+    settings : mapping
+        Keyword arguments of :class:`KalmanIdentifier`.
+
+    Returns
+    -------
+    bool
+    """
+    theta0 = settings.get("theta0")
+    return bool(UNIT_SETTINGS & set(settings)) or not (theta0 is None or isinstance(theta0, str)
+                                                       or np.isscalar(theta0))
+
+
+class ScaledRun:
+    """A :class:`KalmanIdentifier` run on a record brought to the magnitudes of its defaults.
+
+    :meth:`fit` multiplies the input and output by :func:`decade_factors`, runs the filter and
+    maps the model and the parameter history back to the record's units
+    (:func:`~hystid.identify.offline.to_physical`): the same model, whatever the units.
+
+    Parameters
+    ----------
+    estimator : KalmanIdentifier
+        The filter, configured.
+    record : Record
+        The record the factors are read from (input relative to its rest level).
+    scale : bool
+        False: factors of 1 (settings stated in the record's units, :func:`stated_in_units`).
+
+    Attributes
+    ----------
+    u_factor, y_factor : float
+        The factors applied.
+    """
+
+    def __init__(self, estimator: KalmanIdentifier, record: Record, scale: bool = True) -> None:
+        self.estimator = estimator
+        self.u_factor, self.y_factor = decade_factors(record) if scale else (1.0, 1.0)
+
+    def fit(self, record: Record,
+            progress: Callable[[int, int], None] | None = None) -> IdentificationResult:
+        """Run the filter over the scaled record; the result in the record's units.
+
+        Parameters
+        ----------
+        record : Record
+            Input and output in any units.
+        progress : callable, optional
+            As :meth:`KalmanIdentifier.fit`.
+
+        Returns
+        -------
+        IdentificationResult
+            As :meth:`KalmanIdentifier.fit`, with ``info["scaled"]`` the factors.
+        """
+        cu, cy = self.u_factor, self.y_factor
+        scaled = Record(record.u * cu, record.y * cy, record.fs, record.units, record.name)
+        result = self.estimator.fit(scaled, progress=progress)
+        s, m = self.estimator.structure, result.model
+        result.model = DuhemSandwich(to_physical(m.theta, s, 1.0 / cu, 1.0 / cy), s, fs=m.fs,
+                                     name=m.name, u_rest=m.u_rest / cu, offset=m.offset / cy)
+        if result.history is not None:
+            result.history = to_physical(result.history, s, 1.0 / cu, 1.0 / cy)
+        if "theta_start" in result.info:
+            result.info["theta_start"] = to_physical(np.asarray(result.info["theta_start"]), s,
+                                                     1.0 / cu, 1.0 / cy).tolist()
+        result.info["scaled"] = {"u": cu, "y": cy}
+        return result
