@@ -91,10 +91,13 @@ def test_the_resolve_rate_bounds_the_work_of_each_update_and_changes_no_estimate
         before, resolves = slow.resolve_work_, slow.n_resolves
         steps.append(slow.update(float(a), float(b)))
         work.append(slow.resolve_work_ - before)
-        boundary.append(slow.n_resolves > resolves)  # a re-solve took over in this call
+        boundary.append(slow.n_resolves - resolves)  # re-solves that took over in this call
     assert np.array_equal(np.array(steps), ref.history)
     work, boundary = np.array(work), np.array(boundary)
-    assert boundary.sum() == ref.info["resolves"] > 3
+    # the call that chooses between the two starts finishes the re-solve launched at its
+    # chunk boundary and runs one more (CHOICE_ITERATIONS): three take over in it
+    assert boundary.sum() == ref.info["resolves"] > 3 and boundary.max() <= 3
+    boundary = boundary > 0
     within = work[~boundary & (np.arange(len(u)) > np.flatnonzero(boundary)[0])]
     assert within.max() <= 20.0 + max(SLICE, TRIAL) + 1
     assert np.mean(within) == pytest.approx(20.0, rel=0.5)  # the rate is used, on average

@@ -12,7 +12,11 @@ forms. What went wrong before, each measured on the code before the change:
 * a window of 10 000 samples (0.5 s at 20 kHz) left the creep to the arrival cost (1.3-5.2x);
   the default window is now 1 s;
 * a warm-up on a ramp out of rest alone predicted none of the samples after it; the warm-up is
-  fitted again on every sample so far, and said.
+  fitted again on every sample so far, and said;
+* on a record as long as the window (1 s) the two starts were chosen between after a few
+  re-solves of 4 trials: 1.0-5.3x the batch fit's held-out error, and the slow-branch start's
+  weights were those fitted without the branch. Each start now runs one re-solve of 12 trials
+  before the choice, and the slow-branch start's weights fit its blocks.
 """
 
 import warnings
@@ -53,10 +57,10 @@ def record(stage, u, rng, name):
     return Record(u, stage.simulate(u)["y"] + 1e-3 * rng.standard_normal(len(u)), FS, name=name)
 
 
-def creep_records(seconds: float) -> tuple[Record, list[Record]]:
+def creep_records(seconds: float, seed: int = 1) -> tuple[Record, list[Record]]:
     """The creep stage's training record (a rest, then ``seconds`` of noise) and two held-out
-    records (a 10 Hz triangle, slower noise), seed 1."""
-    rng = np.random.default_rng(1)
+    records (a 10 Hz triangle, slower noise)."""
+    rng = np.random.default_rng(seed)
     stage = creep_stage()
     n = int(seconds * FS)
     train = record(stage, np.r_[np.zeros(2000), noise(rng, n, 300.0)], rng, "noise")
@@ -149,6 +153,19 @@ def test_the_start_kept_is_said():
     errors = result.info["start_errors"]
     assert set(errors) == {"warm-up fit", "slow branch"}
     assert result.info["started_from"] == min(errors, key=errors.get) == "slow branch"
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_on_a_record_as_long_as_the_window_the_on_line_model_is_as_good(seed):
+    """Before: seed 1 5.3x and 4.5x the batch fit's held-out error (1.0x on seed 0); with the
+    slow-branch start's weights alone, seed 0 8.7x and 3.0x."""
+    train, held = creep_records(1.0, seed)
+    batch = quiet(identify, train, model="pi-stage")
+    online = quiet(identify, train, model="pi-stage", method="online")
+    rows_b = compare(batch.model, train, held).rows
+    for b, o in zip(rows_b, compare(online.model, train, held).rows, strict=True):
+        assert o["model"] < 1.25 * b["model"], (o, b)
+        assert o["model"] < 0.2 * o["linear"] and o["model"] < 0.2 * o["static_line"], o
 
 
 def test_the_batch_fit_finds_a_creep_half_as_long_as_its_record():

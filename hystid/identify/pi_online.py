@@ -140,6 +140,13 @@ WINDOW_MOST = 20_000
 #: and the same held-out figures on stage A and the helper's stages (within 1 %; 1.14x against
 #: 0.97x the batch fit on one record of the creep stage of ``tests/test_pi_online_creep.py``).
 ITERATIONS = 4
+#: Levenberg-Marquardt trials a start of the re-solve each of the two starts runs when they are
+#: chosen between (``two_starts``: when the window is full, or at the end of a shorter
+#: record), done in that call. With :data:`ITERATIONS` alone the creep stage of
+#: ``tests/test_pi_online_creep.py`` with 1 s records (the window) was 1.0-8.7x the batch
+#: fit's held-out error, depending on the seed and on the slow branch's start; with this,
+#: 0.17-1.0x.
+CHOICE_ITERATIONS = 12
 #: Default samples between two re-solves (:class:`PIStageOnline`'s ``every``).
 EVERY = 2000
 
@@ -225,7 +232,9 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
         On a record that begins at rest, run a second identifier beside this one, started as
         ``slow_start`` does, until the window is full (or :meth:`settle`); then keep the one
         whose model, run from rest over every sample so far, is closer to the output (the
-        batch fit chooses among its starts alike). Twice the work per sample until then.
+        batch fit chooses among its starts alike), each after a re-solve of
+        :data:`CHOICE_ITERATIONS` trials done in that call. Twice the work per sample until
+        then.
     max_step : float
         Largest change of the search coordinates in one sample (normalised units).
     epsilon : float
@@ -539,6 +548,8 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
             if self._twin is not None:  # the same samples, then perhaps the choice
                 self._twin._process(u[a:i], measured[a:i])
                 self._choose_when_full()
+                if self._twin is None and history is not None:  # as update() returns it
+                    history[i - 1] = self.theta
 
     def _left_out_at(self, k: int, n: int) -> bool:
         """Whether samples ``k .. k + n - 1`` meet a span of :attr:`left_out`."""
@@ -642,7 +653,17 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
         return bool((after > 0 or after >= _slope(phi, nplay)) and _l2_stable(trial, n)
                     and (trial[n + 1] <= self._xp_most or trial[n + 1] <= phi[n + 1]))
 
-    def _launch(self, starts: tuple[np.ndarray, ...]) -> HorizonSolve:
+    def _polish(self) -> None:
+        """The running re-solve's estimate takes over, then one more re-solve of the window
+        with :data:`CHOICE_ITERATIONS` trials a start, solved now."""
+        if self._job is not None:
+            self._apply()
+        if self._chunks:
+            self._launch((self._phi, self._solved), CHOICE_ITERATIONS)
+            self._apply()
+
+    def _launch(self, starts: tuple[np.ndarray, ...],
+                iterations: int | None = None) -> HorizonSolve:
         """A re-solve of the window's last ``window // every`` chunks (the older ones folded
         into the arrival cost at the last re-solve's estimate first), from the recursion's
         estimate and from the last re-solve's (the lower cost is kept: the recursion may have
@@ -651,7 +672,9 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
         if leaving:  # samples leave the window: a warm-up can no longer be fitted again
             self._kept_rest = None
         self._job = HorizonSolve(self._slice, self._admissible, self._chunks, self._wstate,
-                                 self._arrival, starts, self.iterations, leaving=leaving,
+                                 self._arrival, starts,
+                                 self.iterations if iterations is None else iterations,
+                                 leaving=leaving,
                                  linearised_at=self._solved, forget=self._forget)
         return self._job
 
