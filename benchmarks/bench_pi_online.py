@@ -95,7 +95,8 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
     dict
         Per identifier: ``samples_per_s`` (``partial_fit``), ``resolve_share`` (``pi-stage``:
         the re-solves' share of that time, ``resolve_work``: their mean work in simulated
-        samples, ``warmup_s``: the warm-up fit's seconds, in the call that completes it),
+        samples, ``warmup_s``: the warm-up fit's seconds, in the call that completes it,
+        ``choice_s``: the seconds of the call that chooses between the two starts),
         ``update_median_us``, ``update_p99_us`` and ``update_max_us``; and
         ``fs``, the records' sampling rate.
     """
@@ -113,6 +114,7 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
             est = make()
             est.fit(train)
             warmup = getattr(est, "warmup_seconds_", None)
+            choice = getattr(est, "choice_seconds_", None)
             before = getattr(est, "resolve_seconds_", 0.0)
             work0, n0 = getattr(est, "resolve_work_", 0.0), getattr(est, "n_resolves", 0)
             t0 = time.perf_counter()
@@ -131,7 +133,7 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
                 est.update(u_k, y_k)
                 times[i] = time.perf_counter() - t0
             out[name] = {"samples_per_s": held[0].n / seconds, "resolve_share": share,
-                         "resolve_work": work, "warmup_s": warmup,
+                         "resolve_work": work, "warmup_s": warmup, "choice_s": choice,
                          "update_median_us": float(np.median(times) * 1e6),
                          "update_p99_us": float(np.percentile(times, 99) * 1e6),
                          "update_max_us": float(np.max(times) * 1e6)}
@@ -156,12 +158,14 @@ def render_speed(speed: dict) -> str:
              f"{100 * e['resolve_share']:.0f} %",
              "" if e.get("resolve_work") is None else f"{e['resolve_work']:,.0f}",
              "" if e.get("warmup_s") is None else f"{e['warmup_s']:.2f}",
+             "" if e.get("choice_s") is None else f"{e['choice_s']:.2f}",
              f"{e['update_median_us']:.1f}",
              f"{e['update_p99_us']:.0f}", f"{e['update_max_us']:,.0f}"]
             for name, e in speed.items() if name != "fs"]
     return table(rows, ["on-line identifier", "samples/s (partial_fit)",
                         f"x real time at {fs:g} Hz", "ratio to duhem", "re-solves' share",
                         "work per re-solve [simulated samples]", "warm-up fit [s]",
+                        "choice of start [s]",
                         "update() median [us]", "update() 99th percentile [us]",
                         "update() worst [us]"])
 

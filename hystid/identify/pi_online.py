@@ -259,6 +259,8 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
     start_errors_ : dict
         Once the two starts were compared: each one's RMS error run from rest over the
         samples then, output units.
+    choice_seconds_ : float
+        Seconds of the call that chose between the two starts (their last re-solves).
     resolve_work_ : float
         Work the re-solves have done so far, in simulated samples
         (:attr:`~hystid.identify.horizon.HorizonSolve.spent`).
@@ -425,6 +427,7 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
         self.e = self.yhat = 0.0
         self.excited_at: int | None = None
         self.warmup_seconds_ = 0.0
+        self.choice_seconds_ = 0.0  # the call that chooses between the two starts
         self.resolve_seconds_ = 0.0
         self.resolve_work_ = 0.0
         self._u0: float | None = None
@@ -760,6 +763,7 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
             "resolves": self.n_resolves,
             "seconds": time.perf_counter() - t0,
             "warmup_seconds": self.warmup_seconds_,
+            "choice_seconds": self.choice_seconds_,
             "resolve_seconds": self.resolve_seconds_,
             "thresholds": self.thresholds.tolist(),
             "stable": bool(self.model.is_stable()),

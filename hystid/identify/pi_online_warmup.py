@@ -78,6 +78,7 @@ class WarmUp:
         """Keep this identifier or take over its twin's state, whichever's model runs closer
         to the output from rest (:meth:`_free_run_rms`) after one more re-solve each
         (``_polish``); the twin is dropped."""
+        t0 = time.perf_counter()
         twin, self._twin = self._twin, None
         self._polish()
         twin._polish()
@@ -90,6 +91,7 @@ class WarmUp:
             self.__dict__.update(twin.__dict__)
             self.__dict__.update(keep)
             self.started_from = "slow branch"
+        self.choice_seconds_ = time.perf_counter() - t0
 
     def _predicts_nothing(self) -> bool:
         """Whether the open chunk, just complete, says that the warm-up went wrong: its
