@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -223,6 +224,28 @@ def _model(path: str | None, fs: float) -> Any:
                              name=f"model from {Path(path).name}")
 
 
+#: A model given with ``--model`` whose simulated output spreads over more than this many
+#: times the train record's output is refused as diverged.
+RUNAWAY = 1e6
+
+
+def _runs_on(model: Any, train: Any, args: argparse.Namespace) -> None:
+    """Refuse a model given with ``--model`` whose simulation of the train record is not
+    finite (a diagnosis of it would only compare infinities)."""
+    import numpy as np
+
+    from ..baselines import simulate_from_rest
+
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        y = simulate_from_rest(model, train.u, check=False)
+    spread = float(np.ptp(train.y[np.isfinite(train.y)])) if np.isfinite(train.y).any() else 0.0
+    if not np.all(np.isfinite(y)) or np.ptp(y) > RUNAWAY * max(spread, 1e-300):
+        raise CommandError(f"--model {args.model}: its simulation of TRAIN {args.train} "
+                           f"diverges (output spread {np.ptp(y):.3g} against the record's "
+                           f"{spread:.3g}); expected a model that runs on the train record")
+
+
 def _structure(text: str | None) -> Structure | None:
     if text is None:
         return None
@@ -283,6 +306,8 @@ def _diagnose(args: argparse.Namespace) -> None:
                                    "comma-separated families or forms, e.g. creep,drift; leave "
                                    "--effects out for all of them)")
         model = _model(args.model, train.fs)
+        if model is not None:
+            _runs_on(model, train, args)
         given = None
         if model is not None and (not isinstance(model, DuhemSandwich)
                                   or not is_plain(model.structure.layout)):

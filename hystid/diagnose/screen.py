@@ -376,10 +376,13 @@ def hac_variance(d: np.ndarray, demean: bool = True) -> tuple[float, int]:
     x = np.asarray(d, float)
     x = x - np.mean(x) if demean else x
     n = len(x)
-    g0 = float(x @ x) / n
+    with np.errstate(over="ignore", invalid="ignore"):
+        g0 = float(x @ x) / n
+        rho = float(np.clip((x[1:] @ x[:-1]) / (x @ x), -0.99, 0.99)) if g0 else 0.0
+    if not (np.isfinite(g0) and np.isfinite(rho)):  # overflowed: no finite variance
+        return float("inf"), 0
     if n < 8 or g0 == 0:
         return g0, 0
-    rho = float(np.clip((x[1:] @ x[:-1]) / (x @ x), -0.99, 0.99))
     a = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
     L = int(min(np.ceil(1.1447 * (a * n) ** (1 / 3)), n // 4))
     gam = correlation(x, None, L) / n
@@ -422,11 +425,15 @@ def compare_losses(
     deltas = [a - b for a, b in zip(eb, ec, strict=True)]
     Eb, Ec, De = np.concatenate(eb), np.concatenate(ec), np.concatenate(deltas)
     n = len(Eb)
-    mb, mc = float(np.mean(Eb**2)), float(np.mean(Ec**2))
+    with np.errstate(over="ignore", invalid="ignore"):
+        mb, mc = float(np.mean(Eb**2)), float(np.mean(Ec**2))
     out = {"rms_base": float(np.sqrt(mb)), "rms_cand": float(np.sqrt(mc)),
-           "rel_reduction": float(1.0 - np.sqrt(mc / mb)) if mb > 0 else 0.0}
-    dd = float(De @ De)
-    if dd == 0:
+           "rel_reduction": float(1.0 - np.sqrt(mc / mb)) if 0 < mb < np.inf and mc < np.inf
+           else 0.0}
+    with np.errstate(over="ignore", invalid="ignore"):
+        dd = float(De @ De)
+    if dd == 0 or not (np.isfinite(dd) and np.isfinite(Eb).all() and np.isfinite(Ec).all()):
+        # no difference, or a simulation that overflowed: nothing to test, nothing accepted
         out.update({"p_value": 1.0, "beta": 0.0, "t_hac": 0.0, "p_hac": 1.0, "hac_lag": 0,
                     "t_block": 0.0, "p_block": 1.0, "dm": 0.0, "p_dm": 0.5})
         return out

@@ -43,8 +43,16 @@ LINEAR_GAIN = 0.9
 HEAD_SAMPLES = 6000
 
 
+#: Samples of a leading rest kept before the excitation in a head (:func:`head`).
+HEAD_REST = 500
+
+
 def head(data: FitData, n: int) -> FitData:
-    """The first ``n`` samples of a train part (the part itself when shorter).
+    """The first ``n`` samples of a train part's excitation, after at most :data:`HEAD_REST`
+    samples of its leading rest (the part itself when shorter).
+
+    Measured stage A's records rest for 10 001 samples: the first 6 000 samples held a
+    constant input, and ``hystid diagnose`` stopped on it with "the input u is constant".
 
     Parameters
     ----------
@@ -56,12 +64,20 @@ def head(data: FitData, n: int) -> FitData:
     Returns
     -------
     FitData
-        The head, sharing the weight mask's head.
+        The head, with the weight mask's samples over it.
     """
     if len(data.u) <= n:
         return data
-    weight = data.weight[:n] if isinstance(data.weight, np.ndarray) else data.weight
-    return FitData(data.u[:n], data.y[:n], data.fs, data.level, weight)
+    moved = np.flatnonzero(data.u != data.u[0])
+    first = int(moved[0]) if moved.size else 0
+    start = max(0, first - HEAD_REST)
+    if len(data.u) - start <= n:
+        start = len(data.u) - n
+    mask = np.zeros(len(data.u), bool)
+    mask[data.weight] = True
+    stop = start + n
+    return FitData(data.u[start:stop], data.y[start:stop], data.fs, data.level,
+                   mask[start:stop])
 
 
 def identify_nominal(tr: FitData, structure: Structure | None,
