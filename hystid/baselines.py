@@ -68,9 +68,14 @@ class StaticLine:
         -------
         StaticLine
         """
-        A = np.column_stack([record.u, np.ones(record.n)])
-        (k, c), *_ = np.linalg.lstsq(A, record.y, rcond=None)
-        return cls(float(k), float(c))
+        # about the input's mean and in its spread: with u and y near 1e12 an unscaled
+        # solve dropped the column of ones (an offset of -4e-16 where it is -7.2e11)
+        mu = float(np.mean(record.u))
+        su = float(np.std(record.u)) or 1.0
+        A = np.column_stack([(record.u - mu) / su, np.ones(record.n)])
+        (a, b), *_ = np.linalg.lstsq(A, record.y, rcond=None)
+        k = a / su
+        return cls(float(k), float(b - k * mu))
 
     def predict(self, u: np.ndarray) -> np.ndarray:
         """Output for input ``u``.

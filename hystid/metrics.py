@@ -163,7 +163,8 @@ def zoom_window(t: np.ndarray, e: np.ndarray, seconds: float = 0.01) -> tuple[in
     n = len(t)
     dt = (t[-1] - t[0]) / max(n - 1, 1)
     width = int(min(n, max(2, round(seconds / dt)))) if dt > 0 else n
-    centre = int(np.argmax(np.abs(e)))
+    finite = np.isfinite(e)
+    centre = int(np.argmax(np.where(finite, np.abs(e), -1.0))) if finite.any() else 0
     start = int(np.clip(centre - width // 2, 0, n - width))
     return start, start + width
 
@@ -213,6 +214,9 @@ def plot_validation(
 
     sl = slice(skip, None)
     t, y, yhat = (np.asarray(a, float)[sl] for a in (t, y, yhat))
+    yhat, runaway = _drawable(y, yhat)
+    if runaway:
+        title = f"{title} (the model diverged: {runaway} samples not drawn)"
     scale, e_unit = error_scale(unit)
     e = scale * (y - yhat)
     fig = Figure(figsize=(10, 7.5), layout="constrained")
@@ -243,7 +247,7 @@ def plot_validation(
         ax_loop.set_title(f"y against u (loop): {1e3 * (t[b - 1] - t[a]):.3g} ms around the "
                           "largest error", fontsize=9)
         ax_loop.legend(loc="upper left", fontsize=8)
-    noise = noise_level(e)
+    noise = noise_level(e[np.isfinite(e)]) if np.isfinite(e).sum() > 2 else 0.0
     ax_err.axhspan(-noise, noise, color="0.85", zorder=0,
                    label=f"sensor noise +-{noise:.3g} {e_unit} (from sample-to-sample steps)")
     ax_err.plot(t, e, lw=0.6, color="C3")
@@ -251,11 +255,31 @@ def plot_validation(
     ax_err.legend(loc="upper right", fontsize=8)
     ax_err.set_ylabel(f"error [{e_unit}]")
     ax_err.set_xlabel("time [s]")
-    ax_err.set_title(f"measured - model: RMS {np.sqrt(np.mean(e**2)):.3g} {e_unit}, range "
-                     f"{e.min():.3g} .. {e.max():.3g} {e_unit}", fontsize=9)
+    ax_err.set_title(f"measured - model: RMS {np.sqrt(np.nanmean(e**2)):.3g} {e_unit}, range "
+                     f"{np.nanmin(e):.3g} .. {np.nanmax(e):.3g} {e_unit}"
+                     + (" where drawn" if runaway else ""), fontsize=9)
     if path is not None:
         fig.savefig(path, dpi=120)
     return fig
+
+
+#: A model output further than this many times the measured output's spread from its median
+#: is not drawn (a diverged simulation: matplotlib cannot place ticks on 1e32).
+RUNAWAY_SPREADS = 1e3
+
+
+def _drawable(y: np.ndarray, yhat: np.ndarray) -> tuple[np.ndarray, int]:
+    """``yhat`` with non-finite and runaway samples (:data:`RUNAWAY_SPREADS`) set to NaN, and
+    how many there were."""
+    fin = y[np.isfinite(y)]
+    mid = float(np.median(fin)) if fin.size else 0.0
+    spread = float(np.ptp(fin)) if fin.size else 1.0
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = ~np.isfinite(yhat) | (np.abs(yhat - mid) > RUNAWAY_SPREADS * max(spread, 1e-300))
+    n = int(np.count_nonzero(bad))
+    if n == len(yhat):  # nothing to draw: the measured output alone
+        return np.full(len(yhat), np.nan), n
+    return (np.where(bad, np.nan, yhat), n) if n else (yhat, 0)
 
 
 #: The loop panel spans this many zoom widths around the largest error.

@@ -407,6 +407,15 @@ class DuhemSandwich(Sandwich):
             w2 += duhem_increment(p, prev, w2, x - prev)
             prev = x
         y = w2 * self._l2_gain()
+        if not np.isfinite(y):
+            env = getattr(self, "envelope", None)
+            unit = (self.units or {}).get("u", "")
+            seen = (f"; the model was identified on inputs {env.u_min:g}..{env.u_max:g} {unit}"
+                    if env is not None else "")
+            raise ValueError(
+                f"u0 = {u0:g} {unit}: the model's rest state at that input is not finite (the "
+                f"Duhem state diverges on the way there{seen}); expected an input in the "
+                "model's units and range")
         return InitialCondition(*(np.full(P, x) for x in (v, w1, w2, y)))
 
     def _block_admissibility(self, response: SandwichResponse) -> list[str]:

@@ -322,6 +322,7 @@ def _mended_for_scoring(target, held_from: int | None) -> tuple[object, list[str
 def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dict, np.ndarray,
                                                                               object]:
     from ..baselines import compare, rest_zero, simulate_from_rest
+    from ..identify.prepare import without_input_glitches
     from ..metrics import validate
     from ..safeio import same_file
 
@@ -337,8 +338,8 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
             yhat = yhat + rest_zero(yhat, target)
     problems = result.model.admissibility(target.u) if hasattr(result.model, "admissibility") \
         else (result.model.envelope.violations(target.u) if result.model.envelope else [])
-    baselines = compare(result.model, rec, [(target, k) if k is not None else target],
-                        repeats=repeats)
+    baselines = compare(result.model, without_input_glitches(rec)[0],  # what the fit saw
+                        [(target, k) if k is not None else target], repeats=repeats)
     if k is None and val is not None:  # scored from the burn-in, as compare() scores it
         from ..identify.prepare import burn_in, rest_level
 

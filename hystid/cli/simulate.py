@@ -157,7 +157,8 @@ def _model_record(args: argparse.Namespace, progress: Progress) -> Record:
                            f"{model.fs:g} Hz (expected the model's rate)")
     with warnings.catch_warnings(record=True) as caught:  # printed below
         warnings.simplefilter("always", AdmissibilityWarning)
-        y = simulate_from_rest(model, rec.u)
+        with refused(f"--input {args.input}: ", errors=ValueError):
+            y = simulate_from_rest(model, rec.u)
     for w in caught:
         if issubclass(w.category, AdmissibilityWarning):
             progress.say(f"warning: {w.message}")

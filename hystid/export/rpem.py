@@ -190,8 +190,9 @@ def rpem_start(
         P = np.diag([preset] * npar + [preset * ident._sett[on._S_TRACK]])
     if sigma is None:
         sigma = measured if measured is not None else _default_sigma(model)
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma: expected a positive residual scale, got {sigma!r}")
+    if not (np.isfinite(sigma) and 1e-150 < sigma < 1e150):  # its square is kept too
+        raise ValueError(f"sigma: expected a positive residual scale within 1e-150..1e150 "
+                         f"(output units), got {sigma!r}")
     ident._est[:npar] = model.theta
     ident._est[npar] = model.offset
     ident.P[:] = P

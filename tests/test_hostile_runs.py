@@ -1,0 +1,93 @@
+"""Cases a hostile run of the command line found (each a traceback or a wrong figure before).
+
+Records come from the built-in reference stage (no shared data needed), scaled or spoilt here.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from hystid import cli
+from hystid.baselines import StaticLine
+from hystid.metrics import plot_validation
+from hystid.records import Record
+from hystid.reference import reference_record
+
+
+def run(args, capsys):
+    try:
+        code = cli.main([str(a) for a in args])
+    except SystemExit as err:
+        code = err.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("model")
+    rec = reference_record(0.2, seed=4, noise=1e-3)
+    rec.save(folder / "train.csv")
+    assert cli.main(["identify", str(folder / "train.csv"), "--model", "duhem", "--quiet",
+                     "--out", str(folder / "fit")]) == 0
+    return folder / "fit" / "model.json", rec
+
+
+@pytest.mark.parametrize("scale", [1e9, 1e12])
+def test_the_static_line_holds_its_offset_at_any_scale(scale):
+    """At 1e12 an unscaled solve dropped the column of ones: offset -4e-16 for -7.2e11."""
+    rec = reference_record(0.05, seed=1, noise=1e-3)
+    base = StaticLine.fit(rec)
+    big = StaticLine.fit(Record(rec.u * scale, (rec.y - 0.7) * scale, rec.fs))
+    assert big.gain == pytest.approx(base.gain, rel=1e-6)
+    assert big.offset == pytest.approx((base.offset - 0.7) * scale, rel=1e-6)
+
+
+def test_a_validation_figure_of_a_diverged_model_is_drawn(tmp_path):
+    """matplotlib raised "arange: cannot compute length" on a model output of 1e32."""
+    t = np.arange(2000) / 1e4
+    y = np.sin(2 * np.pi * 50 * t)
+    yhat = y.copy()
+    yhat[1200:1300] = 1e32
+    yhat[1300:] = np.inf
+    fig = plot_validation(t, y, yhat, tmp_path / "v.png", u=y)
+    assert (tmp_path / "v.png").stat().st_size > 0
+    assert "diverged: 800 samples not drawn" in fig.axes[0].get_title()
+
+
+def test_an_input_far_outside_the_model_is_said_not_traced(model_file, tmp_path, capsys):
+    """A record in another scale: the model's rest state there overflows (a traceback from
+    InitialCondition before)."""
+    path, rec = model_file
+    Record((rec.u + 3.0) * 1e6, rec.y * 1e6, rec.fs).save(tmp_path / "big.csv")  # from 3e6
+    code, _, err = run(["simulate", "--model", path, "--input", tmp_path / "big.csv",
+                        "--out", tmp_path / "s.csv"], capsys)
+    assert code == 2 and "--input" in err and "rest state" in err and "Traceback" not in err
+    assert not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.parametrize("sigma", ["1e300", "1e-200"])
+def test_an_rpem_sigma_whose_square_overflows_is_refused(model_file, tmp_path, capsys, sigma):
+    path, _ = model_file
+    code, _, err = run(["export", path, "--c", tmp_path / "c", "--rpem-sigma", sigma], capsys)
+    assert code == 2 and "--rpem-sigma" in err and "1e-150..1e150" in err, err
+
+
+def test_the_baselines_are_fitted_on_the_record_the_model_saw(tmp_path, capsys):
+    """One input sample at 1e6: the fit mends it, the baselines were fitted on it (1.8 um
+    where they are 0.2-0.3 um on the clean record)."""
+    rec = reference_record(0.2, seed=5, noise=1e-3)
+    spoilt = Record(rec.u.copy(), rec.y, rec.fs)
+    spoilt.u[1500] = 1e6
+    reports = []
+    for name, r in (("clean", rec), ("spoilt", spoilt)):
+        r.save(tmp_path / f"{name}.csv")
+        code, out, _ = run(["identify", tmp_path / f"{name}.csv", "--model", "duhem", "--json"],
+                           capsys)
+        assert code == 0
+        reports.append(json.loads(out)["baselines"]["rows"][0])
+    for key in ("static_line", "linear"):
+        assert reports[1][key] == pytest.approx(reports[0][key], rel=0.05), (key, reports)
