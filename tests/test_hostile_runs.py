@@ -91,3 +91,14 @@ def test_the_baselines_are_fitted_on_the_record_the_model_saw(tmp_path, capsys):
         reports.append(json.loads(out)["baselines"]["rows"][0])
     for key in ("static_line", "linear"):
         assert reports[1][key] == pytest.approx(reports[0][key], rel=0.05), (key, reports)
+
+
+def test_a_model_whose_envelope_gives_no_range_names_the_limits_option(model_file, tmp_path,
+                                                                        capsys):
+    path, _ = model_file
+    doc = json.loads(path.read_text())
+    doc["envelope"].update(u_min=1.0, u_max=1.0, slew=0.0)
+    (tmp_path / "flat.json").write_text(json.dumps(doc))
+    code, _, err = run(["compensate", tmp_path / "flat.json", "--scan", "triangle:50:2",
+                        "--out", tmp_path / "c.csv"], capsys)
+    assert code == 2 and "--limits" in err and "got None" not in err, err

@@ -281,6 +281,10 @@ def _plan(model: Any, *, u_limits: tuple[float, float] | None = None,
             raise ValueError(f"u_limits: expected two numbers (low, high), got "
                              f"{u_limits!r}") from err
     if len(limits) != 2 or not (np.all(np.isfinite(limits)) and limits[0] < limits[1]):
+        if u_limits is None:  # from the model's envelope
+            raise ValueError(f"u_limits: the model's input envelope gives no range "
+                             f"({limits[0]:g} .. {limits[1]:g}); expected u_limits=(low, high) "
+                             "(--limits LOW:HIGH)")
         raise ValueError(f"u_limits: expected (low, high) with low < high, got {u_limits!r}")
     if anchor not in ("model", "reference"):
         raise ValueError(f"anchor: expected 'model' or 'reference', got {anchor!r}")
