@@ -13,7 +13,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
 __all__ = ["PAPER_TRANSIENT_S", "Validation", "error_scale", "gap_closed", "plot_convergence",
-           "plot_validation", "validate", "zoom_window", "noise_level", "LOOP_SPAN"]
+           "plot_validation", "runaway", "validate", "zoom_window", "noise_level", "LOOP_SPAN"]
 
 
 def gap_closed(nominal: float, value: float, floor: float) -> float:
@@ -266,6 +266,22 @@ def plot_validation(
 #: A model output further than this many times the measured output's spread from its median
 #: is not drawn (a diverged simulation: matplotlib cannot place ticks on 1e32).
 RUNAWAY_SPREADS = 1e3
+
+
+def runaway(y: np.ndarray, yhat: np.ndarray) -> bool:
+    """Whether a model's output ran away from the measured one: a sample not finite or further
+    than :data:`RUNAWAY_SPREADS` times the measured output's spread from its median.
+
+    Parameters
+    ----------
+    y, yhat : ndarray
+        Measured and simulated output.
+
+    Returns
+    -------
+    bool
+    """
+    return _drawable(np.asarray(y, float), np.asarray(yhat, float))[1] > 0
 
 
 def _drawable(y: np.ndarray, yhat: np.ndarray) -> tuple[np.ndarray, int]:

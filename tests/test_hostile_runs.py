@@ -102,3 +102,12 @@ def test_a_model_whose_envelope_gives_no_range_names_the_limits_option(model_fil
     code, _, err = run(["compensate", tmp_path / "flat.json", "--scan", "triangle:50:2",
                         "--out", tmp_path / "c.csv"], capsys)
     assert code == 2 and "--limits" in err and "got None" not in err, err
+
+
+def test_an_output_that_runs_away_is_diverged_though_finite():
+    """--holdout 0.99 on stage A gave a model 7.5e18 um off: reported as a figure before."""
+    from hystid.metrics import runaway
+
+    y = np.sin(np.linspace(0.0, 20.0, 1000))
+    assert not runaway(y, y + 0.5)
+    assert runaway(y, np.r_[y[:-1], 7.5e18]) and runaway(y, np.r_[y[:-1], np.nan])

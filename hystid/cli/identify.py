@@ -323,7 +323,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
                                                                               object]:
     from ..baselines import compare, rest_zero, simulate_from_rest
     from ..identify.prepare import without_input_glitches
-    from ..metrics import validate
+    from ..metrics import runaway, validate
     from ..safeio import same_file
 
     target = val if val is not None else rec
@@ -345,7 +345,7 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
 
         k = burn_in(target.u, rest_level(target.u)[1]) or None
     k = k or 0
-    finite = bool(np.all(np.isfinite(yhat[k:])))
+    finite = not runaway(target.y[k:], yhat[k:])  # 7.5e18 um from --holdout 0.99 is no figure
     try:
         validation = validate(target.y[k:], yhat[k:] if finite else np.zeros(target.n - k),
                               target.fs)
@@ -362,8 +362,9 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
                          "are not held out (without --val the record's end is held out, "
                          "--holdout)")
     if not finite:
-        warnings_.append("the model diverges on the validation input; its figures are not "
-                         "reported")
+        warnings_.append("the model diverges on the validation input (its output runs away "
+                         "from the measured one); its figures are not reported: do not use "
+                         "this model")
     return {
         "model": result.info.get("model", getattr(args, "model", None) or "duhem"),
         "method": result.method,
