@@ -111,3 +111,25 @@ def test_an_output_that_runs_away_is_diverged_though_finite():
     y = np.sin(np.linspace(0.0, 20.0, 1000))
     assert not runaway(y, y + 0.5)
     assert runaway(y, np.r_[y[:-1], 7.5e18]) and runaway(y, np.r_[y[:-1], np.nan])
+
+
+@pytest.mark.parametrize("case", ["other units", "other scale", "still input"])
+def test_an_rpem_record_of_another_scale_or_unit_is_refused(model_file, tmp_path, capsys, case):
+    """The export took a record labelled nm for a model in um (its residual floor 1 000x too
+    high), one 1e6x the model's input range (a covariance of 4.5e61) and a still input."""
+    path, rec = model_file
+    if case == "other units":
+        np.savetxt(tmp_path / "r.csv", np.column_stack([np.arange(rec.n) / rec.fs, rec.u,
+                                                        rec.y * 1e3]),
+                   delimiter=",", header="t,u,y [nm]", comments="")
+        expected = "y in nm, the model in um"
+    elif case == "other scale":
+        Record(rec.u * 1e6, rec.y, rec.fs).save(tmp_path / "r.csv")
+        expected = "the model was identified on"
+    else:
+        Record(np.full(rec.n, 1.0), rec.y, rec.fs).save(tmp_path / "r.csv")
+        expected = "does not move"
+    code, _, err = run(["export", path, "--c", tmp_path / "c", "--rpem-record",
+                        tmp_path / "r.csv"], capsys)
+    assert code == 2 and "--rpem-record" in err and expected in err, err
+    assert not (tmp_path / "c").exists()
