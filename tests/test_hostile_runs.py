@@ -133,3 +133,15 @@ def test_an_rpem_record_of_another_scale_or_unit_is_refused(model_file, tmp_path
                         tmp_path / "r.csv"], capsys)
     assert code == 2 and "--rpem-record" in err and expected in err, err
     assert not (tmp_path / "c").exists()
+
+
+def test_a_decimal_comma_gets_a_hint(tmp_path):
+    from hystid.records import RecordError, load_record
+
+    (tmp_path / "r.csv").write_text("t;u;y\n0,0;1,5;0,25\n0,0001;1,6;0,26\n")
+    with pytest.raises(RecordError, match="line 2.*a decimal comma"):
+        load_record(tmp_path / "r.csv")
+    (tmp_path / "s.csv").write_text("t,u,y\n0.0,abc,0.25\n")
+    with pytest.raises(RecordError) as err:
+        load_record(tmp_path / "s.csv")
+    assert "decimal comma" not in str(err.value)

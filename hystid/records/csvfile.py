@@ -285,7 +285,10 @@ def _parse_column(raw: list[str], linenos: list[int], column: str, file: str) ->
                 float(text)
             except ValueError:
                 shown = "empty value" if not text.strip() else f"value {text.strip()!r}"
-                raise RecordError(f"{shown} is not a number (expected a finite number)",
+                comma = re.fullmatch(r"\s*[-+]?\d*,\d+([eE][-+]?\d+)?\s*", text)
+                hint = ("; a decimal comma? write numbers with a decimal point (and separate "
+                        "the fields with commas, semicolons or tabs)" if comma else "")
+                raise RecordError(f"{shown} is not a number (expected a finite number{hint})",
                                   file=file, line=linenos[k], column=column) from None
         raise  # pragma: no cover - the loop above always finds the culprit
     return finite_signal(values, column, locate=_csv_locator(linenos, column, file), raw=raw,
