@@ -85,7 +85,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--model", choices=("auto", *MODEL_NAMES), default=None,
                    help="member of the model family (default: auto, the simplest member that "
                    "no richer one beats on the record's held-out end; with --method online "
-                   "chosen on the record's first half, then identified on-line; duhem when "
+                   "chosen as for the batch fit, then identified on-line; duhem when "
                    "--structure, --history or --method eria/ekf is given)")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch; online for --model pi)")
