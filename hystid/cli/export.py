@@ -8,7 +8,6 @@ status 2; nothing is written then.
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from .support import CommandError, as_option, bind, run_command, tell
 
@@ -149,7 +148,6 @@ def _export(args: argparse.Namespace) -> None:
             from ..records import load_record
 
             record = load_record(args.rpem_record)
-            _check_rpem_record(model, record)
         paths = export_c(model, args.c_dir, force=args.force, source=str(args.model),
                          compensator=options or None, rpem_sigma=args.rpem_sigma,
                          rpem_record=record, rpem_supervise=not args.rpem_bare, notes=notes)
@@ -171,41 +169,6 @@ def _export(args: argparse.Namespace) -> None:
 #: The API's names of the compensator's and identifier's settings, as the options say them.
 _OPTIONS = {"preview": "--preview", "u_limits": "--u-limits", "margin": "--margin",
             "samples": "--smooth", "sigma": "--rpem-sigma", "anchor": "--anchor"}
-
-
-#: An ``--rpem-record`` whose input span is this many times the model's identified span (or
-#: less than its inverse), or that lies that many spans away, is in other units or of another
-#: stage.
-SPAN_RATIO = 10.0
-
-
-def _check_rpem_record(model: Any, record: Any) -> None:
-    """Refuse an ``--rpem-record`` in other units than the model's, at another scale, or with
-    an input that does not move (the export used to take one whose header said nm for a model
-    in um, which set its residual floor 1 000x too high)."""
-    import numpy as np
-
-    for key in ("u", "y"):
-        mine, theirs = (model.units or {}).get(key), (record.units or {}).get(key)
-        if mine and theirs and mine != theirs:
-            raise ValueError(f"record {record.name!r}: {key} in {theirs}, the model in {mine} "
-                             "(expected a record of the model's stage in the model's units)")
-    u = record.u[np.isfinite(record.u)]
-    span = float(np.ptp(u)) if u.size else 0.0
-    if span == 0.0:
-        raise ValueError(f"record {record.name!r}: its input does not move (expected a record "
-                         "that excites the stage)")
-    env = getattr(model, "envelope", None)
-    if env is None or env.u_max <= env.u_min:
-        return
-    known = env.u_max - env.u_min
-    centre = 0.5 * (env.u_max + env.u_min)
-    far = abs(float(np.median(u)) - centre) > SPAN_RATIO * known
-    if not (1.0 / SPAN_RATIO <= span / known <= SPAN_RATIO) or far:
-        raise ValueError(f"record {record.name!r}: its input spans {float(u.min()):.4g} .. "
-                         f"{float(u.max()):.4g}, the model was identified on {env.u_min:.4g} .. "
-                         f"{env.u_max:.4g} (expected a record of the model's stage, in its "
-                         "units)")
 
 
 def _as_option(message: str) -> str:

@@ -126,6 +126,38 @@ def _output_spread(model: DuhemSandwich, record: Record | None) -> float:
     return float(np.std(y)) if len(y) else 0.0
 
 
+#: A record whose input span is this many times the model's identified span (or less than
+#: its inverse), or that lies that many spans away, is in other units or of another stage.
+SPAN_RATIO = 10.0
+
+
+def _check_record_like(model: DuhemSandwich, record: Record) -> None:
+    """Refuse a record in other units than the model's, at another scale, or with an input
+    that does not move (``hystid export --rpem-record`` took one whose header said nm for a
+    model in um, which set the residual floor 1 000x too high)."""
+    for key in ("u", "y"):
+        mine, theirs = (model.units or {}).get(key), (record.units or {}).get(key)
+        if mine and theirs and mine != theirs:
+            raise ValueError(f"record {record.name!r}: {key} in {theirs}, the model in {mine} "
+                             "(expected a record of the model's stage in the model's units)")
+    u = record.u[np.isfinite(record.u)]
+    span = float(np.ptp(u)) if u.size else 0.0
+    if span == 0.0:
+        raise ValueError(f"record {record.name!r}: its input does not move (expected a record "
+                         "that excites the stage)")
+    env = getattr(model, "envelope", None)
+    if env is None or env.u_max <= env.u_min:
+        return
+    known = env.u_max - env.u_min
+    centre = 0.5 * (env.u_max + env.u_min)
+    far = abs(float(np.median(u)) - centre) > SPAN_RATIO * known
+    if not (1.0 / SPAN_RATIO <= span / known <= SPAN_RATIO) or far:
+        raise ValueError(f"record {record.name!r}: its input spans {float(u.min()):.4g} .. "
+                         f"{float(u.max()):.4g}, the model was identified on {env.u_min:.4g} .. "
+                         f"{env.u_max:.4g} (expected a record of the model's stage, in its "
+                         "units)")
+
+
 def rpem_start(
     model: DuhemSandwich, record: Record | None = None, sigma: float | None = None,
     supervise: bool = True,
@@ -180,6 +212,7 @@ def rpem_start(
                              f"identifier's starting covariance (expected at least "
                              f"{ident.n_start}, the samples its own start-up solve takes; "
                              f"{INFORMATION_SAMPLES} are used)")
+        _check_record_like(model, record)
         m = INFORMATION_SAMPLES
         P, measured = warm_information(model, record.u[:m], record.y[:m])
     else:
