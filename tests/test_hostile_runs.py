@@ -145,3 +145,18 @@ def test_a_decimal_comma_gets_a_hint(tmp_path):
     with pytest.raises(RecordError) as err:
         load_record(tmp_path / "s.csv")
     assert "decimal comma" not in str(err.value)
+
+
+def test_swapped_columns_are_suggested_when_the_output_does_not_move():
+    """u and y swapped on a record that rests before its excitation: the 'output' (the
+    command) is still over the identification part; the error spoke of a saturated sensor
+    alone."""
+    from hystid.errors import IdentificationDataError
+    from hystid.identify import identify
+
+    rec = reference_record(0.3, seed=6, noise=1e-3)
+    command = np.r_[np.full(3 * rec.n, rec.u[0]), rec.u]
+    response = np.r_[rec.y[0] + 1e-3 * np.random.default_rng(0).standard_normal(3 * rec.n),
+                     rec.y]
+    with pytest.raises(IdentificationDataError, match="u and y columns swapped"):
+        identify(Record(response, command, rec.fs, name="r"), model="duhem")

@@ -217,6 +217,17 @@ def _lead(u: np.ndarray) -> tuple[float, int]:
     return span, int(moved[0]) if len(moved) else len(u)
 
 
+def _still_output(u: np.ndarray, y: np.ndarray) -> bool:
+    """Whether the output sits at one value on most samples while the input moves over them
+    (a command read as the output: the columns swapped)."""
+    ok = np.isfinite(y)
+    if not ok.any():
+        return False
+    values, counts = np.unique(y[ok], return_counts=True)
+    still = ok & (y == values[np.argmax(counts)])
+    return bool(still.sum() >= 0.5 * len(y) and np.ptp(u[still]) > 0)
+
+
 def held_out_from(u: np.ndarray, share: float, stop: int | None = None) -> int:
     """First sample of the held-out end when ``share`` of a record's excitation is held out.
 
@@ -548,9 +559,12 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
                      f"times the slew it otherwise holds; the {n} samples after it (until the "
                      "input has travelled half its range) are simulated but left out of the fit")
     if weight.sum() < 0.5 * len(u):
+        swapped = ("; the output does not move over most of the record while the input does: "
+                   "are the u and y columns swapped (--columns)?" if _still_output(u, y)
+                   else "")
         raise IdentificationDataError(
             f"record {record.name!r}: only {int(weight.sum())} of {len(u)} samples are usable "
-            f"({'; '.join(notes)})")
+            f"({'; '.join(notes)}){swapped}")
     prep = Prepared(record, u_rest, u_scale, y_ref, y_scale, (u - u_rest) / u_scale,
                     (y - y_ref) / y_scale, weight, at_rest, skip, Envelope.of(u[:1]), notes)
     prep.envelope = Envelope.of(u[prep.fitted], from_rest=at_rest)
