@@ -160,3 +160,19 @@ def test_swapped_columns_are_suggested_when_the_output_does_not_move():
                      rec.y]
     with pytest.raises(IdentificationDataError, match="u and y columns swapped"):
         identify(Record(response, command, rec.fs, name="r"), model="duhem")
+
+
+def test_an_input_excursion_longer_than_a_glitch_is_said():
+    """Ten input samples at 1e6 V: not mended (a glitch is at most MAX_GLITCH samples), and the
+    model's envelope reached 1e6 V without a word; a one-sample glitch is still mended."""
+    from hystid.identify.prepare import MAX_GLITCH, without_input_glitches
+
+    rec = reference_record(0.2, seed=7, noise=1e-3)
+    for width, mended in ((10, False), (1, True)):
+        u = rec.u.copy()
+        u[2500:2500 + width] = 1e6
+        out, notes = without_input_glitches(Record(u, rec.y, rec.fs))
+        assert len(notes) == 1, notes
+        assert ("not mended" in notes[0]) is not mended
+        assert bool(np.max(out.u) < 1e3) is mended
+        assert width > MAX_GLITCH or mended

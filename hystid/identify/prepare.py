@@ -369,9 +369,14 @@ def bad_samples(y: np.ndarray, quiet: np.ndarray | None = None
 
 #: Longest run of input samples taken for a recording glitch (a stage is not driven that way).
 MAX_GLITCH = 3
+#: Longest run of the same shape that is said, not mended (:func:`input_glitches`): ten
+#: samples of stage A's record at 1e6 V gave a model whose envelope, and so the compensator's
+#: default limits, reached 1e6 V without a word.
+LONG_EXCURSION = 100
 
 
-def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]], list[str]]:
+def input_glitches(u: np.ndarray, y: np.ndarray, longer: list[str] | None = None
+                   ) -> tuple[list[tuple[int, int]], list[str]]:
     """Runs of input samples that were recorded wrong: the stage never saw them.
 
     A run of at most :data:`MAX_GLITCH` samples, inside the record, more than
@@ -393,6 +398,10 @@ def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]],
     ----------
     u, y : ndarray
         Input and output samples.
+
+    longer : list of str, optional
+        Receives one sentence per run of the same shape longer than :data:`MAX_GLITCH`
+        samples (at most :data:`LONG_EXCURSION`): not mended, but said.
 
     Returns
     -------
@@ -432,6 +441,14 @@ def input_glitches(u: np.ndarray, y: np.ndarray) -> tuple[list[tuple[int, int]],
                              f"(the input otherwise spans {q_lo:.4g} to {q_hi:.4g}), "
                              "while the output does not move: a recording glitch; identified "
                              "with the input interpolated over it")
+        elif inside and jumps and stop - k <= LONG_EXCURSION and longer is not None:
+            longer.append(f"the input reads {u[k]:.4g} at samples {k}..{stop - 1}, "
+                          f"{abs(u[k] - med) / spread:.2g} input spreads from its median (the "
+                          f"input otherwise spans {q_lo:.4g} to {q_hi:.4g}), for {stop - k} "
+                          f"samples: longer than a recording glitch ({MAX_GLITCH} samples at "
+                          "most), so it is not mended. If the stage never saw it, crop or mend "
+                          "the record: the model is fitted through it, and its input envelope "
+                          "(compensate's default limits) reaches it")
         k = stop
     return runs, notes
 
@@ -451,14 +468,15 @@ def without_input_glitches(record: Record) -> tuple[Record, list[str]]:
     list of str
         What was mended.
     """
-    runs, notes = input_glitches(record.u, record.y)
+    longer: list[str] = []
+    runs, notes = input_glitches(record.u, record.y, longer)
     if not runs:
-        return record, []
+        return record, longer
     u = np.array(record.u, dtype=float)
     for k, stop in runs:
         u[k:stop] = np.interp(np.arange(k, stop), [k - 1, stop], [u[k - 1], u[stop]])
     return Record(u, record.y.copy(), record.fs, units=dict(record.units),
-                  name=record.name), notes
+                  name=record.name), notes + longer
 
 
 def burn_in(u: np.ndarray, at_rest: bool, limit: float = 0.25, sweeps: float = 2.0) -> int:
