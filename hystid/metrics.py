@@ -214,9 +214,9 @@ def plot_validation(
 
     sl = slice(skip, None)
     t, y, yhat = (np.asarray(a, float)[sl] for a in (t, y, yhat))
-    yhat, runaway = _drawable(y, yhat)
-    if runaway:
-        title = f"{title} (the model diverged: {runaway} samples not drawn)"
+    yhat, n_runaway = _drawable(y, yhat)
+    if n_runaway:
+        title = f"{title} (the model diverged: {n_runaway} samples not drawn)"
     scale, e_unit = error_scale(unit)
     e = scale * (y - yhat)
     fig = Figure(figsize=(10, 7.5), layout="constrained")
@@ -257,7 +257,7 @@ def plot_validation(
     ax_err.set_xlabel("time [s]")
     ax_err.set_title(f"measured - model: RMS {np.sqrt(np.nanmean(e**2)):.3g} {e_unit}, range "
                      f"{np.nanmin(e):.3g} .. {np.nanmax(e):.3g} {e_unit}"
-                     + (" where drawn" if runaway else ""), fontsize=9)
+                     + (" where drawn" if n_runaway else ""), fontsize=9)
     if path is not None:
         fig.savefig(path, dpi=120)
     return fig

@@ -224,25 +224,23 @@ def _model(path: str | None, fs: float) -> Any:
                              name=f"model from {Path(path).name}")
 
 
-#: A model given with ``--model`` whose simulated output spreads over more than this many
-#: times the train record's output is refused as diverged.
-RUNAWAY = 1e6
-
-
 def _runs_on(model: Any, train: Any, args: argparse.Namespace) -> None:
     """Refuse a model given with ``--model`` whose simulation of the train record is not
     finite (a diagnosis of it would only compare infinities)."""
     import numpy as np
 
     from ..baselines import simulate_from_rest
+    from ..metrics import runaway
 
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         y = simulate_from_rest(model, train.u, check=False)
-    spread = float(np.ptp(train.y[np.isfinite(train.y)])) if np.isfinite(train.y).any() else 0.0
-    if not np.all(np.isfinite(y)) or np.ptp(y) > RUNAWAY * max(spread, 1e-300):
+    if runaway(train.y, y):
+        spread = float(np.nanmax(train.y) - np.nanmin(train.y))
+        with np.errstate(all="ignore"):
+            reach = float(np.max(np.abs(y)))
         raise CommandError(f"--model {args.model}: its simulation of TRAIN {args.train} "
-                           f"diverges (output spread {np.ptp(y):.3g} against the record's "
+                           f"diverges (it reaches {reach:.3g} where the record spans "
                            f"{spread:.3g}); expected a model that runs on the train record")
 
 

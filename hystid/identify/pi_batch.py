@@ -24,7 +24,7 @@ from .pi_stage_coordinates import is_stage_structure, stage_from_theta, theta_fr
 from .prepare import prepare, scales
 from .result import IdentificationResult
 
-__all__ = ["POLISHED", "RIDGE", "fit_pi_output_error"]
+__all__ = ["POLISHED", "RIDGE", "fit_pi_output_error", "with_slow_branch"]
 
 
 #: Starts of the off-line fit polished after the screening (the best ones), and the slow
@@ -274,6 +274,30 @@ def _excitation_span(un: np.ndarray, rows: np.ndarray) -> int:
     return int(rows[-1] - (moved[0] if moved.size else rows[0]) + 1)
 
 
+def with_slow_branch(phi: np.ndarray, n: int, span: int) -> np.ndarray:
+    """Stage coordinates with the slow branch set as the slow-branch start sets it.
+
+    Parameters
+    ----------
+    phi : ndarray
+        Stage coordinates (:mod:`~hystid.identify.pi_stage_coordinates`), weights first.
+    n : int
+        Number of weights (and polynomial terms) before the slow branch.
+    span : int
+        Samples the time constant is a share of.
+
+    Returns
+    -------
+    ndarray
+        A copy with :data:`SLOW_START_GAIN` of the DC gain on the slow branch and its time
+        constant :data:`SLOW_START_SPAN` of ``span``.
+    """
+    phi = np.array(phi, dtype=float)
+    phi[n] = SLOW_START_GAIN
+    phi[n + 1] = np.arctanh(np.exp(-1.0 / (SLOW_START_SPAN * max(span, 1))) / _KMAX)
+    return phi
+
+
 def _slow_branch_start(arx: np.ndarray, structure: PIStructure, span: int) -> np.ndarray | None:
     """The ARX blocks of the ``pi-stage`` shape in its parallel form
     (:mod:`~hystid.identify.pi_stage_coordinates`), the slow branch's pole moved to a time
@@ -299,10 +323,7 @@ def _slow_branch_start(arx: np.ndarray, structure: PIStructure, span: int) -> np
     roots = np.roots(np.r_[1.0, a])
     if not np.any(np.abs(roots.imag) <= 1e-9 * np.maximum(1.0, np.abs(roots))):
         return None
-    phi = stage_from_theta(arx, n)
-    phi[n] = SLOW_START_GAIN
-    phi[n + 1] = np.arctanh(np.exp(-1.0 / (SLOW_START_SPAN * max(span, 1))) / _KMAX)
-    theta = theta_from_stage(phi, n)
+    theta = theta_from_stage(with_slow_branch(stage_from_theta(arx, n), n, span), n)
     return theta if np.isfinite(theta).all() else None
 
 

@@ -14,13 +14,7 @@ import time
 import numpy as np
 
 from .horizon import covariance
-from .pi_batch import (
-    SLOW_START_GAIN,
-    SLOW_START_LONGEST,
-    SLOW_START_SPAN,
-    _scale_weights,
-    _weights_given_blocks,
-)
+from .pi_batch import SLOW_START_LONGEST, _scale_weights, _weights_given_blocks, with_slow_branch
 from .pi_online_kernels import _KMAX, _STATE_ROWS
 from .pi_stage_coordinates import admissible_weights, stage_from_theta, theta_from_stage
 from .prepare import REST_SAMPLES
@@ -203,9 +197,7 @@ class WarmUp:
         record from rest (the warm-up fit's 0.10), and the on-line model 4.5-5.3x the batch
         fit's held-out error."""
         n = self._n_weights
-        phi = phi.copy()
-        phi[n] = SLOW_START_GAIN
-        phi[n + 1] = np.arctanh(np.exp(-1.0 / (SLOW_START_SPAN * self._window)) / _KMAX)
+        phi = with_slow_branch(phi, n, self._window)
         rows = np.flatnonzero(np.isfinite(yn))
         theta, _ = _weights_given_blocks(theta_from_stage(phi, n), un, yn, rows, self._rn,
                                          self.structure, False)
