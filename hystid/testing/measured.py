@@ -493,7 +493,7 @@ def _stage_a_input(kind: str, seconds: float, fs: float, rng: np.random.Generato
 
 def stage_a_like(kind: str = "prbn", *, seconds: float = 2.0, rest_seconds: float = 1.0,
                  repeat: int = 0, noise_rms: float = 0.5e-3, repeat_rms: float = 0.027,
-                 offset: float = -0.7, seed: int = 0) -> Record:
+                 offset: float = -0.7, swing_before: float = 0.0, seed: int = 0) -> Record:
     """Return a record like the measured stage A (piezo stage, capacitive sensor, 10 kHz).
 
     The stage (:func:`stage_a`, Bouc-Wen hysteresis and a 740 Hz flexure mode) is simulated at
@@ -521,6 +521,11 @@ def stage_a_like(kind: str = "prbn", *, seconds: float = 2.0, rest_seconds: floa
         RMS difference between repeats, um, by default 0.027.
     offset : float, optional
         Sensor offset, um, by default -0.7.
+    swing_before : float, optional
+        Before the rest, the stage swings out and back once (a half sine of 0.1 s) by this
+        share of the input's half-range, upwards when positive, downwards when negative, so
+        that it rests on one branch of its loop, as a stage rests after earlier work; the swing
+        is not in the record. By default 0: the stage starts at its rest.
     seed : int, optional
         Seed of the excitation; the variation and the noise use ``seed`` and ``repeat``.
 
@@ -534,11 +539,14 @@ def stage_a_like(kind: str = "prbn", *, seconds: float = 2.0, rest_seconds: floa
     x = _stage_a_input(kind, seconds, fs, rng)
     u = hold_then_excite(x, fs, seconds=rest_seconds)
     u[-1] = u[0]  # the generator wraps its last sample back to the first value
-    sim = simulate_at_rate(stage_a(), u, fs)
+    lo, hi = STAGE_A_U
+    n_swing = int(round(0.1 * fs)) if swing_before else 0
+    swing = u[0] + swing_before * 0.5 * (hi - lo) * np.sin(np.pi * np.arange(n_swing) / n_swing)
+    sim = simulate_at_rate(stage_a(), np.concatenate([np.clip(swing, lo, hi), u]), fs)
     var = coloured_variations(u.size, 8, repeat_rms, fs, corner_hz=4.0, seed=seed + 1000)
     noise = np.random.default_rng([seed, repeat, 7]).standard_normal(u.size) * noise_rms
     # displacement zero: the mean input level sits near -0.35 um before the sensor offset
-    y = sim["y"] + 0.05 + offset + var[repeat] + noise
+    y = sim["y"][n_swing:] + 0.05 + offset + var[repeat] + noise
     return Record(u=u, y=y, fs=fs, units={"u": "V", "y": "um"}, name=f"stage-A {kind} #{repeat}")
 
 
