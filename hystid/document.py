@@ -140,6 +140,8 @@ def model_document(
     }
     if kind == "pi":
         doc["thresholds"] = [float(r) for r in model.thresholds]
+        if model.rest_swing:
+            doc["rest_swing"] = float(model.rest_swing)
     elif kind == "mduhem":
         doc["rates"] = [float(r) for r in model.rates]
     else:

@@ -142,7 +142,8 @@ def load_model(path: str | os.PathLike[str]) -> DuhemSandwich | PISandwich | Mul
             check_structure_size(structure)
             thresholds = _numbers(doc, "thresholds", where, "a PI model's play-operator "
                                   "thresholds")
-            model = PISandwich(params, thresholds, structure, **common)
+            model = PISandwich(params, thresholds, structure, **common,
+                               rest_swing=_number(doc, "rest_swing", where, default=0.0))
         check_model(model)
     except ModelFileError:
         raise

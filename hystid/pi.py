@@ -56,9 +56,11 @@ from .pi_operator import (  # the operator; re-exported here, where the sandwich
     play_operator,
     poly_keys,
     poly_terms,
+    rest_plays,
 )
 from .poly import is_stable
 from .sandwich import InitialCondition, UnitGainSandwich, unit_gain_numerator
+from .signals import finite_number
 from .thresholds import pi_thresholds
 
 __all__ = [
@@ -73,6 +75,7 @@ __all__ = [
     "play_operator",
     "pi_simulate_into",
     "poly_terms",
+    "rest_plays",
     "unit_gain_numerator",
     "N_OPERATORS",
 ]
@@ -187,6 +190,13 @@ class PISandwich(UnitGainSandwich):
         Inputs the model was identified on; simulating outside it warns.
     units : dict, optional
         Units of ``u`` and ``y`` (``{"u": "V", "y": "um"}`` by default).
+    rest_swing : float
+        The stage's last excursion before its rest, in input units from the rest (0 by
+        default: the plays start virgin). A stage brought back to its rest from
+        ``u_rest + rest_swing`` rests on one branch of its loop: each play sits at
+        ``sign(s) min(max(|s| - r_i, 0), r_i)`` (:attr:`rest_plays`), the block's output at rest
+        is their weighted sum and L2 has settled on it. The PI analogue of the Duhem sandwich's
+        ``rest_memory``; the batch fit estimates it when the record starts at rest.
 
     Attributes
     ----------
@@ -194,6 +204,8 @@ class PISandwich(UnitGainSandwich):
         Free parameter vector.
     thresholds : ndarray
         Play-operator thresholds (fixed, not identified).
+    rest_swing : float
+        See above.
     """
 
     #: The model file's ``kind`` (:mod:`hystid.modelfile`).
@@ -211,8 +223,10 @@ class PISandwich(UnitGainSandwich):
         offset: float = 0.0,
         envelope: Envelope | None = None,
         units: Mapping[str, str] | None = None,
+        rest_swing: float = 0.0,
     ) -> None:
         self.thresholds = _check_thresholds(thresholds)
+        self.rest_swing = finite_number(rest_swing, "rest_swing")
         structure = structure or PIStructure(n_operators=len(self.thresholds))
         if structure.n_operators != len(self.thresholds):
             raise ValueError(
@@ -349,13 +363,34 @@ class PISandwich(UnitGainSandwich):
                              "operator; hystid.compensate inverts it sample by sample")
         return pi_inverse_block(self.thresholds, self.mu, dt=self.dt, name="H_inv")
 
+    @property
+    def rest_plays(self) -> np.ndarray:
+        """The plays' states at rest after the swing :attr:`rest_swing` (zero without one)."""
+        return rest_plays(self.rest_swing, self.thresholds)
+
+    def at_rest(self) -> InitialCondition:
+        """The past of the stage at rest: ``w1 = 0``, the plays at :attr:`rest_plays`, ``w2``
+        their weighted sum and L2 (unit DC gain) settled on it.
+
+        Returns
+        -------
+        InitialCondition
+            Relative to the model's rest.
+        """
+        if not self.rest_swing:
+            return InitialCondition()
+        P = self.structure.history + 1
+        w2 = self.hysteresis_output(0.0, self.rest_plays)
+        return InitialCondition(w2=np.full(P, w2), y=np.full(P, w2))
+
     def operator_state(
         self, x0: InitialCondition | None = None, p0: np.ndarray | Sequence[float] | None = None
     ) -> np.ndarray:
         """Play-operator states ``p_i(-1)`` for a start from ``x0``.
 
-        ``p0`` when given; otherwise the state reached from the virgin state by a monotone move
-        to ``w1(-1)``: ``p_i = max(w1 - r_i, min(w1 + r_i, 0))`` (zero at rest).
+        ``p0`` when given; otherwise the state reached from the state at rest
+        (:attr:`rest_plays`) by a monotone move to ``w1(-1)``:
+        ``p_i = max(w1 - r_i, min(w1 + r_i, p_rest_i))`` (``p_rest`` at rest).
 
         Parameters
         ----------
@@ -372,7 +407,8 @@ class PISandwich(UnitGainSandwich):
         if p0 is not None:
             return _initial_states(p0, len(self.thresholds))
         w1 = (x0 or InitialCondition()).window("w1", 1)[0]
-        return np.maximum(w1 - self.thresholds, np.minimum(w1 + self.thresholds, 0.0))
+        return np.maximum(w1 - self.thresholds, np.minimum(w1 + self.thresholds,
+                                                           self.rest_plays))
 
     def settled_state(self, u0: float) -> InitialCondition:
         """The past of a stage that moved monotonically from its rest to input ``u0`` and is
@@ -396,7 +432,7 @@ class PISandwich(UnitGainSandwich):
         """
         P = self.structure.history + 1
         v = float(u0) - self.u_rest
-        p = np.maximum(v - self.thresholds, np.minimum(v + self.thresholds, 0.0))
+        p = np.maximum(v - self.thresholds, np.minimum(v + self.thresholds, self.rest_plays))
         w2 = self.hysteresis_output(v, p)
         return InitialCondition(*(np.full(P, x) for x in (v, v, w2, w2)))
 
@@ -408,6 +444,7 @@ class PISandwich(UnitGainSandwich):
 
     structure_type = PIStructure
     _reading_options = ("prefix",)
+    _carried = ("rest_swing",)
 
     @staticmethod
     def _prefixes(H: ct.NonlinearIOSystem) -> list[str]:

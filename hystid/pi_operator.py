@@ -155,6 +155,26 @@ def play_operator(
     return out
 
 
+def rest_plays(swing: float, thresholds: np.ndarray) -> np.ndarray:
+    """The plays' states at rest after one excursion from the rest to ``swing`` and back
+    (from the virgin state).
+
+    Parameters
+    ----------
+    swing : float
+        The excursion from the rest, in the plays' input units (signed).
+    thresholds : ndarray
+        The plays' thresholds.
+
+    Returns
+    -------
+    ndarray
+        ``sign(swing) min(max(|swing| - r_i, 0), r_i)``.
+    """
+    r = np.asarray(thresholds, dtype=float)
+    return np.sign(swing) * np.clip(abs(swing) - r, 0.0, r)
+
+
 def pi_operator(
     v: np.ndarray | Sequence[float],
     thresholds: np.ndarray | Sequence[float],

@@ -133,14 +133,16 @@ def placed_duhem() -> DuhemSandwich:
                          units={"u": "V", "y": "um"})
 
 
-def pi_model(placed: bool) -> PISandwich:
+def pi_model(placed: bool, swing: float = 0.0) -> PISandwich:
+    """A PI model; placed, at rest at 1.5 with an offset; with ``swing``, resting on the branch
+    an excursion to ``u_rest + swing`` left (the plays not virgin, L2 settled off zero)."""
     n = 12
     params = {"a11": -0.6, "a12": 0.05, "b12": 0.1, "a21": -1.2, "a22": 0.4, "b22": 0.05,
               **{f"mu{i}": 0.3 / (1 + i) for i in range(n)}}
     place = {"u_rest": 1.5, "offset": 0.3, "envelope": Envelope(0.0, 10.0, 0.5)} if placed \
         else {}
     return PISandwich(params, pi_thresholds((0.0, 10.0), n), PIStructure(n_operators=n),
-                      fs=10_000.0, **place)
+                      fs=10_000.0, rest_swing=swing, **place)
 
 
 def pi_poly_model() -> PISandwich:
@@ -179,6 +181,7 @@ MODELS = {
     "duhem-placed": placed_duhem,
     "pi": lambda: pi_model(False),
     "pi-placed": lambda: pi_model(True),
+    "pi-swung": lambda: pi_model(True, swing=4.0),
     "pi-poly-placed": pi_poly_model,
 }
 
@@ -336,10 +339,13 @@ def test_ff_step_makes_up_the_cut_pre_actuation_like_compensate(tmp_path):
 
 
 @needs_cc
-@pytest.mark.parametrize("placed", [False, True])
-def test_ff_step_matches_for_a_pi_model(placed, tmp_path):
-    model = pi_model(placed)
-    _ff_case(model, triangle(model, 1.5, seconds=0.3), tmp_path, u_limits=(-20.0, 20.0))
+@pytest.mark.parametrize("placed,swing", [(False, 0.0), (True, 0.0), (True, 4.0), (True, -3.0)])
+def test_ff_step_matches_for_a_pi_model(placed, swing, tmp_path):
+    model = pi_model(placed, swing)
+    res = _ff_case(model, triangle(model, 1.5, seconds=0.3), tmp_path, u_limits=(-20.0, 20.0))
+    if swing:  # the compensator starts from the plays the swing left: the model follows
+        y = model.simulate(res.u, check=False).y
+        assert np.sqrt(np.mean((y - res.y_des) ** 2)) < 1e-6 * np.ptp(res.y_des)
 
 
 @needs_cc

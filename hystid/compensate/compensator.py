@@ -382,20 +382,27 @@ class _Chain:
     def prime_args(self):
         return (self.ispec, self.fpar, self.a2, self.b2t, self.AM, self.BM, self.CM, self.DM)
 
-    def initial_state(self, y_ref: np.ndarray | None = None, rest: float = 0.0) -> np.ndarray:
+    def initial_state(self, y_ref: np.ndarray | None = None, rest: float = 0.0,
+                      plays: np.ndarray | None = None) -> np.ndarray:
         """At rest (the hysteresis block's output at ``rest``, ``w1 = 0``), primed on ``y_ref``.
 
         ``rest`` is only meaningful with L2 left out (``l2_identity``): the reference lines
-        then hold ``w2`` and start settled at ``rest``, like the Duhem state.
+        then hold ``w2`` and start settled at ``rest``, like the Duhem state; a PI block's
+        plays then start at ``plays`` (:attr:`hystid.pi.PISandwich.rest_plays`).
         """
         x = np.zeros(int(self.ispec[_NX]))
-        if rest:
-            if self.ispec[_KIND] not in (KIND_DUHEM, KIND_GDUHEM) or self.ispec[_NM] \
+        pi = plays is not None and len(plays) > 0
+        if rest or pi:
+            kinds = (KIND_PI,) if pi else (KIND_DUHEM, KIND_GDUHEM)
+            if self.ispec[_KIND] not in kinds or self.ispec[_NM] \
                     or self.ispec[_N2A] or self.ispec[_N2B] or self.ispec[_Q2]:
-                raise ValueError("rest: a remembered hysteresis state needs the Duhem inverse "
-                                 "(plain or generalised block) with L2 left out of the chain")
+                raise ValueError("rest: a remembered hysteresis state needs the Duhem or PI "
+                                 "inverse with L2 left out of the chain")
             x[self.ispec[_OFF_Y]:self.ispec[_OFF_U]] = rest  # y_M and w2d lines; u, w1: 0
-            x[self.ispec[_OFF_H]] = rest
+            if pi:
+                x[self.ispec[_OFF_H]:self.ispec[_OFF_H] + len(plays)] = plays
+            else:
+                x[self.ispec[_OFF_H]] = rest
         if y_ref is not None:
             head = _pad_hold(np.asarray(y_ref, float), self.advance)[: self.advance]
             chain_prime(x, np.ascontiguousarray(head), *self.prime_args())
@@ -573,10 +580,11 @@ class Feedforward:
 
 
 def _run(chain: _Chain, y_ref: np.ndarray, n: int | None = None,
-         rest: float = 0.0) -> Feedforward:
-    """Run the chain over ``y_ref`` (``n`` samples; ``y_ref`` may run further, for the preview)."""
+         rest: float = 0.0, plays: np.ndarray | None = None) -> Feedforward:
+    """Run the chain over ``y_ref`` (``n`` samples; ``y_ref`` may run further, for the preview)
+    from rest (the hysteresis block's output ``rest``, a PI block's ``plays``)."""
     n = len(y_ref) if n is None else n
-    x = chain.initial_state(y_ref, rest)
+    x = chain.initial_state(y_ref, rest, plays)
     rs = _pad_hold(y_ref, chain.advance)[chain.advance:chain.advance + n]
     u, yd, status = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
     chain_run(x, np.ascontiguousarray(rs), *chain.args(), u, yd, status)

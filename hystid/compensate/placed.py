@@ -54,6 +54,7 @@ from .compensator import (
     KIND_DUHEM,
     KIND_GDUHEM,
     KIND_LINEAR,
+    KIND_PI,
     NOT_EXACT,
     SATURATED,
     Feedforward,
@@ -237,6 +238,7 @@ class _Plan:
     rest: float  # the hysteresis block's output at rest (the chain's start)
     u_rest: float
     u_limits: tuple[float, float]
+    plays: np.ndarray  # a PI block's plays at rest (empty: virgin, or not a PI block)
 
     @property
     def preview(self) -> int:
@@ -255,7 +257,7 @@ class _Plan:
         else:
             ym = dev
         w2d = self.l2.run(ym, n + self.chain.advance) + self.rest
-        return _run(self.chain, w2d, n=n, rest=self.rest), ym[:n] + y_rest
+        return _run(self.chain, w2d, n=n, rest=self.rest, plays=self.plays), ym[:n] + y_rest
 
 
 def _plan(model: Any, *, u_limits: tuple[float, float] | None = None,
@@ -300,16 +302,19 @@ def _plan(model: Any, *, u_limits: tuple[float, float] | None = None,
                    reference_model=None, preview=preview, duhem_bound=duhem_bound,
                    l2_identity=True)
     chain_kind = int(chain.ispec[0])
+    plays = np.zeros(0)
     if chain_kind in (KIND_DUHEM, KIND_GDUHEM):  # from the Duhem state remembered at rest
         rest = w2_rest
+    elif chain_kind == KIND_PI and getattr(model, "rest_swing", 0.0):  # plays at rest
+        rest, plays = w2_rest, np.asarray(model.rest_plays, dtype=float)
     elif chain_kind == KIND_LINEAR or not w2_rest:  # the central line through the rest point
         rest = 0.0
     else:
         raise ValueError("model: a hysteresis state at rest is only handled for the Duhem block "
-                         "(plain or generalised)")
+                         "(plain or generalised) and the PI block")
     return _Plan(float(model.offset) + y_rest_rel, anchor, m_num, m_den, lead,
                  inverse_filter(model.L2), chain, float(rest), float(model.u_rest),
-                 (float(limits[0]), float(limits[1])))
+                 (float(limits[0]), float(limits[1])), plays)
 
 
 def compensate(

@@ -533,6 +533,10 @@ void hystid_ff_init(hystid_ff_state *s)
 #if HX_FF_KIND == 0
     s->x[HX_FF_OFF_H] = HX_FF_REST; /* the Duhem state remembered at rest */
     hx_planner_init(&s->plan);
+#elif HX_FF_KIND == 1
+    for (i = 0; i < HX_FF_NPI; i++) {
+        s->x[HX_FF_OFF_H + i] = hx_ff_p_rest[i]; /* the plays where the swing left them */
+    }
 #endif
     for (i = 0; i < HYSTID_FF_M_NX; i++) {
         s->mx[i] = 0.0;

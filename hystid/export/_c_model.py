@@ -110,11 +110,11 @@ void hystid_model_init(hystid_model_state *s)
     for (i = 0; i <= HX_HIST; i++) {
         s->u[i] = 0.0;
         s->w1[i] = 0.0;
-        s->w2[i] = 0.0;
-        s->y[i] = 0.0;
+        s->w2[i] = HX_W2_REST;
+        s->y[i] = HX_Y_REST;
     }
     for (i = 0; i < HX_NPI; i++) {
-        s->p[i] = 0.0;
+        s->p[i] = hx_p_rest[i];
     }
 }
 

@@ -13,7 +13,8 @@ What each function is:
 
 * ``hystid_model_step`` -- ``model.simulate(u).y`` one sample at a time: the recorded input in
   (record units), the displacement out (record units, the sensor offset included), from rest
-  (the Duhem state at the model's ``rest_memory``).
+  (the Duhem state at the model's ``rest_memory``, a PI model's plays where its
+  ``rest_swing`` left them).
 * ``hystid_ff_step`` -- :func:`hystid.compensate.compensate` one sample at a time, in the
   record's units (the reference as the sensor reads it in, the command as the amplifier takes
   it out; the rest level and the model's output at rest, or the reference's first sample with
@@ -149,7 +150,11 @@ def _model_part(model: DuhemSandwich | PISandwich | MultiDuhemSandwich) -> tuple
         src += (_define("HX_NOP", len(model.rates)) + _array("hx_alpha", model.rates)
                 + _array("hx_f1", model.f1) + _array("hx_g0", model.g0) + MDUHEM_STEP)
     else:
+        rest = model.at_rest()  # the plays where the swing before the rest left them
         src += (_define("HX_NPI", len(model.thresholds)) + _array("hx_r", model.thresholds)
+                + _array("hx_p_rest", model.rest_plays)
+                + _define("HX_W2_REST", rest.window("w2", 1)[0])
+                + _define("HX_Y_REST", rest.window("y", 1)[0])
                 + _array("hx_mu", model.mu) + _define("HX_NPOLY", len(model.poly))
                 + _array("hx_c", model.poly) + PI_STEP)
     return head, src
@@ -355,7 +360,8 @@ def _ff_part(
         arrays.update(m_num=plan.m_num, m_den=plan.m_den)
     member = ""
     if kind == comp.KIND_PI:
-        arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi)
+        arrays.update(r_pi=chain.r_pi, mu_pi=chain.mu_pi,
+                      p_rest=plan.plays if len(plan.plays) else np.zeros(len(chain.r_pi)))
         src += _define("HX_FF_NPOLY", npoly)
         if npoly:  # the polynomial terms: the per-sample inverse (pi_poly_inverse)
             arrays.update(poly=fpar[comp._NF:comp._NF + npoly])

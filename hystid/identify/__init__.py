@@ -473,8 +473,11 @@ def place_after_run(model: Any, record: Record, prep: Any) -> dict[str, float] |
     record. Eq. (7) is affine in ``w2`` given ``w1``, so the output on the record is affine in
     the rest memory: two simulations and a least-squares solve of two unknowns (the memory and
     the offset; the offset alone for the other members) over the samples the batch fit would
-    score place the model exactly. The placement is kept only when it lowers that RMS. On a
-    record that does not begin at rest only the offset is fitted: there is no rest to remember.
+    score place the model exactly. The placement is kept only when it lowers that RMS. A PI
+    model's plays at rest (:attr:`~hystid.pi.PISandwich.rest_swing`, the stage's last excursion
+    before the record) are set first, with its parameters held
+    (:func:`~hystid.identify.pi_rest_swing.place_rest_swing`). On a record that does not begin
+    at rest only the offset is fitted: there is no rest to remember.
 
     Parameters
     ----------
@@ -489,13 +492,17 @@ def place_after_run(model: Any, record: Record, prep: Any) -> dict[str, float] |
     -------
     dict or None
         ``offset_change`` and ``rest_memory`` (output units; 0 for a member without one) and
-        the RMS over the scored samples ``before`` and ``after``; None when the model is not
-        finite, the record leaves nothing to fit or the placement does not lower the RMS.
+        the RMS over the scored samples ``before`` and ``after``; for a PI model whose swing
+        was set, ``rest_swing`` (input units) and ``before_swing`` (the RMS before it, the
+        offset refitted); None when the model is not finite, the record leaves nothing to fit
+        or the placement does not lower the RMS.
     """
     import numpy as np
 
     from ..baselines import simulate_from_rest
     from ..model import DuhemSandwich
+    from ..pi import PISandwich
+    from .pi_rest_swing import place_rest_swing
 
     if not np.all(np.isfinite(model.theta)):
         return None
@@ -506,6 +513,9 @@ def place_after_run(model: Any, record: Record, prep: Any) -> dict[str, float] |
     scored = _scored(record, prep)
     if np.count_nonzero(scored) < 3:
         return None
+    swing = None
+    if isinstance(model, PISandwich) and prep.at_rest:  # the plays' state at rest
+        swing = place_rest_swing(model, record.u, record.y, scored)
     unit = float(prep.y_scale)
     memory = model.rest_memory if duhem else 0.0
     columns = [np.ones(record.n)]
@@ -526,12 +536,18 @@ def place_after_run(model: Any, record: Record, prep: Any) -> dict[str, float] |
     after = float(np.sqrt(np.mean((r - a @ x) ** 2)))
     before = float(np.sqrt(np.mean(r ** 2)))
     if not np.all(np.isfinite(x)) or after >= before:
-        return None
+        if swing is None:
+            return None
+        x, after = np.zeros(len(columns)), before
     model.offset += float(x[0])
     if duhem:
         model.rest_memory = memory + float(x[1])
-    return {"offset_change": float(x[0]), "rest_memory": memory + float(x[-1]) if duhem else 0.0,
-            "before": before, "after": after}
+    placed = {"offset_change": float(x[0]),
+              "rest_memory": memory + float(x[-1]) if duhem else 0.0,
+              "before": before, "after": after}
+    if swing is not None:  # the RMS before the swing was set, with its best offset
+        placed.update(rest_swing=swing["rest_swing"], before_swing=swing["before"])
+    return placed
 
 
 def _check_call(record: Any, structure: Any = None) -> None:

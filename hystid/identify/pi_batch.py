@@ -219,11 +219,42 @@ def _solve_normalised(
             or _slowest_tau(problem.split(item[2].x)[0], structure) <= SLOW_START_LONGEST
             * _excitation_span(un, rows)]
     _, label, sol = min(kept or polished, key=lambda item: item[0])
+    return _normalised_fit(problem, sol, label)
+
+
+def _normalised_fit(problem: _PIOutputError, sol: Any, label: str) -> _NormalisedFit:
+    """The fit of a solver's result ``sol`` on ``problem``, started from ``label``."""
     theta, y0 = problem.split(sol.x)
     rms = float(np.sqrt(np.mean(problem.evaluate(sol.x)["data"] ** 2)))
     moved, pieces = problem.moved(sol.x)
     return _NormalisedFit(theta, y0, rms, int(sol.nfev), str(sol.message), label,
-                          problem.drift(sol.x), _span(rows), moved, pieces)
+                          problem.drift(sol.x), _span(problem.rows), moved, pieces)
+
+
+def _with_rest_swing(fit: _NormalisedFit, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
+                     r: np.ndarray, structure: PIStructure, fit_offset: bool, drift: bool,
+                     knot: int | None, max_nfev: int, tol: float
+                     ) -> tuple[_NormalisedFit, float, dict[str, Any]]:
+    """The fit with the stage's last excursion before its rest
+    (:mod:`~hystid.identify.pi_rest_swing`: scanned with L1 and L2 held, then the problem
+    solved again with it held), kept when it lowers the RMS residual by more than
+    :data:`~hystid.identify.pi_rest_swing.GAIN`; the swing (normalised) and the scan's report."""
+    from .pi_rest_swing import GAIN, scan_rest_swing
+
+    nuisance = _nuisance(rows, drift, knot) if fit_offset else np.ones((len(rows), 0))
+    found = scan_rest_swing(fit.theta, un, yn, rows, r, structure, nuisance, RIDGE)
+    report = {"swing": found["swing"], "rms_scan": found["rms"], "rms_virgin": fit.rms,
+              "kept": False}
+    if not found["rms"] < (1.0 - GAIN) * fit.rms:
+        return fit, 0.0, report
+    problem = _PIOutputError(un, yn, rows, r, structure, fit_offset, drift, knot,
+                             swing=found["swing"])
+    sol = problem.solve(problem.to_z(found["theta"], found["nuisance"]), max_nfev, tol)
+    swung = _normalised_fit(problem, sol, f"{fit.start} + rest swing")
+    if not swung.rms < (1.0 - GAIN) * fit.rms:
+        return fit, 0.0, report
+    report["kept"] = True
+    return swung, found["swing"], report
 
 
 def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
@@ -333,8 +364,9 @@ class _PIOutputError:
 
     def __init__(self, un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
                  structure: PIStructure, fit_offset: bool, drift: bool = False,
-                 knot: int | None = None) -> None:
+                 knot: int | None = None, swing: float = 0.0) -> None:
         s = self.structure = structure
+        self.swing = swing  # the stage's last excursion before its rest (held)
         self.un, self.r, self.rows, self.target = un, r, rows, yn[rows]
         # the fitted samples as a slice when they are a run (no copy of the Jacobian's rows)
         whole = len(rows) and np.array_equal(rows, np.arange(rows[0], rows[0] + len(rows)))
@@ -383,8 +415,8 @@ class _PIOutputError:
         if self._cache.get("z") is None or not np.array_equal(self._cache["z"], z):
             theta, dtheta = self.rp.to_theta(z[: self.n])
             with np.errstate(over="ignore", invalid="ignore"):
-                yhat, S, D = pi_output_sensitivities(PISandwich(theta, self.r, self.structure),
-                                                     self.un, chain=dtheta, raw=True)
+                model = PISandwich(theta, self.r, self.structure, rest_swing=self.swing)
+                yhat, S, D = pi_output_sensitivities(model, self.un, chain=dtheta, raw=True)
             data = yhat[self.kept] + self.ones @ z[self.n:] - self.target
             # the data rows [S | 1 | r] (sensitivities to the full coefficients, the offset's
             # ones, the residuals) reduced to their triangle first; its columns then mapped to
@@ -475,6 +507,7 @@ def fit_pi_output_error(
     max_nfev: int = 200,
     tol: float = 1e-8,
     name: str = "identified PI sandwich",
+    rest_swing: bool = True,
 ) -> IdentificationResult:
     """Identify the PI sandwich off-line by output-error least squares (the reference).
 
@@ -535,12 +568,19 @@ def fit_pi_output_error(
         ``ftol``, ``xtol`` and ``gtol`` of the solver.
     name : str
         Name of the identified model.
+    rest_swing : bool
+        On a record that starts at rest, also estimate the stage's last excursion before it
+        (:attr:`~hystid.pi.PISandwich.rest_swing`: the stage rests on one branch of its loop;
+        :mod:`~hystid.identify.pi_rest_swing`), kept when it lowers the RMS residual by more
+        than a tenth. Default on.
 
     Returns
     -------
     IdentificationResult
         ``method="pi-batch"``; ``info`` holds the RMS residual (record units), the solver's
-        message, the scales, the offset, ``drift_per_second`` (output units, its mean rate over
+        message, the scales, the offset, ``rest_swing`` (input units; ``rest_swing_scan``: the
+        best swing found, the RMS residual with it and from the virgin state, whether it was
+        kept), ``drift_per_second`` (output units, its mean rate over
         the fitted samples, 0 when not estimated), ``drift_pieces`` (its straight pieces) and
         ``warnings`` (what the preparation found, and a drift larger than
         :data:`DRIFT_SAID` times the RMS residual over the fitted samples).
@@ -559,16 +599,23 @@ def fit_pi_output_error(
     knot = max(1, int(round(DRIFT_KNOT_SECONDS * record.fs)))
     fit = _solve_normalised(prep.un, prep.yn, prep.weight, r / su, s, theta0_n, offset,
                             max_nfev, tol, drift=drift, knot=knot, slow_start=prep.at_rest)
+    swing, scan = 0.0, None
+    if rest_swing and prep.at_rest:
+        fit, swing, scan = _with_rest_swing(fit, prep.un, prep.yn, np.flatnonzero(prep.weight),
+                                            r / su, s, offset, drift, knot, max_nfev, tol)
+        scan = {**scan, "swing": scan["swing"] * su, "rms_scan": scan["rms_scan"] * sy,
+                "rms_virgin": scan["rms_virgin"] * sy}
     model = PISandwich(_scale_weights(fit.theta, s, sy, su), r, s, fs=record.fs, name=name,
                        u_rest=prep.u_rest, offset=prep.offset(fit.y0), envelope=prep.envelope,
-                       units=record.units)
+                       units=record.units, rest_swing=swing * su)
     info = {**fit.info(r, su, sy), "offset": model.offset, "at_rest": prep.at_rest,
             "skip": prep.skip, "warnings": list(prep.notes) + _drift_note(fit, prep, record)
             + _inverse_note(model)}
+    info["rest_swing"], info["rest_swing_scan"] = model.rest_swing, scan
     info["drift_per_second"] = _drift_per_second(fit, prep, record)
     info["drift_pieces"] = fit.pieces if drift else 0
     settings = {"n_operators": len(r), "offset": offset, "drift": drift, "skip": prep.skip,
-                "max_nfev": max_nfev, "tol": tol, "samples": record.n}
+                "max_nfev": max_nfev, "tol": tol, "samples": record.n, "rest_swing": rest_swing}
     return IdentificationResult(model, "pi-batch", settings, info=info)
 
 

@@ -449,7 +449,8 @@ def pi_output_sensitivities(
         ``yhat``, the full sensitivities and the map (their product is the Jacobian).
     """
     s = model.structure
-    x0 = x0 or InitialCondition()
+    given = x0 is not None
+    x0 = x0 or model.at_rest()
     P = s.history
     u = np.asarray(u, dtype=float)
     n = len(u)
@@ -465,11 +466,32 @@ def pi_output_sensitivities(
     full_coefficients(model.theta, layout, c)
     p = model.operator_state(x0)
     SP = np.zeros((s.n_operators, nc))
+    if not given and model.rest_swing:
+        _rest_sensitivities(model, layout, c, SW2, SY, P)
     pi_sensitivities_into(c, layout, model.thresholds, U, W1, W2, Y, S1, SW2, SY, p, SP, P)
     T = _free_map(layout, len(model.theta), nc)
     if raw:
         return Y[P:], SY[P:], T if chain is None else T @ chain
     return Y[P:], SY[P:] @ (T if chain is None else T @ chain)
+
+
+def _rest_sensitivities(model: PISandwich, layout: np.ndarray, c: np.ndarray, SW2: np.ndarray,
+                        SY: np.ndarray, P: int) -> None:
+    """The past rows of ``SW2`` and ``SY`` at rest after a swing (:attr:`PISandwich.rest_plays`):
+    ``w2 = sum_i mu_i p_i`` there and L2 settled on it, ``y = G w2`` with
+    ``G = sum(b2) / (1 + sum(a2))`` (1 at the model's coefficients), so ``d w2 / d mu_i = p_i``,
+    ``d y / d mu_i = G p_i``, ``d y / d b2_j = w2 / (1 + sum a2)`` and
+    ``d y / d a2_j = -G w2 / (1 + sum a2)``."""
+    _, _, imu, ia2, ib2 = _layout_offsets(layout)
+    pr = model.rest_plays
+    w2 = float(model.mu @ pr)
+    a2, b2 = c[ia2:ib2], c[ib2:]
+    den = 1.0 + float(np.sum(a2))
+    gain = float(np.sum(b2)) / den
+    SW2[:P, imu:imu + len(pr)] = pr
+    SY[:P, imu:imu + len(pr)] = gain * pr
+    SY[:P, ia2:ib2] = -gain * w2 / den
+    SY[:P, ib2:] = w2 / den
 
 
 def _free_map(layout: np.ndarray, npar: int, nc: int) -> np.ndarray:

@@ -1,0 +1,66 @@
+"""The PI sandwich on records of a stage that rests on a branch of its loop.
+
+``hystid.testing.stage_a_like`` (Bouc-Wen hysteresis, a 740 Hz mode: not the model's form) with
+the stage swung by 90 % of its half-range up or down before its rest, and not swung; 1 s of
+excitation after 1 s of rest. Each record kind is identified with ``model="pi-stage"`` from the
+virgin state (``rest_swing=False``), with the swing estimated (the default), on-line (the swing
+set after the run with the parameters held), and with the default ``model="auto"``, then scored
+on a PRBN, a sine and a triangle record of another seed swung alike, beside the linear model
+and the static line. Prints a table and writes ``benchmarks/results/rest_swing.json``.
+
+Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_rest_swing.py``
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from _common import table, write_json
+
+from hystid.baselines import compare
+from hystid.identify import identify
+from hystid.testing import stage_a_like
+
+HELD = ("prbn", "sine50", "tri50")
+FITS = {"pi-stage, virgin": {"model": "pi-stage", "rest_swing": False},
+        "pi-stage": {"model": "pi-stage"},
+        "pi-stage on-line": {"model": "pi-stage", "method": "online"},
+        "auto": {}}
+
+
+def measure(swings=(0.9, -0.9, 0.0), kinds=("prbn", "sine50", "tri50")) -> list[dict]:
+    """One row per training record: every fit's held-out RMS (nm) and the baselines'."""
+    rows = []
+    for swing in swings:
+        records = {"seconds": 1.0, "swing_before": swing}
+        held = [stage_a_like(k, seed=2, repeat=1, **records) for k in HELD]
+        for kind in kinds:
+            train = stage_a_like(kind, seed=1, **records)
+            row: dict = {"swing_before": swing, "train": kind}
+            for label, options in FITS.items():
+                res = identify(train, **options)
+                c = compare(res.model, train, held).rows
+                row[label] = [1e3 * r["model"] for r in c]
+                row[f"{label} swing"] = float(getattr(res.model, "rest_swing", 0.0))
+                row[f"{label} member"] = res.info.get("model", options.get("model"))
+            row["linear"] = [1e3 * r["linear"] for r in c]
+            row["static line"] = [1e3 * r["static_line"] for r in c]
+            rows.append(row)
+    return rows
+
+
+def main() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rows = measure()
+    fmt = lambda v: " / ".join(f"{x:.0f}" for x in v)  # noqa: E731
+    labels = [*FITS, "linear", "static line"]
+    print(table([[f"{r['swing_before']:+.1f}", r["train"], *(fmt(r[k]) for k in labels),
+                  f"{r['pi-stage swing']:.1f}", str(r["auto member"])] for r in rows],
+                ["swing", "trained on", *(f"{k} [nm]" for k in labels), "swing found [V]",
+                 "auto chose"]))
+    print(f"written {write_json('rest_swing', {'held_out': list(HELD), 'rows': rows})}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,190 @@
+"""The PI sandwich's state at rest: the stage's last excursion before the record.
+
+A stage brought back to its rest level after earlier work rests on one branch of its loop, not
+at the loop's centre; the play operators then start where that excursion left them
+(:attr:`hystid.pi.PISandwich.rest_swing`, :attr:`~hystid.pi.PISandwich.rest_plays`). A fit
+that starts them virgin reads the branch gap as an offset that appears when the stage first
+moves: on the stage-A look-alike swung by 90 % of its half-range before a 50 Hz sine record,
+the ``pi-stage`` fit was 260 nm off its own record and lost to the static line on three held-out
+records. The swing is one number, found in two steps once the fit from the virgin state is done:
+
+1. **scan**: for each swing on a grid over the input's reach from the rest (:data:`GRID`
+   points, then :data:`REFINE` between the best's neighbours), the output is linear in the
+   weights, the polynomial terms and the offset given L1 and L2: the play operators run from
+   the swing's state on ``w1``, L2 filters each from its settled past, and one least-squares
+   solve sets them;
+2. **polish**: when the best swing lowers the RMS residual by more than :data:`GAIN` (a share),
+   the output-error problem is solved again from there with the swing held, and kept when it
+   stays lower.
+
+On a record where the state at rest is not seen (measured stage A's records: the best swing
+changes the residual by under 1 %) the virgin fit is kept as it was.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from scipy import linalg, signal
+
+from ..pi import PISandwich, PIStructure
+from ..pi_operator import play_operator, rest_plays
+
+__all__ = ["GAIN", "GRID", "REFINE", "best_swing", "place_rest_swing", "scan_rest_swing"]
+
+#: Swings on the first grid, over -1..1 times the input's reach from the rest.
+GRID = 17
+#: Swings between the best grid point's neighbours.
+REFINE = 6
+#: The swing is taken only when it lowers the RMS residual by more than this share.
+GAIN = 0.1
+
+
+class _Regressors:
+    """The columns the output is linear in, for one swing: each play filtered by L2 from its
+    settled past, the polynomial terms filtered by L2 (the same for every swing)."""
+
+    def __init__(self, theta: np.ndarray, un: np.ndarray, r: np.ndarray,
+                 structure: PIStructure) -> None:
+        model = PISandwich(theta, r, structure)
+        self.w1 = np.ascontiguousarray(model.simulate(un, check=False).w1)
+        self.r = r
+        self.num = np.r_[np.zeros(structure.q2), model.b2]
+        self.den = np.r_[1.0, model.a2]
+        self.zi = signal.lfilter_zi(self.num, self.den)
+        powers = [self.w1 ** (j + 2) for j in range(structure.n_poly)]
+        self.poly = [signal.lfilter(self.num, self.den, p) for p in powers]
+
+    def columns(self, swing: float) -> np.ndarray:
+        start = rest_plays(swing, self.r)
+        plays = play_operator(self.w1, self.r, start)
+        filtered, _ = signal.lfilter(self.num, self.den, plays, axis=0,
+                                     zi=np.outer(self.zi, start))
+        return np.column_stack([filtered, *self.poly])
+
+
+def _solve(A: np.ndarray, target: np.ndarray, nuisance: np.ndarray,
+           ridge: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Weights (ridge on them) and nuisance coefficients by least squares; the RMS residual."""
+    n = A.shape[1]
+    M = np.column_stack([A, nuisance])
+    M = np.vstack([M, np.sqrt(ridge * len(A)) * np.eye(n, M.shape[1])])
+    coef, *_ = linalg.lstsq(M, np.r_[target, np.zeros(n)], lapack_driver="gelsy",
+                            check_finite=False)
+    resid = np.column_stack([A, nuisance]) @ coef - target
+    return coef[:n], coef[n:], float(np.sqrt(np.mean(resid ** 2)))
+
+
+def best_swing(rms_of: Callable[[float], float], reach: float) -> float:
+    """The swing of least ``rms_of(swing)``: a grid of :data:`GRID` over ``-reach..reach``,
+    then :data:`REFINE` points between the best one's neighbours.
+
+    Parameters
+    ----------
+    rms_of : callable
+        The RMS residual with a swing.
+    reach : float
+        The input's reach from the rest.
+
+    Returns
+    -------
+    float
+    """
+    grid = np.linspace(-reach, reach, GRID)
+    scores = [rms_of(float(s)) for s in grid]
+    i = int(np.argmin(scores))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, GRID - 1)]
+    candidates = [(scores[i], float(grid[i]))]
+    candidates += [(rms_of(float(s)), float(s)) for s in np.linspace(lo, hi, REFINE + 2)[1:-1]]
+    return min(candidates)[1]
+
+
+def place_rest_swing(model: PISandwich, u: np.ndarray, y: np.ndarray,
+                     scored: np.ndarray) -> dict[str, float] | None:
+    """Set a model's swing before its rest with its parameters held (a recursive fit's model:
+    its estimate is what it is; the batch fit scans with the weights re-solved instead).
+
+    Each swing's free run from rest is scored on the ``scored`` samples with the offset that
+    fits them best; the best swing is kept when it lowers that RMS by more than :data:`GAIN`.
+
+    Parameters
+    ----------
+    model : PISandwich
+        The model (its ``rest_swing`` set in place).
+    u, y : ndarray
+        The record it was identified on.
+    scored : ndarray of bool
+        The samples the fit scores.
+
+    Returns
+    -------
+    dict or None
+        ``rest_swing`` (input units), ``before`` and ``after`` (RMS, offset refitted); None
+        when no swing lowers the RMS enough.
+    """
+    held = model.rest_swing
+
+    def rms_of(swing: float) -> float:
+        model.rest_swing = swing
+        with np.errstate(all="ignore"):
+            e = (y - model.simulate(u, check=False).y)[scored]
+        e = e - np.mean(e)
+        r = float(np.sqrt(np.mean(e ** 2)))
+        return r if np.isfinite(r) else np.inf
+
+    before = rms_of(held)
+    reach = float(np.max(np.abs(u[scored] - model.u_rest), initial=0.0))
+    swing = best_swing(rms_of, reach)
+    after = rms_of(swing)
+    if not after < (1.0 - GAIN) * before:
+        model.rest_swing = held
+        return None
+    model.rest_swing = swing
+    return {"rest_swing": swing, "before": before, "after": after}
+
+
+def scan_rest_swing(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
+                    r: np.ndarray, structure: PIStructure, nuisance: np.ndarray,
+                    ridge: float) -> dict[str, Any]:
+    """The swing that fits the record best with L1 and L2 of ``theta`` held (step 1).
+
+    Parameters
+    ----------
+    theta : ndarray
+        A fit from the virgin state (normalised signals).
+    un, yn : ndarray
+        Normalised input (from the rest) and output.
+    rows : ndarray
+        The fitted samples.
+    r : ndarray
+        Thresholds (normalised input units).
+    structure : PIStructure
+        The structure of ``theta``.
+    nuisance : ndarray
+        The nuisance columns on ``rows`` (the offset, a drift).
+    ridge : float
+        The fit's ridge on the weights.
+
+    Returns
+    -------
+    dict
+        ``swing``, ``theta`` (its weights and polynomial terms set), ``nuisance`` (their
+        coefficients), ``rms`` and ``rms_virgin`` (the same solve at swing 0).
+    """
+    regs = _Regressors(theta, un, r, structure)
+    target = yn[rows]
+
+    def fit(swing: float) -> tuple[float, np.ndarray, np.ndarray]:
+        w, nu, rms = _solve(regs.columns(swing)[rows], target, nuisance, ridge)
+        return rms, w, nu
+
+    reach = float(np.max(np.abs(regs.w1[rows]), initial=0.0))
+    swing = best_swing(lambda s: fit(s)[0], reach)
+    rms, w, nu = fit(swing)
+    virgin = fit(0.0)[0]
+    out = np.array(theta, dtype=float)
+    sl = structure.slices()
+    out[sl["mu"].start:sl["c"].stop] = w
+    return {"swing": swing, "theta": out, "nuisance": nu, "rms": rms, "rms_virgin": virgin}
