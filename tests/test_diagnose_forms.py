@@ -187,3 +187,15 @@ def test_gap_figure_draws_the_floor_its_legend_names(clean_stage, tmp_path, monk
     k = error_scale(_unit(res))[0] if _unit(res) else 1.0  # errors of a length in nm
     floors = [x for label, x in drawn if label == f"{res.floor['kind']} floor"]
     assert floors and floors[-1] == pytest.approx(k * res.floor["rms"]) and floors[-1] > 0
+
+
+def test_dead_time_past_the_scan_is_found_by_scanning_on():
+    """A dead time of 40 samples, past the linear starts' scan of 24: its best was the scan's
+    end (q1 + 24, on measured stage A's tri50_1 too) and nothing said so; the scan now goes on
+    to 96 samples when its best is its end."""
+    train, val = _stage_records("delay", "pure", 40, seed=1)
+    res = diagnose(train, val, progress=False)
+    assert res.best == "delay"
+    delay = next(e for e in res.effects if e.name == "delay")
+    assert delay.params["samples"] == pytest.approx(40.0, abs=1.0)
+    assert res.final["gap_closed"] > 0.8

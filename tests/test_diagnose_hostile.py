@@ -9,8 +9,10 @@ the loss test.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hystid.cli import main
 from hystid.diagnose.refit import FitData
@@ -55,3 +57,19 @@ def test_a_model_given_that_runs_away_on_the_train_record_is_refused(tmp_path, c
                  str(tmp_path / "model.json"), "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and "--model" in err and "diverges" in err, err
+
+
+STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
+
+
+@pytest.mark.skipif(not (STAGE_A / "tri50_1.csv").exists(),
+                    reason=f"measured stage A not found at {STAGE_A} (../shared/data)")
+def test_a_dead_time_scan_at_its_end_is_widened_and_said(capsys):
+    """On measured stage A's 50 Hz triangle the linear starts' dead-time scan was best at its
+    end (q1 + 24) and nothing said so; it now scans on (to q1 + 96), and a best at that end is
+    reported with the candidate, accepted or not."""
+    code = main(["diagnose", str(STAGE_A / "tri50_1.csv"), "--effects", "delay", "--quiet"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "delay (round 1, not accepted): at a bound of its range: delay.dead time (q1 + 96, " \
+        "the end of the widened scan)" in out, out

@@ -342,6 +342,13 @@ def summary_text(result: DiagnosisResult) -> str:
         for n, c in rnd.get("candidates", {}).items():
             if c["status"] in ("failed", "not confirmed"):
                 lines.append(f"  {n} (round {rnd['round']}): {c['message']}")
+    said: set[str] = set(result.accepted)  # an accepted form's bounds are said below
+    for rnd in result.rounds:
+        for n, c in rnd.get("candidates", {}).items():
+            if c.get("at_bound") and n not in said:
+                said.add(n)
+                lines.append(f"  {n} (round {rnd['round']}, not accepted): at a bound of its "
+                             f"range: {'; '.join(c['at_bound'])}")
     lines.append("")
     if result.accepted:
         lines.append("How far it shrinks (accepted, in order; each with its round's test):")

@@ -27,6 +27,7 @@ __all__ = [
     "HEAD_SAMPLES",
     "LINEAR_GAIN",
     "STRUCTURE_DELAYS",
+    "WIDE_DELAYS",
     "delay_as_structure",
     "head",
     "identify_nominal",
@@ -35,6 +36,9 @@ __all__ = [
 
 #: Dead times (samples added to q1) scanned by the linear starts.
 STRUCTURE_DELAYS = 24
+#: The scan goes on to this many samples when its best is the last it tried (a dead time past
+#: the scan's end); a best at the end of this one is reported at a bound.
+WIDE_DELAYS = 4 * STRUCTURE_DELAYS
 #: A dead time is worth fresh identifications when its linear start's mean squared error is
 #: below this share of the nominal structure's.
 LINEAR_GAIN = 0.9
@@ -113,9 +117,9 @@ def identify_nominal(tr: FitData, structure: Structure | None,
 
 
 def linear_delay_costs(tr: FitData, structure: Structure,
-                       delays: int = STRUCTURE_DELAYS) -> dict[int, float]:
+                       delays: int = STRUCTURE_DELAYS, first: int = 0) -> dict[int, float]:
     """Mean squared error of the linear start (:func:`hystid.identify.offline.linear_start`)
-    simulated with ``q1 + d``, for every ``d`` from 0 to ``delays``.
+    simulated with ``q1 + d``, for every ``d`` from ``first`` to ``delays``.
 
     Parameters
     ----------
@@ -125,6 +129,8 @@ def linear_delay_costs(tr: FitData, structure: Structure,
         The nominal structure.
     delays : int
         Largest dead time tried, in samples.
+    first : int
+        Smallest dead time tried, in samples.
 
     Returns
     -------
@@ -133,7 +139,7 @@ def linear_delay_costs(tr: FitData, structure: Structure,
     """
     rec = Record(tr.u, tr.y, tr.fs, name="train")
     costs: dict[int, float] = {}
-    for d in range(delays + 1):
+    for d in range(first, delays + 1):
         sd = replace(structure, q1=structure.q1 + d)
         lin = linear_start(rec, sd)
         if lin is None:
@@ -177,7 +183,9 @@ def delay_as_structure(
     better than none (:data:`LINEAR_GAIN`), the nominal model is identified afresh with
     ``q1 + d - 1``, ``q1 + d`` and ``q1 + d + 1`` and each refitted with the fractional delay
     (on the head of :data:`HEAD_SAMPLES` samples when the train part is longer; the best one is
-    then identified and refitted on the whole part).
+    then identified and refitted on the whole part). The scan runs to :data:`STRUCTURE_DELAYS`
+    and, when its best is its end, on to :data:`WIDE_DELAYS`; a best at the widened end is
+    reported in the result's ``at_bound``.
 
     Parameters
     ----------
@@ -208,7 +216,17 @@ def delay_as_structure(
         return rf
     ref = costs.get(0, np.inf)
     pick = min(costs, key=costs.__getitem__)
+    bound: list[str] = []
+    if pick == STRUCTURE_DELAYS:  # the best is the scan's end: the dead time may be longer
+        say(f"the dead time's scan is best at its end (q1 + {pick}); scanning on to "
+            f"q1 + {WIDE_DELAYS}")
+        costs.update(linear_delay_costs(tr, model.structure, WIDE_DELAYS, STRUCTURE_DELAYS + 1))
+        pick = min(costs, key=costs.__getitem__)
+        if pick == max(costs):
+            bound = [f"delay.dead time (q1 + {pick}, the end of the widened scan)"]
+            say(f"the dead time's scan is best at its widened end (q1 + {pick})")
     if pick == 0 or not costs[pick] < LINEAR_GAIN * ref:
+        rf.at_bound = [*rf.at_bound, *bound]
         return rf
     tried = [d for d in (pick, pick - 1, pick + 1) if d >= 1 and d in costs]
     data = head(tr, HEAD_SAMPLES)
@@ -216,12 +234,12 @@ def delay_as_structure(
         + ("" if data is tr else f" on the first {len(data.u)} train samples"))
     found = [(_fresh(d, data, model, phi, active, scales, refit_fn), d) for d in tried]
     found = [(c, d) for c, d in found if c.ok]
-    if not found:
-        return rf
-    best, d = min(found, key=lambda cd: cd[0].cost)
-    if data is not tr:
-        say(f"identifying the nominal structure with q1 + {d}")
-        best = _fresh(d, tr, model, phi, active, scales, refit_fn)
-    if best.ok and (not rf.ok or best.cost < rf.cost):
-        return best
+    if found:
+        best, d = min(found, key=lambda cd: cd[0].cost)
+        if data is not tr:
+            say(f"identifying the nominal structure with q1 + {d}")
+            best = _fresh(d, tr, model, phi, active, scales, refit_fn)
+        if best.ok and (not rf.ok or best.cost < rf.cost):
+            rf = best
+    rf.at_bound = [*rf.at_bound, *bound]  # reported with the candidate, kept or not
     return rf
