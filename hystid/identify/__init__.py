@@ -301,8 +301,9 @@ def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
     record that choice took the Duhem sandwich where the batch fit takes ``pi-stage``, and the
     on-line model was 1.7-2.6x the batch fit's held-out error (1.0-1.2x with the batch
     choice); over the six records as training records, 15 of 30 pairs were above 1.25x, 10 of
-    30 now (all from a sine record, where the on-line Duhem sandwich is 1.6-2.0x its batch fit;
-    ``benchmarks/bench_stage_a.py --train``)."""
+    30 with the batch choice (all from a sine record, where the on-line Duhem sandwich was
+    1.6-2.0x its batch fit: its recursion started from the loop's centre, not from its start-up
+    solve's state at rest), none now (0.96-1.22x; ``benchmarks/bench_stage_a.py --train``)."""
     from .members import member, select_member
 
     with warnings.catch_warnings():
