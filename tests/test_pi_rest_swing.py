@@ -114,3 +114,21 @@ def test_a_record_at_the_loop_centre_keeps_the_virgin_fit(kind):
     res, after = _fit(kind, 0.0)
     assert res.model.rest_swing == 0.0 and not res.info["rest_swing_scan"]["kept"]
     assert np.array_equal(after, before)
+
+
+def test_a_swing_at_an_end_of_the_input_range_is_not_kept():
+    """A swing the scan can only place at an end of the input's range is not determined by the
+    record: on the helper's stage s3 (resting at 2.5 V in a 0.7-9.5 V range) the fit took the
+    range's end, -1.8 V, and a held-out record resting at 0 V went from 0.23 to 0.57 um. Here a
+    model swung 3x past the record's range: the best swing is the range's end, and it is left
+    out; inside the range the same scan finds the swing."""
+    from hystid.identify.pi_rest_swing import place_rest_swing
+
+    u = 0.3 * _record_input(2_000)  # about +-1.6 around the rest
+    scored = np.ones(len(u), bool)
+    for swing, kept in ((3.0 * np.max(np.abs(u)), False), (0.8 * np.max(u), True)):
+        y = _model(swing).simulate(u, check=False).y
+        model = _model()
+        placed = place_rest_swing(model, u, y, scored)
+        assert (placed is not None) == kept, (swing, placed)
+        assert model.rest_swing == (pytest.approx(swing, rel=0.1) if kept else 0.0)

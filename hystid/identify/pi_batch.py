@@ -239,16 +239,16 @@ def _with_rest_swing(fit: _NormalisedFit, un: np.ndarray, yn: np.ndarray, rows: 
     """The fit with the stage's last excursion before its rest
     (:mod:`~hystid.identify.pi_rest_swing`: scanned with L1 and L2 held, then the problem
     solved again with it held), kept when it lowers the RMS residual by more than ``gain``
-    (:data:`~hystid.identify.pi_rest_swing.GAIN` by default); the swing (normalised) and the
-    scan's report."""
+    (:data:`~hystid.identify.pi_rest_swing.GAIN` by default) and is not an end of the input's
+    range; the swing (normalised) and the scan's report."""
     from .pi_rest_swing import GAIN, scan_rest_swing
 
     gain = GAIN if gain is None else gain
     nuisance = _nuisance(rows, drift, knot) if fit_offset else np.ones((len(rows), 0))
     found = scan_rest_swing(fit.theta, un, yn, rows, r, structure, nuisance, RIDGE)
     report = {"swing": found["swing"], "rms_scan": found["rms"], "rms_virgin": fit.rms,
-              "kept": False}
-    if not found["rms"] < (1.0 - gain) * fit.rms:
+              "at_bound": found["at_bound"], "kept": False}
+    if found["at_bound"] or not found["rms"] < (1.0 - gain) * fit.rms:
         return fit, 0.0, report
     problem = _PIOutputError(un, yn, rows, r, structure, fit_offset, drift, knot,
                              swing=found["swing"])

@@ -219,10 +219,18 @@ class WarmUp:
         the parameters held (:func:`hystid.identify.place_after_run`)."""
         rows = np.flatnonzero(np.isfinite(y))
         un, yn = u / self._su, y / self._sy
-        swung, swing, report = _with_rest_swing(fit, un, yn, rows, self._rn, self.structure,
-                                                True, False, None, WARMUP_NFEV, 1e-8,
-                                                gain=WARMUP_SWING_GAIN)
-        if not report["kept"]:
+        # L1 and L2 held by the scan come from a fit with an offset, as the batch fit's do: the
+        # warm-up's own, without one, bends them to make the branch gap (and the scan then
+        # took the swing's sign wrong on three of six swung look-alike records)
+        from .pi_batch import _fit_normalised_from_zero
+
+        with_offset, _, _ = _fit_normalised_from_zero(u, y, self.thresholds, self.structure,
+                                                      max_nfev=WARMUP_NFEV,
+                                                      screen_nfev=WARMUP_SCREEN, offset=True)
+        swung, swing, report = _with_rest_swing(with_offset, un, yn, rows, self._rn,
+                                                self.structure, True, False, None, WARMUP_NFEV,
+                                                1e-8, gain=0.0)
+        if not (report["kept"] and swung.rms < (1.0 - WARMUP_SWING_GAIN) * fit.rms):
             return fit, y
         self._swing = swing
         self._y0 += swung.y0 * self._sy
