@@ -9,6 +9,7 @@ from the virgin state and both baselines, and on records that are not swung (not
 changed there).
 """
 
+import json
 import warnings
 
 import numpy as np
@@ -132,3 +133,20 @@ def test_a_swing_at_an_end_of_the_input_range_is_not_kept():
         placed = place_rest_swing(model, u, y, scored)
         assert (placed is not None) == kept, (swing, placed)
         assert model.rest_swing == (pytest.approx(swing, rel=0.1) if kept else 0.0)
+
+
+def test_identify_says_the_swing(tmp_path, capsys):
+    from hystid.cli import main
+
+    records = {"seconds": 1.0, "swing_before": 0.9}
+    stage_a_like("prbn", seed=1, **records).save(tmp_path / "train.csv")
+    stage_a_like("tri50", seed=2, repeat=1, **records).save(tmp_path / "val.csv")
+    args = ["identify", str(tmp_path / "train.csv"), "--val", str(tmp_path / "val.csv"),
+            "--model", "pi-stage"]
+    assert main([*args, "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("rest_swing [V]"))
+    assert float(line.split()[-1]) > 20.0  # swung up by 78 V
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["rest_swing"] > 20.0 and report["units"]["rest_swing"] == "V"
+    assert hystid.load_model(tmp_path / "out" / "model.json").rest_swing == report["rest_swing"]

@@ -371,6 +371,9 @@ def _report(result, rec, val, args, scored_from=None, repeats=None) -> tuple[dic
         "params": result.params,
         "u_rest": getattr(result.model, "u_rest", 0.0),
         "offset": getattr(result.model, "offset", 0.0),
+        # the state at rest: a Duhem model's remembered w2, a PI model's swing before the rest
+        "rest_memory": float(getattr(result.model, "rest_memory", 0.0)),
+        "rest_swing": float(getattr(result.model, "rest_swing", 0.0)),
         "units": dict(rec.units),
         "structure": getattr(result.model.structure, "__dict__", {}),
         "validation": validation.to_dict() if finite else None,
@@ -466,7 +469,9 @@ def _identify(args: argparse.Namespace) -> int:
     else:
         rows, yu = [[k, f"{v:.6g}"] for k, v in report["params"].items()], rec.units.get("y", "")
         rows += [[f"{k} [{rec.units.get(x, '')}]", f"{report[k]:.6g}"]
-                 for k, x in (("u_rest", "u"), ("offset", "y"))]
+                 for k, x in (("u_rest", "u"), ("offset", "y"), ("rest_memory", "y"),
+                              ("rest_swing", "u"))
+                 if k in ("u_rest", "offset") or report[k]]
         print(table(rows, ["parameter", "estimate"]))
         _print_choice(result.info.get("member_selection"), rec.units.get("y", ""))
         v = report["validation"]
@@ -552,7 +557,8 @@ def write_outputs(out: Path, report: dict, target: Record, yhat: np.ndarray, res
     report = {
         **report,
         "units": {**units, "validation": units["y"], "u_rest": units["u"],
-                  "offset": units["y"], "time": "s", "fs": "Hz"},
+                  "offset": units["y"], "rest_memory": units["y"], "rest_swing": units["u"],
+                  "time": "s", "fs": "Hz"},
         "provenance": {**(provenance or {}), "fs": model.fs,
                        "structure": dict(vars(model.structure)), "seed": seed},
     }
