@@ -114,15 +114,14 @@ def _linear_slice(structure: PIStructure) -> slice:
 
 def _weights_given_blocks(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
                           r: np.ndarray, structure: PIStructure, fit_offset: bool,
-                          drift: bool = False, knot: int | None = None, swing: float = 0.0
+                          drift: bool = False, knot: int | None = None
                           ) -> tuple[np.ndarray, np.ndarray]:
     """``theta`` with its weights and polynomial terms (and the offset, and the drift) set by
-    linear least squares for its L1 and L2 (from the rest after ``swing``): exact, since the
-    output is linear in them."""
+    linear least squares for its L1 and L2: exact, since the output is linear in them."""
     theta = np.array(theta, dtype=float)
     mu = _linear_slice(structure)
     theta[mu] = 0.0
-    _, J = pi_output_sensitivities(PISandwich(theta, r, structure, rest_swing=swing), un)
+    _, J = pi_output_sensitivities(PISandwich(theta, r, structure), un)
     A = J[rows][:, mu]
     if fit_offset:
         A = np.column_stack([A, _nuisance(rows, drift, knot)])
@@ -234,27 +233,26 @@ def _normalised_fit(problem: _PIOutputError, sol: Any, label: str) -> _Normalise
 
 def _with_rest_swing(fit: _NormalisedFit, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
                      r: np.ndarray, structure: PIStructure, fit_offset: bool, drift: bool,
-                     knot: int | None, max_nfev: int, tol: float, gain: float | None = None
+                     knot: int | None, max_nfev: int, tol: float
                      ) -> tuple[_NormalisedFit, float, dict[str, Any]]:
     """The fit with the stage's last excursion before its rest
     (:mod:`~hystid.identify.pi_rest_swing`: scanned with L1 and L2 held, then the problem
-    solved again with it held), kept when it lowers the RMS residual by more than ``gain``
-    (:data:`~hystid.identify.pi_rest_swing.GAIN` by default) and is not an end of the input's
-    range; the swing (normalised) and the scan's report."""
+    solved again with it held), kept when it lowers the RMS residual by more than
+    :data:`~hystid.identify.pi_rest_swing.GAIN` and is not an end of the input's range; the
+    swing (normalised) and the scan's report."""
     from .pi_rest_swing import GAIN, scan_rest_swing
 
-    gain = GAIN if gain is None else gain
     nuisance = _nuisance(rows, drift, knot) if fit_offset else np.ones((len(rows), 0))
     found = scan_rest_swing(fit.theta, un, yn, rows, r, structure, nuisance, RIDGE)
     report = {"swing": found["swing"], "rms_scan": found["rms"], "rms_virgin": fit.rms,
               "at_bound": found["at_bound"], "kept": False}
-    if found["at_bound"] or not found["rms"] < (1.0 - gain) * fit.rms:
+    if found["at_bound"] or not found["rms"] < (1.0 - GAIN) * fit.rms:
         return fit, 0.0, report
     problem = _PIOutputError(un, yn, rows, r, structure, fit_offset, drift, knot,
                              swing=found["swing"])
     sol = problem.solve(problem.to_z(found["theta"], found["nuisance"]), max_nfev, tol)
     swung = _normalised_fit(problem, sol, f"{fit.start} + rest swing")
-    if not swung.rms < (1.0 - gain) * fit.rms:
+    if not swung.rms < (1.0 - GAIN) * fit.rms:
         return fit, 0.0, report
     report["kept"] = True
     return swung, found["swing"], report

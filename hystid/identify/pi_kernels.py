@@ -484,7 +484,7 @@ def _rest_sensitivities(model: PISandwich, layout: np.ndarray, c: np.ndarray, SW
     ``d y / d a2_j = -G w2 / (1 + sum a2)``."""
     _, _, imu, ia2, ib2 = _layout_offsets(layout)
     pr = model.rest_plays
-    w2 = float(model.mu @ pr)
+    w2 = model.hysteresis_output(0.0, pr)
     a2, b2 = c[ia2:ib2], c[ib2:]
     den = 1.0 + float(np.sum(a2))
     gain = float(np.sum(b2)) / den

@@ -401,7 +401,7 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
         value, its output there the offset (corrected by the estimate)."""
         return PISandwich(self.theta, self.thresholds, self.structure, fs=self.fs,
                           name="identified PI sandwich (on-line)", u_rest=self._u0 or 0.0,
-                          offset=self.offset_, rest_swing=self._swing * self._su)
+                          offset=self.offset_)
 
     @property
     def offset_(self) -> float:
@@ -457,7 +457,6 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
         self._chunk_sq, self._chunk_n = 0.0, 0  # the open chunk's prediction errors
         self._phi: np.ndarray | None = None
         self._theta_rest = np.zeros(len(self.names))
-        self._swing = 0.0  # the stage's last excursion before its rest (normalised input)
         self._su = self._sy = 1.0
         self._to_record = np.ones(n + 5)  # theta's scale from normalised to record units
         self._theta1 = np.empty((1, n + 5))

@@ -10,25 +10,16 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
 
 import numpy as np
 
-from ..pi_operator import rest_plays
 from .horizon import covariance
-from .pi_batch import (
-    SLOW_START_LONGEST,
-    _scale_weights,
-    _weights_given_blocks,
-    _with_rest_swing,
-    with_slow_branch,
-)
+from .pi_batch import SLOW_START_LONGEST, _scale_weights, _weights_given_blocks, with_slow_branch
 from .pi_online_kernels import _KMAX, _STATE_ROWS
 from .pi_stage_coordinates import admissible_weights, stage_from_theta, theta_from_stage
 from .prepare import REST_SAMPLES
 
-__all__ = ["REWARM_RATIO", "REWARM_SPREAD", "WARMUP_NFEV", "WARMUP_SCREEN", "WARMUP_SWING_GAIN",
-           "WarmUp"]
+__all__ = ["REWARM_RATIO", "REWARM_SPREAD", "WARMUP_NFEV", "WARMUP_SCREEN", "WarmUp"]
 
 #: Rest samples kept before the excitation for the warm-up fit.
 _REST_KEPT = 200
@@ -40,12 +31,6 @@ _REST_KEPT = 200
 #: (``benchmarks/bench_pi_online.py``).
 WARMUP_SCREEN = 10
 WARMUP_NFEV = 25
-#: A swing before the rest (:attr:`hystid.pi.PISandwich.rest_swing`) is kept at the warm-up
-#: when it lowers the warm-up fit's RMS residual by more than this share (the batch fit's
-#: tenth took, on the stage-A look-alike's unswung sine and triangle records, swings of 4-9 V
-#: that cut 0.2 s of warm-up by 17-27 % and the held-out PRBN's error by nothing, raising it
-#: from 198 to 313 nm from the sine; swung records' warm-ups fell by 57-94 %).
-WARMUP_SWING_GAIN = 0.5
 #: The warm-up is fitted again (on every excited sample so far, while they all are in the
 #: window) when the prediction errors over a chunk after it exceed both this many times the
 #: warm-up fit's residual and :data:`REWARM_SPREAD` of the output's spread over that chunk:
@@ -153,8 +138,6 @@ class WarmUp:
             at_rest = rest[:, 1][np.isfinite(rest[:, 1])]
             self._y0 = (float(np.median(at_rest)) if at_rest.size else
                         float(seen[0]) if seen.size else 0.0)
-        else:  # as given (a swing before the rest moved it at a warm-up before: see below)
-            self._y0 = self.offset
         u = np.r_[rest[:, 0], exc[:, 0]] - (self._u0 or 0.0)
         y = np.r_[rest[:, 1], exc[:, 1]] - self._y0
         in_motion = len(rest) < REST_SAMPLES  # no rest pins the output's zero
@@ -164,9 +147,6 @@ class WarmUp:
                                                 max_nfev=WARMUP_NFEV, screen_nfev=WARMUP_SCREEN,
                                                 offset=in_motion, drift=in_motion)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
-        self._swing = 0.0
-        if not in_motion:  # the stage may rest on a branch
-            fit, y = self._rest_swing(fit, u, y)
         self._to_record = _scale_weights(np.ones(n + 5), self.structure, sy, su)
         phi = stage_from_theta(fit.theta, n)
         nplay = self.structure.n_operators
@@ -176,8 +156,6 @@ class WarmUp:
         if self.slow_start and not in_motion:
             phi = self._slow_branch(phi, un, yn)
         st0 = np.zeros((_STATE_ROWS, n + 1))
-        # the plays (and both branches of each, settled) where the swing left them
-        st0[[0, 1, 2, 4, 5], :self.structure.n_operators] = rest_plays(self._swing, self._rn)
         if in_motion:  # the offset and the drift's rate: search coordinates from here on
             phi = np.r_[phi, fit.y0, self._start_clock(fit, y, st0)]
         self._warm_rms = fit.rms * sy
@@ -208,34 +186,6 @@ class WarmUp:
             self._apply()
         self.warmup_seconds_ = time.perf_counter() - t0
 
-    def _rest_swing(self, fit: Any, u: np.ndarray, y: np.ndarray) -> tuple[Any, np.ndarray]:
-        """The warm-up fit with the stage's last excursion before its rest, as the batch fit
-        estimates it (:func:`~hystid.identify.pi_batch._with_rest_swing`, with an offset: the
-        model's output at rest is then the plays' weighted sum, not zero). When it is kept, the
-        output's reference (the output at rest, :attr:`offset` or the rest's level) moves by
-        that offset, fixed from here on as the reference is without a swing, and the output so
-        referenced is returned. A warm-up is short: the swing is kept only when it halves the
-        residual (:data:`WARMUP_SWING_GAIN`); the placement after the run sets it again with
-        the parameters held (:func:`hystid.identify.place_after_run`)."""
-        rows = np.flatnonzero(np.isfinite(y))
-        un, yn = u / self._su, y / self._sy
-        # L1 and L2 held by the scan come from a fit with an offset, as the batch fit's do: the
-        # warm-up's own, without one, bends them to make the branch gap (and the scan then
-        # took the swing's sign wrong on three of six swung look-alike records)
-        from .pi_batch import _fit_normalised_from_zero
-
-        with_offset, _, _ = _fit_normalised_from_zero(u, y, self.thresholds, self.structure,
-                                                      max_nfev=WARMUP_NFEV,
-                                                      screen_nfev=WARMUP_SCREEN, offset=True)
-        swung, swing, report = _with_rest_swing(with_offset, un, yn, rows, self._rn,
-                                                self.structure, True, False, None, WARMUP_NFEV,
-                                                1e-8, gain=0.0)
-        if not (report["kept"] and swung.rms < (1.0 - WARMUP_SWING_GAIN) * fit.rms):
-            return fit, y
-        self._swing = swing
-        self._y0 += swung.y0 * self._sy
-        return swung, y - swung.y0 * self._sy
-
     def _slow_branch(self, phi: np.ndarray, un: np.ndarray, yn: np.ndarray) -> np.ndarray:
         """The warm-up fit's blocks with a slow branch, as the batch fit's slow-branch start
         (:func:`~hystid.identify.pi_batch._slow_branch_start`): its share of the DC gain
@@ -250,7 +200,7 @@ class WarmUp:
         phi = with_slow_branch(phi, n, self._window)
         rows = np.flatnonzero(np.isfinite(yn))
         theta, _ = _weights_given_blocks(theta_from_stage(phi, n), un, yn, rows, self._rn,
-                                         self.structure, False, swing=self._swing)
+                                         self.structure, False)
         out = stage_from_theta(theta, n)
         if self.monotone:
             out[:self.structure.n_operators] = admissible_weights(

@@ -84,6 +84,11 @@ def _solve(A: np.ndarray, target: np.ndarray, nuisance: np.ndarray,
     return coef[:n], coef[n:], float(np.sqrt(np.mean(resid ** 2)))
 
 
+def _range_about_rest(v: np.ndarray) -> tuple[float, float]:
+    """The least and largest of ``v`` (input from the rest), the rest itself included."""
+    return min(float(np.min(v, initial=0.0)), 0.0), max(float(np.max(v, initial=0.0)), 0.0)
+
+
 def best_swing(rms_of: Callable[[float], float], low: float, high: float) -> float:
     """The swing of least ``rms_of(swing)``: a grid of :data:`GRID` over ``low..high``,
     then :data:`REFINE` points between the best one's neighbours.
@@ -143,8 +148,7 @@ def place_rest_swing(model: PISandwich, u: np.ndarray, y: np.ndarray,
         return r if np.isfinite(r) else np.inf
 
     before = rms_of(held)
-    v = u[scored] - model.u_rest
-    low, high = min(float(np.min(v, initial=0.0)), 0.0), max(float(np.max(v, initial=0.0)), 0.0)
+    low, high = _range_about_rest(u[scored] - model.u_rest)
     swing = best_swing(rms_of, low, high)
     after = rms_of(swing)
     if swing in (low, high) or not after < (1.0 - GAIN) * before:
@@ -190,8 +194,7 @@ def scan_rest_swing(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.
         w, nu, rms = _solve(regs.columns(swing)[rows], target, nuisance, ridge)
         return rms, w, nu
 
-    w1 = regs.w1[rows]
-    low, high = min(float(np.min(w1, initial=0.0)), 0.0), max(float(np.max(w1, initial=0.0)), 0.0)
+    low, high = _range_about_rest(regs.w1[rows])
     swing = best_swing(lambda s: fit(s)[0], low, high)
     rms, w, nu = fit(swing)
     virgin = fit(0.0)[0]
