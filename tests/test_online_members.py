@@ -95,7 +95,8 @@ def test_the_resolve_rate_bounds_the_work_of_each_update_and_changes_no_estimate
     assert np.array_equal(np.array(steps), ref.history)
     work, boundary = np.array(work), np.array(boundary)
     # the call that chooses between the two starts finishes the re-solve launched at its
-    # chunk boundary and runs one more (CHOICE_ITERATIONS): three take over in it
+    # chunk boundary and runs one more (pi_online_horizon.CHOICE_ITERATIONS): three take over
+    # in it
     assert boundary.sum() == ref.info["resolves"] > 3 and boundary.max() <= 3
     boundary = boundary > 0
     within = work[~boundary & (np.arange(len(u)) > np.flatnonzero(boundary)[0])]

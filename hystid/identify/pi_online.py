@@ -95,12 +95,13 @@ import numpy as np
 from ..pi import PISandwich, PIStructure
 from ..records import Record
 from .base import Estimator, record_signals, sample_arrays, sample_floats
-from .horizon import HorizonSolve, covariance, drain, run_steps
+from .horizon import HorizonSolve
 from .pi_batch import (
     drift_note,
 )
 from .pi_online_arrival import ARRIVAL_DECAY, ArrivalAndDrift
-from .pi_online_kernels import _STATE_ROWS, _l2_stable, _run, _slope, _theta_rows
+from .pi_online_horizon import MovingHorizon
+from .pi_online_kernels import _STATE_ROWS, _run, _slope, _theta_rows
 from .pi_online_warmup import _REST_KEPT, WarmUp
 from .pi_stage_coordinates import (
     admissible_weights,
@@ -140,19 +141,12 @@ WINDOW_MOST = 20_000
 #: and the same held-out figures on stage A and the helper's stages (within 1 %; 1.14x against
 #: 0.97x the batch fit on one record of the creep stage of ``tests/test_pi_online_creep.py``).
 ITERATIONS = 4
-#: Levenberg-Marquardt trials a start of the re-solve each of the two starts runs when they are
-#: chosen between (``two_starts``: when the window is full, or at the end of a shorter
-#: record), done in that call. With :data:`ITERATIONS` alone the creep stage of
-#: ``tests/test_pi_online_creep.py`` with 1 s records (the window) was 1.0-8.7x the batch
-#: fit's held-out error, depending on the seed and on the slow branch's start; with this,
-#: 0.17-1.0x.
-CHOICE_ITERATIONS = 12
 #: Default samples between two re-solves (:class:`PIStageOnline`'s ``every``).
 EVERY = 2000
 
 
 # =========================================================================== the identifier
-class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
+class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
     """On-line identification of the ``pi-stage`` sandwich (see the module docstring).
 
     Keeps the estimator contract (:class:`~hystid.identify.base.Estimator`): :meth:`update`
@@ -233,8 +227,8 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
         ``slow_start`` does, until the window is full (or :meth:`settle`); then keep the one
         whose model, run from rest over every sample so far, is closer to the output (the
         batch fit chooses among its starts alike), each after a re-solve of
-        :data:`CHOICE_ITERATIONS` trials done in that call. Twice the work per sample until
-        then.
+        :data:`~hystid.identify.pi_online_horizon.CHOICE_ITERATIONS` trials done in that
+        call. Twice the work per sample until then.
     max_step : float
         Largest change of the search coordinates in one sample (normalised units).
     epsilon : float
@@ -620,90 +614,6 @@ class PIStageOnline(WarmUp, ArrivalAndDrift, Estimator):
             self._close_chunk()
         self._chunk_sq, self._chunk_n = 0.0, 0
         return True
-
-    # ----------------------------------------------------------------- moving horizon
-    def _keep(self) -> int:
-        return max(1, self._span // self._every)
-
-    def _close_chunk(self) -> None:
-        """The open chunk is complete: keep it in the window and open the next one; the
-        running re-solve's estimate takes over (the work it has left done now) and the next
-        re-solve is launched."""
-        self._chunks.append((self._open[0].copy(), self._open[1].copy()))
-        self._n_open = 0
-        recursion = self._phi.copy()
-        if self._job is not None:
-            self._apply()
-        (recursion,) = self._rereference(recursion)
-        self._launch((recursion, self._solved))
-
-    def _simulate(self, phi: np.ndarray, st0: np.ndarray, u: np.ndarray,
-                  y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return drain(run_steps(self._slice, phi, st0, u, y))
-
-    def _slice(self, phi: np.ndarray, st: np.ndarray, u: np.ndarray, y: np.ndarray,
-               J: np.ndarray, err: np.ndarray) -> None:
-        """The branches over a slice, gradients and errors written (the re-solve's
-        :data:`~hystid.identify.horizon.Simulate`)."""
-        _run(phi, self._P, 1.0, 1.0, 1.0, self._rn, self.structure.n_poly, u, y, st, False, J,
-             np.empty(len(u)), err, self._no_rows, 0)
-
-    def _admissible(self, trial: np.ndarray, phi: np.ndarray) -> bool:
-        """A re-solve's trial: L2 stable, the loading slope positive or no lower than at
-        ``phi``."""
-        nplay, n = self._nslope, self._n_weights
-        after = _slope(trial, nplay)
-        return bool((after > 0 or after >= _slope(phi, nplay)) and _l2_stable(trial, n)
-                    and (trial[n + 1] <= self._xp_most or trial[n + 1] <= phi[n + 1]))
-
-    def _polish(self) -> None:
-        """The running re-solve's estimate takes over, then one more re-solve of the window
-        with :data:`CHOICE_ITERATIONS` trials a start, solved now."""
-        if self._job is not None:
-            self._apply()
-        if self._chunks:
-            self._launch((self._phi, self._solved), CHOICE_ITERATIONS)
-            self._apply()
-
-    def _launch(self, starts: tuple[np.ndarray, ...],
-                iterations: int | None = None) -> HorizonSolve:
-        """A re-solve of the window's last ``window // every`` chunks (the older ones folded
-        into the arrival cost at the last re-solve's estimate first), from the recursion's
-        estimate and from the last re-solve's (the lower cost is kept: the recursion may have
-        drifted along a direction the data do not fix)."""
-        leaving = max(0, len(self._chunks) - self._keep())
-        if leaving:  # samples leave the window: a warm-up can no longer be fitted again
-            self._kept_rest = None
-        self._job = HorizonSolve(self._slice, self._admissible, self._chunks, self._wstate,
-                                 self._arrival, starts,
-                                 self.iterations if iterations is None else iterations,
-                                 leaving=leaving,
-                                 linearised_at=self._solved, forget=self._forget)
-        return self._job
-
-    def _apply(self) -> None:
-        """The solved re-solve's estimate takes over, with the branches it ran over the
-        samples since its window ended and its information (the recursion's covariance is the
-        inverse); the chunks it folded leave the window."""
-        t0, before = time.perf_counter(), self._job.spent
-        res = self._job.result()
-        self.resolve_work_ += self._job.spent - before
-        del self._chunks[:len(self._job.leaving)]
-        self._arrival, self._wstate = res.arrival, res.start
-        self._phi, self._st, self._solved = res.phi.copy(), res.state, res.phi.copy()
-        self._P = covariance(res.information)
-        self._job = None
-        self.n_resolves += 1
-        self.resolve_seconds_ += time.perf_counter() - t0
-
-    def _advance(self, u: np.ndarray, y: np.ndarray) -> None:
-        """Samples the running re-solve follows, and its share of work for them."""
-        if self._job is not None:
-            t0, before = time.perf_counter(), self._job.spent
-            self._job.feed(u, y)
-            self._job.advance(len(u) * self.resolve_rate)
-            self.resolve_work_ += self._job.spent - before
-            self.resolve_seconds_ += time.perf_counter() - t0
 
     # ----------------------------------------------------------------- a record
     def _restart(self, record: Record) -> None:
