@@ -10,6 +10,7 @@ from hystid.baselines import compare, simulate_from_rest
 from hystid.identify import identify
 from hystid.identify.members import member
 from hystid.identify.pi_online import (
+    _STATE_ROWS,
     PIStageOnline,
     _run,
     is_stage_structure,
@@ -50,7 +51,7 @@ def test_stage_coordinates_round_trip_and_predict_as_the_sandwich():
     model = PISandwich(theta, r, STAGE)
     assert model.is_stable() and is_stage_structure(STAGE)
     u = np.cumsum(rng.normal(0, 0.05, 3000))
-    st = np.zeros((12, 20))
+    st = np.zeros((_STATE_ROWS, 20))
     yhat, err = np.empty(len(u)), np.empty(len(u))
     _run(phi, np.eye(25), 1.0, 1.0, 1.0, r, 0, u, np.zeros(len(u)), st, False,
          np.zeros((0, 25)), yhat, err, np.zeros((0, 25)), 0)
@@ -217,8 +218,8 @@ def test_branch_gradients_are_the_derivatives_of_the_prediction():
 
     def run(p):
         J, yhat, err = np.empty((len(u), 25)), np.empty(len(u)), np.empty(len(u))
-        _run(p, np.eye(25), 1.0, 1.0, 1.0, r, 0, u, np.zeros(len(u)), np.zeros((12, 20)), False,
-             J, yhat, err, np.zeros((0, 25)), 0)
+        _run(p, np.eye(25), 1.0, 1.0, 1.0, r, 0, u, np.zeros(len(u)),
+             np.zeros((_STATE_ROWS, 20)), False, J, yhat, err, np.zeros((0, 25)), 0)
         return yhat, J
 
     _, J = run(phi)

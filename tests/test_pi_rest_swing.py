@@ -150,3 +150,33 @@ def test_identify_says_the_swing(tmp_path, capsys):
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["rest_swing"] > 20.0 and report["units"]["rest_swing"] == "V"
     assert hystid.load_model(tmp_path / "out" / "model.json").rest_swing == report["rest_swing"]
+
+
+def test_default_online_holds_the_batch_choice_swing():
+    """``identify(..., method="online")`` (``model="auto"``) hands the batch choice's swing to
+    the on-line ``pi-stage`` identifier. Measured on the look-alike's sine swung down (nm, held
+    out PRBN / sine / triangle): batch 265 / 26 / 103; on-line from the virgin state 824 / 60 /
+    256 (2.2-3.1x, before), holding the swing 229 / 25 / 125 (0.86-1.22x)."""
+    records = {"seconds": 1.0, "swing_before": -0.9}
+    train = stage_a_like("sine50", seed=1, **records)
+    held = [stage_a_like(k, seed=2, repeat=1, **records) for k in ("prbn", "sine50", "tri50")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        batch = identify(train)
+        online = identify(train, method="online")
+        b = compare(batch.model, train, held).rows
+        o = compare(online.model, train, held).rows
+    assert batch.info["model"] == online.info["model"] == "pi-stage"
+    assert batch.model.rest_swing < 0 and online.model.rest_swing < 0
+    assert online.settings["rest_swing"] == batch.model.rest_swing
+    for rb, ro in zip(b, o, strict=True):
+        assert ro["model"] <= 1.25 * rb["model"], (ro, rb)
+        assert ro["model"] < min(ro["linear"], ro["static_line"]), ro
+
+
+@pytest.mark.parametrize("swing", [True, float("nan"), "up"])
+def test_the_online_identifier_refuses_a_swing_that_is_not_a_number(swing):
+    from hystid.identify.pi_online import PIStageOnline
+
+    with pytest.raises(ValueError, match="rest_swing: expected a finite swing"):
+        PIStageOnline(np.linspace(0.0, 10.0, 5), rest_swing=swing)

@@ -114,14 +114,15 @@ def _linear_slice(structure: PIStructure) -> slice:
 
 def _weights_given_blocks(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
                           r: np.ndarray, structure: PIStructure, fit_offset: bool,
-                          drift: bool = False, knot: int | None = None
+                          drift: bool = False, knot: int | None = None, swing: float = 0.0
                           ) -> tuple[np.ndarray, np.ndarray]:
     """``theta`` with its weights and polynomial terms (and the offset, and the drift) set by
-    linear least squares for its L1 and L2: exact, since the output is linear in them."""
+    linear least squares for its L1 and L2 (the plays at rest after ``swing``): exact, since
+    the output is linear in them."""
     theta = np.array(theta, dtype=float)
     mu = _linear_slice(structure)
     theta[mu] = 0.0
-    _, J = pi_output_sensitivities(PISandwich(theta, r, structure), un)
+    _, J = pi_output_sensitivities(PISandwich(theta, r, structure, rest_swing=swing), un)
     A = J[rows][:, mu]
     if fit_offset:
         A = np.column_stack([A, _nuisance(rows, drift, knot)])
@@ -180,7 +181,7 @@ def _solve_normalised(
     un: np.ndarray, yn: np.ndarray, weight: np.ndarray, r: np.ndarray, structure: PIStructure,
     theta0: np.ndarray | None, fit_offset: bool, max_nfev: int, tol: float,
     screen_nfev: int = SCREEN_NFEV, drift: bool = False, knot: int | None = None,
-    slow_start: bool = False,
+    slow_start: bool = False, swing: float = 0.0,
 ) -> _NormalisedFit:
     """Output-error least squares on normalised signals, from several starts.
 
@@ -188,7 +189,8 @@ def _solve_normalised(
     free run from rest on ``un``, thresholds ``r`` in normalised input units) with
     :func:`scipy.optimize.least_squares` in reflection coefficients of L1 and L2 and, with
     ``fit_offset``, the normalised sensor offset ``y0`` (and, with ``drift``, a straight line
-    in time beside it: :func:`_nuisance`). The starts (:func:`_starts`) are run for
+    in time beside it: :func:`_nuisance`), the plays at rest after ``swing`` (normalised input
+    units, held). The starts (:func:`_starts`) are run for
     ``screen_nfev`` evaluations each; the :data:`POLISHED` best and the slow branch's start
     are polished (``max_nfev`` evaluations).
 
@@ -198,9 +200,10 @@ def _solve_normalised(
         Normalised parameters and offset, RMS residual and the solver's report.
     """
     rows = np.flatnonzero(weight)
-    problem = _PIOutputError(un, yn, rows, r, structure, fit_offset, drift and fit_offset, knot)
+    problem = _PIOutputError(un, yn, rows, r, structure, fit_offset, drift and fit_offset, knot,
+                             swing)
     starts = _starts(un, yn, rows, r, structure, theta0, fit_offset, drift and fit_offset, knot,
-                     slow_start)
+                     slow_start, swing)
     screened = []
     for label, (theta, y0) in starts.items():
         sol = problem.solve(problem.to_z(theta, y0),
@@ -261,7 +264,8 @@ def _with_rest_swing(fit: _NormalisedFit, un: np.ndarray, yn: np.ndarray, rows: 
 def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
             structure: PIStructure, theta0: np.ndarray | None,
             fit_offset: bool, drift: bool = False, knot: int | None = None,
-            slow_start: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+            slow_start: bool = False, swing: float = 0.0
+            ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """``theta0`` alone when given; else ``L1 = L2 = z^-1``, the linear sandwich's ARX
     blocks and, for the ``pi-stage`` shape with ``slow_start`` (a record that begins at rest),
     those blocks with a slow branch (:func:`_slow_branch_start`), each with the weights (and
@@ -288,7 +292,7 @@ def _starts(un: np.ndarray, yn: np.ndarray, rows: np.ndarray, r: np.ndarray,
         if not any(np.array_equal(theta, other) for other in unique.values()):
             unique[label] = theta
     return {label: _weights_given_blocks(theta, un, yn, rows, r, structure, fit_offset, drift,
-                                         knot)
+                                         knot, swing)
             for label, theta in unique.items()}
 
 
@@ -714,11 +718,12 @@ def _zero_scales(u: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 def _fit_normalised_from_zero(
     u: np.ndarray, y: np.ndarray, r: np.ndarray, structure: PIStructure, *,
     max_nfev: int = 200, tol: float = 1e-8, screen_nfev: int = SCREEN_NFEV,
-    offset: bool = False, drift: bool = False,
+    offset: bool = False, drift: bool = False, swing: float = 0.0,
 ) -> tuple[_NormalisedFit, float, float]:
     """:func:`_solve_normalised` at rest at ``u = 0`` (with an offset when ``offset``, and a
-    drift beside it when ``drift``), on ``u / su`` and ``y / sy`` (:func:`_zero_scales`);
-    samples with a non-finite ``y`` are left out of the cost.
+    drift beside it when ``drift``; the plays at rest after ``swing``, in the units of ``u``),
+    on ``u / su`` and ``y / sy`` (:func:`_zero_scales`); samples with a non-finite ``y`` are
+    left out of the cost.
 
     Returns
     -------
@@ -730,7 +735,7 @@ def _fit_normalised_from_zero(
     su, sy = _zero_scales(u, y)
     with np.errstate(invalid="ignore"):
         fit = _solve_normalised(u / su, y / sy, np.isfinite(y), r / su, structure, None, offset,
-                                max_nfev, tol, screen_nfev, drift=drift)
+                                max_nfev, tol, screen_nfev, drift=drift, swing=swing / su)
     return fit, su, sy
 
 

@@ -205,6 +205,15 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         pins it: estimated there too, stage A's held-out errors went from 1.03x to 1.42x the
         batch fit's and the identifier ran 4x slower. A drift of the zero is tracked beside it
         (see the module docstring).
+    rest_swing : float
+        The stage's last excursion before its rest, input units from the rest (held, not
+        estimated; 0, the plays virgin, by default): on a record that begins at rest the plays
+        start where that excursion left them (:attr:`hystid.pi.PISandwich.rest_swing`) and the
+        prediction is relative to the output at rest. ``identify(..., method="online")`` with
+        the default ``model="auto"`` passes the swing its batch choice found. (Estimated from
+        the warm-up, a swing was kept on measured stage A that the batch fit does not keep;
+        ``identify`` sets one after the run with the parameters held,
+        :func:`~hystid.identify.pi_rest_swing.place_rest_swing`.)
     P0 : float
         Prior variance of every search coordinate (normalised units) before any data.
     forgetting : float
@@ -283,6 +292,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         skip: int = 0,
         left_out: Sequence[tuple[int, int]] = (),
         offset: float | None = None,
+        rest_swing: float = 0.0,
         P0: float = 1.0,
         forgetting: float = 1.0,
         arrival_decay: float = ARRIVAL_DECAY,
@@ -323,6 +333,14 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
                 raise ValueError(f"{label}: expected a positive finite number, got {value!r}")
         if offset is not None and not np.isfinite(offset):
             raise ValueError(f"offset: expected a finite number or None, got {offset!r}")
+        try:
+            swing = float(rest_swing)
+        except (TypeError, ValueError):
+            swing = math.nan
+        if isinstance(rest_swing, bool) or not math.isfinite(swing):
+            raise ValueError(f"rest_swing: expected a finite swing in input units from the rest, "
+                             f"got {rest_swing!r} (the batch fit's rest_swing=True/False switches "
+                             f"its estimation; this identifier holds the swing it is given)")
         if not resolve_rate > 0:  # inf allowed
             raise ValueError(f"resolve_rate: expected a positive number, got {resolve_rate!r}")
         if not 0.0 < forgetting <= 1.0:
@@ -340,6 +358,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         self.settle_at_end, self.skip = bool(settle_at_end), int(skip)
         self.left_out = spans
         self.offset = None if offset is None else float(offset)
+        self.rest_swing = swing
         self.P0, self.forgetting, self.max_step = float(P0), float(forgetting), float(max_step)
         self.epsilon, self.fs = float(epsilon), float(fs)
         self.arrival_decay = float(arrival_decay)
@@ -359,6 +378,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
                 "iterations": self.iterations, "resolve_rate": self.resolve_rate,
                 "settle_at_end": self.settle_at_end, "skip": self.skip,
                 "left_out": [list(span) for span in self.left_out], "offset": self.offset,
+                "rest_swing": self.rest_swing,
                 "P0": self.P0, "forgetting": self.forgetting,
                 "arrival_decay": self.arrival_decay, "slow_start": self.slow_start,
                 "two_starts": self.two_starts, "monotone": self.monotone,
@@ -392,10 +412,14 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
     @property
     def model(self) -> PISandwich:
         """The current estimate as a :class:`~hystid.pi.PISandwich`, at rest at the first input
-        value, its output there the offset (corrected by the estimate)."""
-        return PISandwich(self.theta, self.thresholds, self.structure, fs=self.fs,
-                          name="identified PI sandwich (on-line)", u_rest=self._u0 or 0.0,
-                          offset=self.offset_)
+        value (after :attr:`rest_swing` when the record began at rest), its output there the
+        offset (corrected by the estimate)."""
+        model = PISandwich(self.theta, self.thresholds, self.structure, fs=self.fs,
+                           name="identified PI sandwich (on-line)", u_rest=self._u0 or 0.0,
+                           offset=self.offset_, rest_swing=self._swing * self._su)
+        if model.rest_swing:  # the output at rest is the offset: the plays' share taken off
+            model.offset -= model.hysteresis_output(0.0, model.rest_plays)
+        return model
 
     @property
     def offset_(self) -> float:
@@ -439,7 +463,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
                 self.thresholds, self.structure, warmup=self.warmup, window=self.window,
                 every=self.every, iterations=self.iterations, resolve_rate=self.resolve_rate,
                 settle_at_end=False, skip=self.skip, left_out=self.left_out,
-                offset=self.offset, P0=self.P0,
+                offset=self.offset, rest_swing=self.rest_swing, P0=self.P0,
                 forgetting=self.forgetting, arrival_decay=self.arrival_decay, slow_start=True,
                 two_starts=False, monotone=self.monotone, max_step=self.max_step,
                 epsilon=self.epsilon, fs=self.fs)
@@ -451,6 +475,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         self._chunk_sq, self._chunk_n = 0.0, 0  # the open chunk's prediction errors
         self._phi: np.ndarray | None = None
         self._theta_rest = np.zeros(len(self.names))
+        self._swing = 0.0  # the swing in force (normalised input; 0 on a record in motion)
         self._su = self._sy = 1.0
         self._to_record = np.ones(n + 5)  # theta's scale from normalised to record units
         self._theta1 = np.empty((1, n + 5))

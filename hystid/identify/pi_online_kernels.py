@@ -14,9 +14,12 @@ from numba import njit
 from ..poly import KMAX_STABLE, schur_stable
 
 #: Rows of the branch state of one operator: p(k-1), p(k-2), xS(k-1), dxS/dp, xM(k-1),
-#: xM(k-2), dxM/d(c1, c2, m1) at k-1 and at k-2. A column after the operators' holds the
-#: drift's clock: its value at the next sample (row 0) and its step per sample (row 1).
-_STATE_ROWS = 12
+#: xM(k-2), dxM/d(c1, c2, m1) at k-1 and at k-2, and the operator's output at rest (held; not
+#: zero when the stage rests on a branch of its loop, :attr:`hystid.pi.PISandwich.rest_swing`:
+#: the prediction is then relative to the output at rest, as the measured output is). A
+#: column after the operators' holds the drift's clock: its value at the next sample (row 0)
+#: and its step per sample (row 1).
+_STATE_ROWS = 13
 #: Bound on the slow pole and on the mode's reflection coefficients (``|.| < 1 - 1e-6``), so
 #: that neither branch can become an integrator.
 _KMAX = 1.0 - 1e-6
@@ -84,7 +87,7 @@ def _step(phi, r, npoly, u_k, st, psi):
         st[6, i], st[7, i], st[8, i] = d0, d1, d2
         st[2, i], st[3, i] = xs, ds
         mu = phi[i]
-        xi = g * xs + (1.0 - g) * xm
+        xi = g * xs + (1.0 - g) * xm - st[12, i]
         yhat += mu * xi
         psi[i] = xi
         dg += mu * (xs - xm)

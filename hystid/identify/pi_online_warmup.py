@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from ..pi_operator import rest_plays
 from .horizon import covariance
 from .pi_batch import SLOW_START_LONGEST, _scale_weights, _weights_given_blocks, with_slow_branch
 from .pi_online_kernels import _KMAX, _STATE_ROWS
@@ -143,10 +144,15 @@ class WarmUp:
         in_motion = len(rest) < REST_SAMPLES  # no rest pins the output's zero
         if in_motion:  # the slow-branch start is for a record that begins at rest
             self._twin = None
+        swing = 0.0 if in_motion else self.rest_swing  # a swing before a rest only
+        # swung, the fit's offset takes the plays' share of the output at rest (dropped after:
+        # the recursion's prediction is relative to the output at rest)
         fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure,
                                                 max_nfev=WARMUP_NFEV, screen_nfev=WARMUP_SCREEN,
-                                                offset=in_motion, drift=in_motion)
+                                                offset=in_motion or bool(swing), drift=in_motion,
+                                                swing=swing)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
+        self._swing = swing / su
         self._to_record = _scale_weights(np.ones(n + 5), self.structure, sy, su)
         phi = stage_from_theta(fit.theta, n)
         nplay = self.structure.n_operators
@@ -156,6 +162,9 @@ class WarmUp:
         if self.slow_start and not in_motion:
             phi = self._slow_branch(phi, un, yn)
         st0 = np.zeros((_STATE_ROWS, n + 1))
+        # the plays and both branches of each, settled, where the swing left them; the
+        # operator's output at rest (row 12) is taken off its prediction
+        st0[[0, 1, 2, 4, 5, 12], :nplay] = rest_plays(self._swing, self._rn)
         if in_motion:  # the offset and the drift's rate: search coordinates from here on
             phi = np.r_[phi, fit.y0, self._start_clock(fit, y, st0)]
         self._warm_rms = fit.rms * sy
@@ -200,7 +209,8 @@ class WarmUp:
         phi = with_slow_branch(phi, n, self._window)
         rows = np.flatnonzero(np.isfinite(yn))
         theta, _ = _weights_given_blocks(theta_from_stage(phi, n), un, yn, rows, self._rn,
-                                         self.structure, False)
+                                         self.structure, bool(self._swing),
+                                         swing=self._swing)
         out = stage_from_theta(theta, n)
         if self.monotone:
             out[:self.structure.n_operators] = admissible_weights(
