@@ -4,7 +4,9 @@
 the stage swung by 90 % of its half-range up or down before its rest, and not swung; 1 s of
 excitation after 1 s of rest. Each record kind is identified with ``model="pi-stage"`` from the
 virgin state (``rest_swing=False``), with the swing estimated (the default), on-line (the swing
-set after the run with the parameters held), and with the default ``model="auto"``, then scored
+set after the run with the parameters held; and holding the swing the batch fit found,
+``PIStageOnline(rest_swing=...)``), and with the default ``model="auto"``, batch and
+on-line (its on-line identifier holds the swing its batch choice found), then scored
 on a PRBN, a sine and a triangle record of another seed swung alike, beside the linear model
 and the static line. Prints a table and writes ``benchmarks/results/rest_swing.json``.
 
@@ -24,10 +26,15 @@ from hystid.testing import stage_a_like
 README_BLOCKS = {"rest-swing": "render"}
 
 HELD = ("prbn", "sine50", "tri50")
+#: Stands for the swing the ``pi-stage`` batch fit found on the same record.
+BATCH_SWING = "the batch fit's"
 FITS = {"pi-stage, virgin": {"model": "pi-stage", "rest_swing": False},
         "pi-stage": {"model": "pi-stage"},
         "pi-stage on-line": {"model": "pi-stage", "method": "online"},
-        "auto": {}}
+        "pi-stage on-line, swing given": {"model": "pi-stage", "method": "online",
+                                          "rest_swing": BATCH_SWING},
+        "auto": {},
+        "auto on-line": {"method": "online"}}
 
 
 def measure(quick: bool = False) -> dict:
@@ -42,6 +49,8 @@ def measure(quick: bool = False) -> dict:
                 train = stage_a_like(kind, seed=1, **records)
                 row: dict = {"swing_before": swing, "train": kind}
                 for label, options in FITS.items():
+                    if options.get("rest_swing") is BATCH_SWING:
+                        options = {**options, "rest_swing": row["pi-stage swing"]}
                     res = identify(train, **options)
                     c = compare(res.model, train, held).rows
                     row[label] = [1e3 * r["model"] for r in c]
