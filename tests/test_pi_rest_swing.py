@@ -180,3 +180,26 @@ def test_the_online_identifier_refuses_a_swing_that_is_not_a_number(swing):
 
     with pytest.raises(ValueError, match="rest_swing: expected a finite swing"):
         PIStageOnline(np.linspace(0.0, 10.0, 5), rest_swing=swing)
+
+
+def test_the_batch_fit_holds_a_swing_it_is_given():
+    """``rest_swing`` a number: the fit is solved with the plays where that swing left them and
+    the swing is kept as given (no scan). Measured on the up-swung PRBN record (nm, held out
+    PRBN / sine / triangle): virgin 256 / 286 / 272, the swing found (54.2 V) 33 / 84 / 77,
+    40 V held 39 / 101 / 80."""
+    from hystid.testing import crop_start
+
+    virgin, before = _fit("prbn", 0.9, rest_swing=False)
+    res, after = _fit("prbn", 0.9, rest_swing=40.0)
+    assert res.model.rest_swing == 40.0 and res.info["rest_swing_scan"] is None
+    assert np.mean(after[:, 0]) < 0.6 * np.mean(before[:, 0]), (after[:, 0], before[:, 0])
+    assert np.all(after[:, 0] < np.minimum(after[:, 1], after[:, 2])), after
+    moving = crop_start(stage_a_like("prbn", seed=1, seconds=1.0, swing_before=0.9), 1.2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = identify(moving, model="pi-stage", rest_swing=40.0)
+    assert res.model.rest_swing == 0.0
+    assert any("begins in motion" in w for w in res.info["warnings"])
+    for bad in ("yes", float("inf")):
+        with pytest.raises(ValueError, match="rest_swing: expected True"):
+            identify(moving, model="pi-stage", rest_swing=bad)

@@ -7,6 +7,7 @@ places the model back in the record's units.
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -512,7 +513,7 @@ def fit_pi_output_error(
     max_nfev: int = 200,
     tol: float = 1e-8,
     name: str = "identified PI sandwich",
-    rest_swing: bool = True,
+    rest_swing: bool | float = True,
 ) -> IdentificationResult:
     """Identify the PI sandwich off-line by output-error least squares (the reference).
 
@@ -573,11 +574,14 @@ def fit_pi_output_error(
         ``ftol``, ``xtol`` and ``gtol`` of the solver.
     name : str
         Name of the identified model.
-    rest_swing : bool
+    rest_swing : bool or float
         On a record that starts at rest, also estimate the stage's last excursion before it
         (:attr:`~hystid.pi.PISandwich.rest_swing`: the stage rests on one branch of its loop;
         :mod:`~hystid.identify.pi_rest_swing`), kept when it lowers the RMS residual by more
-        than a tenth. Default on.
+        than a tenth (True, the default); start from the virgin state (False); or hold the
+        swing given, in input units from the rest (a number: the fit is solved with the plays
+        where that swing left them; on a record that begins in motion it does not apply, and
+        the warnings say so).
 
     Returns
     -------
@@ -593,7 +597,13 @@ def fit_pi_output_error(
     if drift and not offset:
         raise ValueError("drift: a drift is estimated beside the offset; pass offset=True or "
                          "drift=False")
+    held = _given_swing(rest_swing)
     prep = prepare(record, skip=skip)
+    if held and not prep.at_rest:
+        prep.notes = list(prep.notes) + [
+            f"rest_swing: the swing given ({held:.4g}) is the state at a rest; record "
+            f"{record.name!r} begins in motion, so the plays start virgin"]
+        held = 0.0
     drift = bool(offset and (not prep.at_rest if drift is None else drift))
     s, r = _structure_and_thresholds(record.u[prep.fitted], thresholds, structure, n_operators)
     if not offset:
@@ -602,10 +612,11 @@ def fit_pi_output_error(
     theta0_n = None if theta0 is None else _scale_weights(
         np.asarray(theta0, dtype=float).ravel(), s, 1.0 / sy, 1.0 / su)
     knot = max(1, int(round(DRIFT_KNOT_SECONDS * record.fs)))
+    swing, scan = (held or 0.0) / su, None
     fit = _solve_normalised(prep.un, prep.yn, prep.weight, r / su, s, theta0_n, offset,
-                            max_nfev, tol, drift=drift, knot=knot, slow_start=prep.at_rest)
-    swing, scan = 0.0, None
-    if rest_swing and prep.at_rest:
+                            max_nfev, tol, drift=drift, knot=knot, slow_start=prep.at_rest,
+                            swing=swing)
+    if held is None and rest_swing and prep.at_rest:
         fit, swing, scan = _with_rest_swing(fit, prep.un, prep.yn, np.flatnonzero(prep.weight),
                                             r / su, s, offset, drift, knot, max_nfev, tol)
         scan = {**scan, "swing": scan["swing"] * su, "rms_scan": scan["rms_scan"] * sy,
@@ -622,6 +633,21 @@ def fit_pi_output_error(
     settings = {"n_operators": len(r), "offset": offset, "drift": drift, "skip": prep.skip,
                 "max_nfev": max_nfev, "tol": tol, "samples": record.n, "rest_swing": rest_swing}
     return IdentificationResult(model, "pi-batch", settings, info=info)
+
+
+def _given_swing(rest_swing: Any) -> float | None:
+    """The swing :func:`fit_pi_output_error` holds: None for True or False (estimated, or the
+    virgin state), else the number given (input units from the rest), checked finite."""
+    if isinstance(rest_swing, (bool, np.bool_)):
+        return None
+    try:
+        value = float(rest_swing)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not math.isfinite(value):
+        raise ValueError(f"rest_swing: expected True (estimate it), False (the virgin state) or "
+                         f"a finite swing in input units from the rest, got {rest_swing!r}")
+    return value
 
 
 def _inverse_note(model: PISandwich) -> list[str]:
