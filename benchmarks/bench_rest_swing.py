@@ -4,8 +4,9 @@
 the stage swung by 90 % of its half-range up or down before its rest, and not swung; 1 s of
 excitation after 1 s of rest. Each record kind is identified with ``model="pi-stage"`` from the
 virgin state (``rest_swing=False``), with the swing estimated (the default), on-line (the swing
-set after the run with the parameters held; and holding the swing the batch fit found,
-``PIStageOnline(rest_swing=...)``), and with the default ``model="auto"``, batch and
+estimated when its window fills, and set again after the run with the parameters held; and
+holding the swing the batch fit found, ``PIStageOnline(rest_swing=...)``), and with the
+default ``model="auto"``, batch and
 on-line (its on-line identifier holds the swing its batch choice found), then scored
 on a PRBN, a sine and a triangle record of another seed swung alike, beside the linear model
 and the static line. Prints a table and writes ``benchmarks/results/rest_swing.json``.

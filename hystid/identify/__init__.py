@@ -317,7 +317,8 @@ def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
     if say is not None:
         say(f"model choice (as for the batch fit): {name}; its on-line identifier runs over "
             "the whole record" + (f", its plays from the batch fit's swing before the rest "
-                                  f"({held['rest_swing']:.4g})" if held else ""))
+                                  f"({held['rest_swing']:.4g})" if held.get("rest_swing")
+                                  else ""))
     result = member(name).fit(record, "online", progress=progress, **{**held, **settings})
     astray = _online_astray(result.model, choice.model, record)
     if astray:
@@ -338,15 +339,16 @@ def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
 
 def _held_state(model: Any) -> dict[str, float]:
     """The batch choice's state at rest its on-line identifier holds: a PI model's swing
-    before the rest (:attr:`hystid.pi.PISandwich.rest_swing`), when it has one.
+    before the rest (:attr:`hystid.pi.PISandwich.rest_swing`, 0 when the batch fit kept none),
+    not estimated again on-line.
 
     On the stage-A look-alike swung before its rest, the on-line ``pi-stage`` identifier from
     the virgin state was 0.6-12x its batch fit's held-out error (the batch fit finds the swing;
     a warm-up too short to find it kept a spurious one on measured stage A); given the batch
     choice's swing, 0.1-1.2x (``benchmarks/bench_rest_swing.py``). The Duhem identifier's
     start-up solve fits its own state at rest."""
-    swing = float(getattr(model, "rest_swing", 0.0) or 0.0)
-    return {"rest_swing": swing} if swing else {}
+    swing = getattr(model, "rest_swing", None)
+    return {} if swing is None else {"rest_swing": float(swing)}
 
 
 def _scored(record: Record, prep: Any) -> Any:

@@ -205,15 +205,17 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         pins it: estimated there too, stage A's held-out errors went from 1.03x to 1.42x the
         batch fit's and the identifier ran 4x slower. A drift of the zero is tracked beside it
         (see the module docstring).
-    rest_swing : float
-        The stage's last excursion before its rest, input units from the rest (held, not
-        estimated; 0, the plays virgin, by default): on a record that begins at rest the plays
-        start where that excursion left them (:attr:`hystid.pi.PISandwich.rest_swing`) and the
-        prediction is relative to the output at rest. ``identify(..., method="online")`` with
-        the default ``model="auto"`` passes the swing its batch choice found. (Estimated from
-        the warm-up, a swing was kept on measured stage A that the batch fit does not keep;
-        ``identify`` sets one after the run with the parameters held,
-        :func:`~hystid.identify.pi_rest_swing.place_rest_swing`.)
+    rest_swing : float, optional
+        The stage's last excursion before its rest, input units from the rest: on a record
+        that begins at rest the plays start where that excursion left them
+        (:attr:`hystid.pi.PISandwich.rest_swing`) and the prediction is relative to the output
+        at rest. A number is held (0: the plays virgin); ``identify(..., method="online")``
+        with the default ``model="auto"`` passes the swing its batch choice found. None (the
+        default): estimated once, when the two starts are chosen between (``two_starts``;
+        every excited sample is then in the window), as the batch fit estimates it
+        (:func:`~hystid.identify.pi_rest_swing.scan_rest_swing`, the same rule for keeping
+        it), and held from there. Estimated from the warm-up alone (0.2 s), a swing was kept
+        on measured stage A that the batch fit does not keep.
     P0 : float
         Prior variance of every search coordinate (normalised units) before any data.
     forgetting : float
@@ -259,6 +261,10 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
     started_from : str
         ``"warm-up fit"`` or ``"slow branch"``: the start the estimate comes from
         (``two_starts``).
+    swing_scan_ : dict or None
+        Once the swing before the rest was estimated (``rest_swing`` None): the swing found
+        (input units), whether it was kept, the RMS residual with it and from the virgin state
+        (output units) and whether it was an end of the input's range.
     start_errors_ : dict
         Once the two starts were compared: each one's RMS error run from rest over the
         samples then, output units.
@@ -292,7 +298,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         skip: int = 0,
         left_out: Sequence[tuple[int, int]] = (),
         offset: float | None = None,
-        rest_swing: float = 0.0,
+        rest_swing: float | None = None,
         P0: float = 1.0,
         forgetting: float = 1.0,
         arrival_decay: float = ARRIVAL_DECAY,
@@ -334,13 +340,13 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         if offset is not None and not np.isfinite(offset):
             raise ValueError(f"offset: expected a finite number or None, got {offset!r}")
         try:
-            swing = float(rest_swing)
+            swing = None if rest_swing is None else float(rest_swing)
         except (TypeError, ValueError):
             swing = math.nan
-        if isinstance(rest_swing, bool) or not math.isfinite(swing):
-            raise ValueError(f"rest_swing: expected a finite swing in input units from the rest, "
-                             f"got {rest_swing!r} (the batch fit's rest_swing=True/False switches "
-                             f"its estimation; this identifier holds the swing it is given)")
+        if isinstance(rest_swing, bool) or (swing is not None and not math.isfinite(swing)):
+            raise ValueError(f"rest_swing: expected None (estimated) or a finite swing in input "
+                             f"units from the rest, got {rest_swing!r} (the batch fit's "
+                             f"rest_swing=True/False switches its estimation)")
         if not resolve_rate > 0:  # inf allowed
             raise ValueError(f"resolve_rate: expected a positive number, got {resolve_rate!r}")
         if not 0.0 < forgetting <= 1.0:
@@ -476,6 +482,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         self._phi: np.ndarray | None = None
         self._theta_rest = np.zeros(len(self.names))
         self._swing = 0.0  # the swing in force (normalised input; 0 on a record in motion)
+        self.swing_scan_: dict[str, Any] | None = None  # the swing's estimate, once made
         self._su = self._sy = 1.0
         self._to_record = np.ones(n + 5)  # theta's scale from normalised to record units
         self._theta1 = np.empty((1, n + 5))
@@ -708,6 +715,8 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
             "rewarms": self.n_rewarms,
             "started_from": self.started_from,
             "start_errors": self.start_errors_,
+            "rest_swing": self._swing * self._su,
+            "swing_scan": self.swing_scan_,
             "warnings": drift_note(self.drift_per_second_, self.drift_range_, self._warm_rms,
                                    _output_unit(record),
                                    "samples so far: its range; the rate is the last window's")

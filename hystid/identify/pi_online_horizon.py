@@ -65,10 +65,12 @@ class MovingHorizon:
                     and (trial[n + 1] <= self._xp_most or trial[n + 1] <= phi[n + 1]))
 
     def _polish(self) -> None:
-        """The running re-solve's estimate takes over, then one more re-solve of the window
-        with :data:`CHOICE_ITERATIONS` trials a start, solved now."""
+        """The running re-solve's estimate takes over, the swing before the rest is estimated
+        (when it is not given), then one more re-solve of the window with
+        :data:`CHOICE_ITERATIONS` trials a start, solved now."""
         if self._job is not None:
             self._apply()
+        self._estimate_swing()
         if self._chunks:
             self._launch((self._phi, self._solved), CHOICE_ITERATIONS)
             self._apply()

@@ -144,7 +144,7 @@ class WarmUp:
         in_motion = len(rest) < REST_SAMPLES  # no rest pins the output's zero
         if in_motion:  # the slow-branch start is for a record that begins at rest
             self._twin = None
-        swing = 0.0 if in_motion else self.rest_swing  # a swing before a rest only
+        swing = 0.0 if in_motion else self.rest_swing or 0.0  # before a rest only
         # swung, the fit's offset takes the plays' share of the output at rest (dropped after:
         # the recursion's prediction is relative to the output at rest)
         fit, su, sy = _fit_normalised_from_zero(u, y, self.thresholds, self.structure,
@@ -194,6 +194,45 @@ class WarmUp:
             self._launch((self._phi, self._phi))
             self._apply()
         self.warmup_seconds_ = time.perf_counter() - t0
+
+    def _estimate_swing(self) -> None:
+        """Estimate the swing before the rest, as the batch fit does, on every excited sample
+        so far (all still in the window), with the current L1 and L2 held
+        (:func:`~hystid.identify.pi_rest_swing.scan_rest_swing`; kept when it lowers the RMS
+        residual by more than :data:`~hystid.identify.pi_rest_swing.GAIN` and is not an end of
+        the input's range). When kept, the branches at the window's start settle where the
+        swing left the plays, the weights are the scan's, and the re-solve that follows starts
+        from there. Only when :attr:`rest_swing` is None, once, on a record that began at
+        rest."""
+        if (self.rest_swing is not None or self.swing_scan_ is not None or self._phi is None
+                or self._tracks_drift or self._kept_rest is None or not self._chunks):
+            return
+        from .pi_batch import RIDGE
+        from .pi_rest_swing import GAIN, scan_rest_swing
+
+        parts = [c for c in self._chunks] + [self._open[:, :self._n_open]]
+        un = np.concatenate([c[0] for c in parts])
+        yn = np.concatenate([c[1] for c in parts])
+        rows = np.flatnonzero(np.isfinite(yn))
+        n, nplay = self._n_weights, self.structure.n_operators
+        found = scan_rest_swing(theta_from_stage(self._phi, n), un, yn, rows, self._rn,
+                                self.structure, np.ones((len(rows), 1)), RIDGE)
+        kept = not found["at_bound"] and found["rms"] < (1.0 - GAIN) * found["rms_virgin"]
+        self.swing_scan_ = {"swing": found["swing"] * self._su, "kept": bool(kept),
+                            "rms": found["rms"] * self._sy,
+                            "rms_virgin": found["rms_virgin"] * self._sy,
+                            "at_bound": bool(found["at_bound"])}
+        if not kept:
+            return
+        self._swing = found["swing"]
+        self._wstate[:, :nplay] = 0.0  # settled: no sensitivities, the states at the plays'
+        self._wstate[[0, 1, 2, 4, 5, 12], :nplay] = rest_plays(self._swing, self._rn)
+        phi = self._phi.copy()
+        phi[:n] = stage_from_theta(found["theta"], n)[:n]
+        if self.monotone:
+            phi[:nplay] = admissible_weights(phi[:nplay])
+        self._phi, self._solved = phi, phi.copy()
+        self._arrival = (phi.copy(), self._arrival[1])
 
     def _slow_branch(self, phi: np.ndarray, un: np.ndarray, yn: np.ndarray) -> np.ndarray:
         """The warm-up fit's blocks with a slow branch, as the batch fit's slow-branch start
