@@ -210,13 +210,14 @@ class WarmUp:
         from .pi_batch import RIDGE
         from .pi_rest_swing import GAIN, scan_rest_swing
 
-        parts = [c for c in self._chunks] + [self._open[:, :self._n_open]]
+        parts = [*self._chunks, self._open[:, :self._n_open]]
         un = np.concatenate([c[0] for c in parts])
         yn = np.concatenate([c[1] for c in parts])
         rows = np.flatnonzero(np.isfinite(yn))
         n, nplay = self._n_weights, self.structure.n_operators
+        # relative to the output at rest, as the recursion predicts it (no offset to fit)
         found = scan_rest_swing(theta_from_stage(self._phi, n), un, yn, rows, self._rn,
-                                self.structure, np.ones((len(rows), 1)), RIDGE)
+                                self.structure, np.ones((len(rows), 0)), RIDGE, relative=True)
         kept = not found["at_bound"] and found["rms"] < (1.0 - GAIN) * found["rms_virgin"]
         self.swing_scan_ = {"swing": found["swing"] * self._su, "kept": bool(kept),
                             "rms": found["rms"] * self._sy,
@@ -225,7 +226,7 @@ class WarmUp:
         if not kept:
             return
         self._swing = found["swing"]
-        self._wstate[:, :nplay] = 0.0  # settled: no sensitivities, the states at the plays'
+        self._wstate[:, :nplay] = 0.0  # settled where the swing left the plays: no sensitivity
         self._wstate[[0, 1, 2, 4, 5, 12], :nplay] = rest_plays(self._swing, self._rn)
         phi = self._phi.copy()
         phi[:n] = stage_from_theta(found["theta"], n)[:n]

@@ -60,11 +60,13 @@ class _Regressors:
         powers = [self.w1 ** (j + 2) for j in range(structure.n_poly)]
         self.poly = [signal.lfilter(self.num, self.den, p) for p in powers]
 
-    def columns(self, swing: float) -> np.ndarray:
+    def columns(self, swing: float, relative: bool = False) -> np.ndarray:
         start = rest_plays(swing, self.r)
         plays = play_operator(self.w1, self.r, start)
         filtered, _ = signal.lfilter(self.num, self.den, plays, axis=0,
                                      zi=np.outer(self.zi, start))
+        if relative:  # each column from its value at rest
+            filtered -= start
         return np.column_stack([filtered, *self.poly])
 
 
@@ -160,7 +162,7 @@ def place_rest_swing(model: PISandwich, u: np.ndarray, y: np.ndarray,
 
 def scan_rest_swing(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.ndarray,
                     r: np.ndarray, structure: PIStructure, nuisance: np.ndarray,
-                    ridge: float) -> dict[str, Any]:
+                    ridge: float, relative: bool = False) -> dict[str, Any]:
     """The swing that fits the record best with L1 and L2 of ``theta`` held (step 1).
 
     Parameters
@@ -179,6 +181,9 @@ def scan_rest_swing(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.
         The nuisance columns on ``rows`` (the offset, a drift).
     ridge : float
         The fit's ridge on the weights.
+    relative : bool
+        The output relative to its value at rest (each play's column less its state at rest),
+        as the on-line identifier predicts it; the output's offset then is not a nuisance.
 
     Returns
     -------
@@ -191,7 +196,7 @@ def scan_rest_swing(theta: np.ndarray, un: np.ndarray, yn: np.ndarray, rows: np.
     target = yn[rows]
 
     def fit(swing: float) -> tuple[float, np.ndarray, np.ndarray]:
-        w, nu, rms = _solve(regs.columns(swing)[rows], target, nuisance, ridge)
+        w, nu, rms = _solve(regs.columns(swing, relative)[rows], target, nuisance, ridge)
         return rms, w, nu
 
     low, high = _range_about_rest(regs.w1[rows])
