@@ -343,10 +343,10 @@ def _held_state(model: Any) -> dict[str, float]:
     not estimated again on-line.
 
     On the stage-A look-alike swung before its rest, the on-line ``pi-stage`` identifier from
-    the virgin state was 0.6-12x its batch fit's held-out error (the batch fit finds the swing;
-    a warm-up too short to find it kept a spurious one on measured stage A); given the batch
-    choice's swing, 0.1-1.2x (``benchmarks/bench_rest_swing.py``). The Duhem identifier's
-    start-up solve fits its own state at rest."""
+    the virgin state was 0.6-12x its batch fit's held-out error; estimating the swing itself
+    when its window fills, 0.12-2.8x; given the batch choice's swing, 0.1-1.2x
+    (``benchmarks/bench_rest_swing.py``). The Duhem identifier's start-up solve fits its own
+    state at rest."""
     swing = getattr(model, "rest_swing", None)
     return {} if swing is None else {"rest_swing": float(swing)}
 

@@ -213,8 +213,9 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         with the default ``model="auto"`` passes the swing its batch choice found. None (the
         default): estimated once, when the two starts are chosen between (``two_starts``;
         every excited sample is then in the window), as the batch fit estimates it
-        (:func:`~hystid.identify.pi_rest_swing.scan_rest_swing`, the same rule for keeping
-        it), and held from there. Estimated from the warm-up alone (0.2 s), a swing was kept
+        (:func:`~hystid.identify.pi_rest_swing.scan_rest_swing` with the current L1 and L2, on
+        the output relative to its value at rest; the same rule for keeping it), and held
+        from there. Estimated from the warm-up alone (0.2 s), a swing was kept
         on measured stage A that the batch fit does not keep.
     P0 : float
         Prior variance of every search coordinate (normalised units) before any data.
