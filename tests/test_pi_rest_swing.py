@@ -245,3 +245,33 @@ def test_the_online_identifier_keeps_no_swing_on_measured_stage_a():
     assert scan is not None and not scan["kept"], scan
     assert scan["rms"] > 0.95 * scan["rms_virgin"], scan
     assert res.model.rest_swing == 0.0
+
+
+def test_the_online_swing_estimate_on_hostile_records():
+    """The on-line estimate of the swing on the swung-down PRBN record in other units (mV, nm)
+    with five outliers: found with the real swing's sign, in the record's units (about
+    -35 600 mV, the volts' -35.6 V), and the model below both baselines held out: measured 43
+    / 82 / 78 nm against the linear model's 262 / 285 / 278 and the static line's 333 / 324 /
+    340, as in V and um without the outliers. On the same record begun in motion there is no
+    rest to swing from: no swing, no scan."""
+    from hystid.testing import crop_start, with_outliers, with_units
+
+    def hostile(rec):
+        return with_units(rec, u="mV", y="nm")
+
+    records = {"seconds": 1.0, "swing_before": -0.9}
+    train = with_outliers(hostile(stage_a_like("prbn", seed=1, **records)), count=5,
+                          size=2.0, seed=3)
+    held = [hostile(stage_a_like(k, seed=2, repeat=1, **records))
+            for k in ("prbn", "sine50", "tri50")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = identify(train, model="pi-stage", method="online")
+        rows = compare(res.model, train, held).rows
+        moving = identify(crop_start(train, 1.2), model="pi-stage", method="online")
+    scan = res.info["swing_scan"]
+    assert scan["kept"] and -60_000 < scan["swing"] < -20_000, scan
+    assert -60_000 < res.model.rest_swing < -20_000
+    for r in rows:
+        assert r["model"] < min(r["linear"], r["static_line"]), r
+    assert moving.info["swing_scan"] is None and moving.model.rest_swing == 0.0

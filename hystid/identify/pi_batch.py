@@ -242,21 +242,22 @@ def _with_rest_swing(fit: _NormalisedFit, un: np.ndarray, yn: np.ndarray, rows: 
     """The fit with the stage's last excursion before its rest
     (:mod:`~hystid.identify.pi_rest_swing`: scanned with L1 and L2 held, then the problem
     solved again with it held), kept when it lowers the RMS residual by more than
-    :data:`~hystid.identify.pi_rest_swing.GAIN` and is not an end of the input's range; the
+    :data:`~hystid.identify.pi_rest_swing.GAIN` and is not an end of the input's range
+    (:func:`~hystid.identify.pi_rest_swing.keeps_swing`); the
     swing (normalised) and the scan's report."""
-    from .pi_rest_swing import GAIN, scan_rest_swing
+    from .pi_rest_swing import keeps_swing, scan_rest_swing
 
     nuisance = _nuisance(rows, drift, knot) if fit_offset else np.ones((len(rows), 0))
     found = scan_rest_swing(fit.theta, un, yn, rows, r, structure, nuisance, RIDGE)
     report = {"swing": found["swing"], "rms_scan": found["rms"], "rms_virgin": fit.rms,
               "at_bound": found["at_bound"], "kept": False}
-    if found["at_bound"] or not found["rms"] < (1.0 - GAIN) * fit.rms:
+    if not keeps_swing(found["rms"], fit.rms, found["at_bound"]):
         return fit, 0.0, report
     problem = _PIOutputError(un, yn, rows, r, structure, fit_offset, drift, knot,
                              swing=found["swing"])
     sol = problem.solve(problem.to_z(found["theta"], found["nuisance"]), max_nfev, tol)
     swung = _normalised_fit(problem, sol, f"{fit.start} + rest swing")
-    if not swung.rms < (1.0 - GAIN) * fit.rms:
+    if not keeps_swing(swung.rms, fit.rms, False):
         return fit, 0.0, report
     report["kept"] = True
     return swung, found["swing"], report

@@ -60,11 +60,15 @@ class WarmUp:
         if len(self._chunks) >= self._keep():
             self._choose()
 
+    def _window_samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """The window's chunks and the open one: input and output, normalised."""
+        parts = [*self._chunks, self._open[:, :self._n_open]]
+        return (np.concatenate([c[0] for c in parts]), np.concatenate([c[1] for c in parts]))
+
     def _free_run_rms(self) -> float:
         """RMS error of the current estimate run from rest over every sample so far (the rest
         kept, then the window's chunks and the open one), output units."""
-        u = np.concatenate([c[0] for c in self._chunks] + [self._open[0, :self._n_open]])
-        y = np.concatenate([c[1] for c in self._chunks] + [self._open[1, :self._n_open]])
+        u, y = self._window_samples()
         err = self._simulate(self._phi, self._wstate.copy(), u, y)[0]
         err = err[np.isfinite(err)]
         return float(np.sqrt(np.mean(err ** 2))) * self._sy if err.size else math.inf
@@ -111,9 +115,8 @@ class WarmUp:
         """Fit the warm-up again on the rest kept and every excited sample so far (all still
         in the window's chunks and the open one); the recursion and the re-solves start
         again from that fit."""
-        parts = [c for c in self._chunks] + [self._open[:, :self._n_open]]
-        u = np.concatenate([c[0] for c in parts]) * self._su + (self._u0 or 0.0)
-        y = np.concatenate([c[1] for c in parts]) * self._sy + self._y0
+        un, yn = self._window_samples()
+        u, y = un * self._su + (self._u0 or 0.0), yn * self._sy + self._y0
         self._rest = [tuple(row) for row in self._kept_rest]
         self._buffer = list(zip(u.tolist(), y.tolist(), strict=True))
         self._chunks, self._n_open, self._job = [], 0, None
@@ -162,9 +165,7 @@ class WarmUp:
         if self.slow_start and not in_motion:
             phi = self._slow_branch(phi, un, yn)
         st0 = np.zeros((_STATE_ROWS, n + 1))
-        # the plays and both branches of each, settled, where the swing left them; the
-        # operator's output at rest (row 12) is taken off its prediction
-        st0[[0, 1, 2, 4, 5, 12], :nplay] = rest_plays(self._swing, self._rn)
+        _settle_plays(st0, rest_plays(self._swing, self._rn))
         if in_motion:  # the offset and the drift's rate: search coordinates from here on
             phi = np.r_[phi, fit.y0, self._start_clock(fit, y, st0)]
         self._warm_rms = fit.rms * sy
@@ -198,27 +199,24 @@ class WarmUp:
     def _estimate_swing(self) -> None:
         """Estimate the swing before the rest, as the batch fit does, on every excited sample
         so far (all still in the window), with the current L1 and L2 held
-        (:func:`~hystid.identify.pi_rest_swing.scan_rest_swing`; kept when it lowers the RMS
-        residual by more than :data:`~hystid.identify.pi_rest_swing.GAIN` and is not an end of
-        the input's range). When kept, the branches at the window's start settle where the
-        swing left the plays, the weights are the scan's, and the re-solve that follows starts
-        from there. Only when :attr:`rest_swing` is None, once, on a record that began at
-        rest."""
+        (:func:`~hystid.identify.pi_rest_swing.scan_rest_swing`; kept by the batch fit's rule,
+        :func:`~hystid.identify.pi_rest_swing.keeps_swing`). When kept, the branches at the
+        window's start settle where the swing left the plays, the weights are the scan's, and
+        the re-solve that follows starts from there. Only when :attr:`rest_swing` is None,
+        once, on a record that began at rest."""
         if (self.rest_swing is not None or self.swing_scan_ is not None or self._phi is None
                 or self._tracks_drift or self._kept_rest is None or not self._chunks):
             return
         from .pi_batch import RIDGE
-        from .pi_rest_swing import GAIN, scan_rest_swing
+        from .pi_rest_swing import keeps_swing, scan_rest_swing
 
-        parts = [*self._chunks, self._open[:, :self._n_open]]
-        un = np.concatenate([c[0] for c in parts])
-        yn = np.concatenate([c[1] for c in parts])
+        un, yn = self._window_samples()
         rows = np.flatnonzero(np.isfinite(yn))
         n, nplay = self._n_weights, self.structure.n_operators
         # relative to the output at rest, as the recursion predicts it (no offset to fit)
         found = scan_rest_swing(theta_from_stage(self._phi, n), un, yn, rows, self._rn,
                                 self.structure, np.ones((len(rows), 0)), RIDGE, relative=True)
-        kept = not found["at_bound"] and found["rms"] < (1.0 - GAIN) * found["rms_virgin"]
+        kept = keeps_swing(found["rms"], found["rms_virgin"], found["at_bound"])
         self.swing_scan_ = {"swing": found["swing"] * self._su, "kept": bool(kept),
                             "rms": found["rms"] * self._sy,
                             "rms_virgin": found["rms_virgin"] * self._sy,
@@ -226,8 +224,7 @@ class WarmUp:
         if not kept:
             return
         self._swing = found["swing"]
-        self._wstate[:, :nplay] = 0.0  # settled where the swing left the plays: no sensitivity
-        self._wstate[[0, 1, 2, 4, 5, 12], :nplay] = rest_plays(self._swing, self._rn)
+        _settle_plays(self._wstate, rest_plays(self._swing, self._rn))
         phi = self._phi.copy()
         phi[:n] = stage_from_theta(found["theta"], n)[:n]
         if self.monotone:
@@ -271,3 +268,13 @@ class WarmUp:
             return math.inf
         seen = max(1, self.k - (self.excited_at or 0))
         return float(np.arctanh(np.exp(-1.0 / (SLOW_START_LONGEST * seen)) / _KMAX))
+
+
+def _settle_plays(st: np.ndarray, p: np.ndarray) -> None:
+    """Write into a branch state ``st`` (:data:`~hystid.identify.pi_online_kernels._STATE_ROWS`
+    rows) the plays settled at ``p`` (one per play, the first columns): each play and both
+    branches after it at ``p``, no sensitivities, and ``p`` as the operator's output at rest
+    (row 12), which the prediction takes off."""
+    nplay = len(p)
+    st[:, :nplay] = 0.0
+    st[[0, 1, 2, 4, 5, 12], :nplay] = p

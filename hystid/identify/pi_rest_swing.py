@@ -33,7 +33,8 @@ from scipy import linalg, signal
 from ..pi import PISandwich, PIStructure
 from ..pi_operator import play_operator, rest_plays
 
-__all__ = ["GAIN", "GRID", "REFINE", "best_swing", "place_rest_swing", "scan_rest_swing"]
+__all__ = ["GAIN", "GRID", "REFINE", "best_swing", "keeps_swing", "place_rest_swing",
+           "scan_rest_swing"]
 
 #: Swings on the first grid, over the input's range about the rest (a stage is driven inside
 #: its range: on the helper's stage s3, resting at 2.5 V in a 0.7-9.5 V range, a scan of -7..7
@@ -84,6 +85,25 @@ def _solve(A: np.ndarray, target: np.ndarray, nuisance: np.ndarray,
     coef = linalg.solve(G, M.T @ target, assume_a="pos", check_finite=False)
     resid = M @ coef - target
     return coef[:n], coef[n:], float(np.sqrt(np.mean(resid ** 2)))
+
+
+def keeps_swing(rms: float, rms_virgin: float, at_bound: bool) -> bool:
+    """The rule every fit keeps a swing by: it lowers the RMS residual by more than
+    :data:`GAIN` of the virgin state's, and it is not an end of the input's range about the
+    rest (a swing there stands in for something else).
+
+    Parameters
+    ----------
+    rms, rms_virgin : float
+        The RMS residual with the swing and from the virgin state.
+    at_bound : bool
+        Whether the swing is an end of the input's range.
+
+    Returns
+    -------
+    bool
+    """
+    return not at_bound and rms < (1.0 - GAIN) * rms_virgin
 
 
 def _range_about_rest(v: np.ndarray) -> tuple[float, float]:
@@ -153,7 +173,7 @@ def place_rest_swing(model: PISandwich, u: np.ndarray, y: np.ndarray,
     low, high = _range_about_rest(u[scored] - model.u_rest)
     swing = best_swing(rms_of, low, high)
     after = rms_of(swing)
-    if swing in (low, high) or not after < (1.0 - GAIN) * before:
+    if not keeps_swing(after, before, swing in (low, high)):
         model.rest_swing = held
         return None
     model.rest_swing = swing
