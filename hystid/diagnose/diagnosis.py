@@ -19,11 +19,9 @@ not.
 
 from __future__ import annotations
 
-import os
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -34,6 +32,7 @@ from ..identify.result import IdentificationResult
 from ..metrics import gap_closed
 from ..model import DuhemSandwich, Structure
 from ..records import Record
+from ..threads import side_by_side, worker_count
 from ..validate import check_plain_duhem
 from .effects import EFFECTS, AugmentedSandwich, effect_dict
 from .final_model import fit_member, member_records
@@ -90,13 +89,9 @@ MAX_ROUNDS = 20
 #: (``python benchmarks/bench_stage_a_diagnosis.py``). Since the plain sandwich's kernels run
 #: their sample loop in one compiled function the nominal fit is twice as fast and the ratio
 #: was 4.3-4.8x: the refits' augmented kernel did not speed up alike. The refits now run side
-#: by side (:data:`MAX_WORKERS`), so within the budget more of them are started on two cores
-#: than on one.
+#: by side (:data:`~hystid.threads.MAX_WORKERS`), so within the budget more of them are
+#: started on two cores than on one.
 BUDGET_FACTOR = 0.5
-#: Most threads a diagnosis takes by default. A round has a handful of refits and the members
-#: one fit each; the compiled kernels release the interpreter, the solver's own Python does
-#: not, so more threads than that gain little.
-MAX_WORKERS = 4
 
 
 @one_blas_thread
@@ -202,8 +197,8 @@ def diagnose(
         its members). None by default.
     workers : int, optional
         Threads the member fits and each round's refits run in (the cores, at most
-        :data:`MAX_WORKERS`, by default). The result does not depend on it, except through
-        the time budget.
+        :data:`~hystid.threads.MAX_WORKERS`, by default). The result does not depend on it,
+        except through the time budget.
     progress : bool or callable
         Periodic progress lines on stderr (True), none (False), or a function taking a line.
 
@@ -236,7 +231,7 @@ def diagnose(
 
     # the members fitted and the candidates refitted in threads (the kernels release the
     # interpreter): the members beside the rounds, each round's refits beside each other
-    with _side_by_side(s.workers) as jobs:
+    with side_by_side(s.workers, "hystid-diagnose") as jobs:
         members_beside = _MembersBeside(members, member_records(train, vals, holdout)[0],
                                         jobs, say)
         greedy = GreedyRounds(s, start, jobs, say, members_beside.start).run()
@@ -310,7 +305,7 @@ def _checked(train: Record, vals: list[Record], model: Any, structure: Structure
                              f"{refit_samples}")
     if time_budget is not None and not time_budget >= 0:
         raise DiagnosisError(f"time_budget: expected seconds >= 0, got {time_budget}")
-    n_workers = _workers(workers)
+    n_workers = worker_count(workers, DiagnosisError)
     if budget_factor is not None and not budget_factor >= 0:
         raise DiagnosisError(f"budget_factor: expected a multiple >= 0, got {budget_factor}")
     fs = train.fs
@@ -507,27 +502,6 @@ def _result(train: Record, start: Start, nominal: DuhemSandwich, data: _Data,
     return DiagnosisResult(nf, nominal_info, start.where, ranked, accepted, final,
                            greedy.rounds, base_placed, aug, state.where, settings, series,
                            floor, fitted)
-
-
-@contextmanager
-def _side_by_side(n_workers: int) -> Iterator[ThreadPoolExecutor]:
-    """The diagnosis' threads; on the way out (an error, Ctrl-C) the work not yet started is
-    dropped instead of run to the end."""
-    jobs = ThreadPoolExecutor(n_workers, thread_name_prefix="hystid-diagnose")
-    try:
-        yield jobs
-    finally:
-        jobs.shutdown(wait=True, cancel_futures=True)
-
-
-def _workers(workers: int | None) -> int:
-    """Threads for the refits and member fits: ``workers``, else the cores up to
-    :data:`MAX_WORKERS`."""
-    if workers is None:
-        return max(1, min(MAX_WORKERS, os.cpu_count() or 1))
-    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise DiagnosisError(f"workers: expected a whole number >= 1, got {workers!r}")
-    return int(workers)
 
 
 def _member_names(members: Sequence[str]) -> list[str]:

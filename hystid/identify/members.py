@@ -43,6 +43,7 @@ from ..mduhem import MultiDuhemStructure
 from ..model import Structure
 from ..pi import PIStructure
 from ..records import Record
+from ..threads import run_side_by_side
 from .result import IdentificationResult
 
 __all__ = ["AUTO_CANDIDATES", "MEMBERS", "Member", "choice_shortfall", "member", "select_member"]
@@ -384,7 +385,7 @@ def _heldout_rms(model: Any, record: Record, k: int, stop: int, scored: np.ndarr
 
 
 def _whole_fit(name: str, record: Record, head_fit: IdentificationResult,
-               settings: dict) -> IdentificationResult:
+               settings: dict, workers: int | None = None) -> IdentificationResult:
     """A member fitted on the whole record; a PI member twice, started from its head fit and
     from its own starts, keeping the fit with the lower residual (the same cost on the same
     samples).
@@ -393,20 +394,41 @@ def _whole_fit(name: str, record: Record, head_fit: IdentificationResult,
     A's ``prbn_1`` with its rest cut to 0.1 s or 62 ms, the head (its first 70 % of excitation)
     put ``pi-stage``'s slow pole at 0.9993 or 0.9964 instead of 0.99987, and the whole fit
     from there left 51 or 50 nm of residual where a fit from the member's own starts leaves
-    26-27 (73-107 nm held out on the other five records against 25-36). The second fit costs
-    about 0.6 s on stage A's 20 001 samples.
+    26-27 (73-107 nm held out on the other five records against 25-36). The two fits run side
+    by side in ``workers`` threads (:func:`~hystid.threads.run_side_by_side`).
     """
     if MEMBERS[name].kind != "pi":
         return MEMBERS[name].fit(record, **settings)
-    started = MEMBERS[name].fit(record, **{"theta0": head_fit.model.theta,
-                                           "max_nfev": REFIT_NFEV, **settings})
-    fresh = MEMBERS[name].fit(record, **settings)
-    return min((started, fresh), key=lambda r: r.info["rms_residual"])
+    fits = run_side_by_side([
+        lambda: MEMBERS[name].fit(record, **{"theta0": head_fit.model.theta,
+                                             "max_nfev": REFIT_NFEV, **settings}),
+        lambda: MEMBERS[name].fit(record, **settings)], workers, "hystid-choice")
+    return min(fits, key=lambda r: r.info["rms_residual"])
+
+
+def _head_fits(members: list[Member], head: Record, settings: dict,
+               progress: Callable[[int, int], None] | None, workers: int | None,
+               ) -> list[Any]:
+    """Each candidate fitted on the head of the record, with its own seconds, and last the
+    linear baseline (third order), side by side in threads
+    (:func:`~hystid.threads.run_side_by_side`)."""
+    from ..baselines import LinearModel
+
+    def fit(m: Member) -> Callable[[], tuple[IdentificationResult, float]]:
+        def run() -> tuple[IdentificationResult, float]:
+            t0 = time.perf_counter()
+            return m.fit(head, **settings), time.perf_counter() - t0
+        return run
+
+    for m in members:
+        _say(progress, f"model choice: fitting {m.name} on samples 0..{head.n - 1}")
+    return run_side_by_side([*(fit(m) for m in members), lambda: LinearModel.fit(head, 3, 3, 1)],
+                            workers, "hystid-choice")
 
 
 def _rate_checked(record: Record, name: str, result: IdentificationResult, chosen: dict,
                   eligible: list[dict], fits: dict, settings: dict,
-                  progress: Callable[[int, int], None] | None,
+                  progress: Callable[[int, int], None] | None, workers: int | None = None,
                   ) -> tuple[str, IdentificationResult, dict]:
     """On a record at one rate: when the chosen member's whole-record fit moves with the rate
     (its head fit did not), the next eligible candidate by held-out RMS whose whole-record fit
@@ -421,7 +443,7 @@ def _rate_checked(record: Record, name: str, result: IdentificationResult, chose
             continue
         _say(progress, f"model choice: {name} fitted on the whole record moves with the rate "
              f"({chosen['rate_dependence_whole']:.2g}); trying {r['member']}")
-        other = _whole_fit(r["member"], record, fits[r["member"]], settings)
+        other = _whole_fit(r["member"], record, fits[r["member"]], settings, workers)
         r["rate_dependence_whole"] = rate_dependence(other.model, record.u, record.y)
         if r["rate_dependence_whole"] <= RATE_LIMIT:
             chosen["left_out"] = (f"fitted on the whole record, its output moves by "
@@ -506,6 +528,7 @@ def select_member(
     holdout: float = HOLDOUT,
     margin: float = MARGIN,
     progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
     **settings: Any,
 ) -> IdentificationResult:
     """Choose a member by held-out error inside the record and fit it on the whole record.
@@ -513,7 +536,7 @@ def select_member(
     The steps:
 
     1. hold out the last ``holdout`` of the samples after the leading rest;
-    2. fit every candidate (batch) on the rest of the record;
+    2. fit every candidate (batch) on the rest of the record, side by side in threads;
     3. score each on the held-out end (free run of the whole record from rest), beside the
        static line and the linear model fitted on the same head; on a record driven at one
        rate, leave out a candidate whose output moves with the rate while another's does not
@@ -537,6 +560,10 @@ def select_member(
         Relative improvement a richer member needs to be chosen.
     progress : callable, optional
         Progress lines (its ``say`` method, when it has one, gets one line per step).
+    workers : int, optional
+        Threads the candidates' fits (and a PI member's two whole-record fits) run in: the
+        cores, at most :data:`~hystid.threads.MAX_WORKERS`, by default. The choice and the
+        model do not depend on it.
     **settings
         Passed to every batch fit (``offset``, ``skip``...).
 
@@ -549,7 +576,7 @@ def select_member(
         chosen one on other reversals by far more than the held-out end shows
         (:data:`DISAGREE`; :mod:`hystid.identify.agreement`).
     """
-    from ..baselines import LinearModel, StaticLine
+    from ..baselines import StaticLine
 
     if not 0.0 < holdout <= 0.5:
         raise ValueError(f"holdout: expected a share in (0, 0.5], got {holdout!r}")
@@ -563,19 +590,17 @@ def select_member(
     k, stop, scored = _split(record, holdout)
     head = record[:k]
     rows, fits = [], {}
-    for m in members:
-        t0 = time.perf_counter()
-        _say(progress, f"model choice: fitting {m.name} on samples 0..{k - 1}")
-        fit = m.fit(head, **settings)
+    *head_fits, linear = _head_fits(members, head, settings, progress, workers)
+    for m, (fit, seconds) in zip(members, head_fits, strict=True):
         fits[m.name] = fit
         rows.append({"member": m.name, "what": m.what, "n_params": m.n_params,
                      "heldout_rms": _heldout_rms(fit.model, record, k, stop, scored),
-                     "seconds": time.perf_counter() - t0})
+                     "seconds": seconds})
         _say(progress, f"model choice: {m.name} held-out RMS {rows[-1]['heldout_rms']:.4g} "
              f"{record.units.get('y', '')} on samples {k}..{stop - 1}")
     y = record.y[k:stop][scored]
     baselines = {"static_line": StaticLine.fit(head).predict(record.u)[k:stop][scored],
-                 "linear": LinearModel.fit(head, 3, 3, 1).predict(record.u)[k:stop][scored]}
+                 "linear": linear.predict(record.u)[k:stop][scored]}
     baseline_rms = {b: float(np.sqrt(np.mean((p - y) ** 2))) for b, p in baselines.items()}
     eligible = _rate_eligible(record, rows, fits, progress)
     best = min(r["heldout_rms"] for r in eligible)
@@ -585,10 +610,10 @@ def select_member(
         r["chosen"] = r is chosen
     name = chosen["member"]
     _say(progress, f"model choice: {name}; fitting it on the whole record")
-    result = _whole_fit(name, record, fits[name], settings)
+    result = _whole_fit(name, record, fits[name], settings, workers)
     if "rate_dependence" in chosen:
         name, result, chosen = _rate_checked(record, name, result, chosen, eligible, fits,
-                                             settings, progress)
+                                             settings, progress, workers)
         for r in rows:
             r["chosen"] = r is chosen
         result.info["rate_dependence"] = chosen["rate_dependence_whole"]
