@@ -7,7 +7,8 @@ what does it cost?
   member it takes, per seed.
 * Speed: ``model="auto"`` against the default Duhem fit on the same 20 001-sample record
   (measured stage A's ``prbn_1`` when ``../shared/data`` is there, else the look-alike), best of
-  three in one process, as a ratio.
+  three in one process, as a ratio; and on each of stage A's six records, best of two, with
+  the choice's fits side by side in threads (the default) and in one thread (``workers=1``).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/bench_members.py [--seeds 20]
 """
@@ -15,6 +16,7 @@ what does it cost?
 from __future__ import annotations
 
 import argparse
+import os
 import time
 import warnings
 from collections import Counter
@@ -34,15 +36,32 @@ def _chosen(rec) -> str:
         return identify(rec, model="auto").info["model"]
 
 
-def _best_seconds(rec, model: str, rounds: int = 3) -> float:
+def _best_seconds(rec, model: str, rounds: int = 3, **options) -> float:
     best = float("inf")
     for _ in range(rounds):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t0 = time.perf_counter()
-            identify(rec, model=model)
+            identify(rec, model=model, **options)
             best = min(best, time.perf_counter() - t0)
     return best
+
+
+def stage_a_speed(rounds: int = 2) -> list[dict]:
+    """``model="auto"`` against the Duhem fit on each of stage A's six records (empty when
+    they are absent): seconds, best of ``rounds``, threads as the default and one."""
+    rows = []
+    for name in ("prbn_1", "prbn_2", "sine50_1", "sine50_2", "tri50_1", "tri50_2"):
+        path = STAGE_A / f"{name}.csv"
+        if not path.exists():
+            return []
+        rec = load_record(path)
+        duhem = _best_seconds(rec, "duhem", rounds)
+        rows.append({"record": name, "duhem_s": duhem,
+                     "auto_s": _best_seconds(rec, "auto", rounds),
+                     "auto_one_thread_s": _best_seconds(rec, "auto", rounds, workers=1),
+                     "chosen": _chosen(rec)})
+    return rows
 
 
 def measure(seeds: int = 20) -> dict:
@@ -67,7 +86,8 @@ def measure(seeds: int = 20) -> dict:
     t_auto, t_duhem = _best_seconds(rec, "auto"), _best_seconds(rec, "duhem")
     return {"duhem_stage": duhem, "bouc_wen_stage": bouc,
             "speed": {"record": rec.name, "samples": rec.n, "auto_s": t_auto,
-                      "duhem_s": t_duhem, "ratio": t_auto / t_duhem}}
+                      "duhem_s": t_duhem, "ratio": t_auto / t_duhem},
+            "stage_a_speed": stage_a_speed(), "cores": os.cpu_count()}
 
 
 def render(payload: dict) -> str:
@@ -82,7 +102,22 @@ def render(payload: dict) -> str:
     return (table(rows, ["records", "seeds", "member chosen (times)"])
             + f"\n\n`model=\"auto\"` takes {s['ratio']:.1f}x the default Duhem fit on "
             f"{s['record']} ({s['samples']} samples): {s['auto_s']:.1f} s against "
-            f"{s['duhem_s']:.1f} s, best of three in one process.")
+            f"{s['duhem_s']:.1f} s, best of three in one process.") + _render_speed(payload)
+
+
+def _render_speed(payload: dict) -> str:
+    rows = payload.get("stage_a_speed") or []
+    if not rows:
+        return ""
+    body = [[r["record"], r["chosen"], f"{r['duhem_s']:.2f}", f"{r['auto_s']:.2f}",
+             f"{r['auto_s'] / r['duhem_s']:.1f}x", f"{r['auto_one_thread_s']:.2f}",
+             f"{r['auto_one_thread_s'] / r['duhem_s']:.1f}x"] for r in rows]
+    ratios = [r["auto_s"] / r["duhem_s"] for r in rows]
+    return ("\n\nOn each record of stage A (best of two, "
+            f"{payload.get('cores')} cores; the goal: at most 3x):\n\n"
+            + table(body, ["record", "auto chose", "duhem [s]", "auto [s]", "ratio",
+                           "auto, one thread [s]", "ratio"])
+            + f"\n\n`auto` takes {min(ratios):.1f}-{max(ratios):.1f}x the Duhem fit.")
 
 
 def main() -> None:

@@ -8,6 +8,7 @@ thread or several: the results do not depend on the thread count.
 
 from __future__ import annotations
 
+import contextvars
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -91,11 +92,13 @@ def run_side_by_side(calls: Sequence[Callable[[], T]], workers: int | None = Non
     Returns
     -------
     list
-        ``[call() for call in calls]``; the first error raised is raised again.
+        ``[call() for call in calls]``, each call run in a copy of the caller's context
+        (:mod:`contextvars`); the first error raised is raised again.
     """
     n = min(worker_count(workers), len(calls))
     if n <= 1:
         return [call() for call in calls]
     with side_by_side(n, name) as jobs:
-        futures = [jobs.submit(call) for call in calls]
+        # each call sees the caller's context variables (a fit inside another's knows it is)
+        futures = [jobs.submit(contextvars.copy_context().run, call) for call in calls]
         return [f.result() for f in futures]

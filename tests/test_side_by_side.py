@@ -90,3 +90,13 @@ def test_a_stalled_slow_branch_polish_ends_early_and_loses_nothing(monkeypatch):
     assert stalled.info["rms_residual"] <= 1.001 * full.info["rms_residual"]
     a, b = (quiet(compare, r.model, train, [held]).rows[0] for r in (stalled, full))
     assert a["model"] <= b["model"] + 1e-3 and a["model"] < 0.5 * a["linear"]
+
+
+def test_calls_side_by_side_see_the_caller_s_context():
+    from hystid.identify.output_jumps import CHECKING
+
+    token = CHECKING.set(False)  # as inside an identify() call: the fits it starts are nested
+    try:
+        assert run_side_by_side([CHECKING.get, CHECKING.get], workers=2) == [False, False]
+    finally:
+        CHECKING.reset(token)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import OptionError
-from ..options import crop, parse_crop, parse_structure
+from ..options import crop, integer, parse_crop, parse_structure
 from .support import (
     IDENTIFY_KERNELS,
     UNITS_HELP,
@@ -89,6 +89,9 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
                    "--structure, --history or --method eria/ekf is given)")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,
                    help="estimator (default: batch; online for --model pi)")
+    p.add_argument("--workers", type=integer(1, 64), default=None, metavar="N",
+                   help="threads the model choice fits its candidates in (default: the cores, "
+                   "at most 4); the choice and the model do not depend on it")
     p.add_argument("--structure", default=None, metavar="auto|n1a=1,n2a=2,...",
                    help="model structure: keys n1a, n1b, n2a, n2b, q1, q2, f0, f_order, "
                    "g_order, directional (the paper's experimental one by default), or 'auto' "
@@ -262,7 +265,8 @@ def _identify_record(rec: Record, args: argparse.Namespace, progress: Progress,
     # record too short to choose a member on
     defaulted = getattr(args, "model_defaulted", False) and _model_arg(args) == "auto"
     return identify(rec, method=method, structure=structure,
-                    model=None if defaulted else _model_arg(args), **settings)
+                    model=None if defaulted else _model_arg(args),
+                    workers=getattr(args, "workers", None), **settings)
 
 
 def _split_for_validation(rec: Record, val: Record | None,

@@ -59,6 +59,7 @@ def identify(
     *,
     model: str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
     **settings: Any,
 ) -> IdentificationResult:
     """Identify a sandwich model from a record.
@@ -86,6 +87,10 @@ def identify(
         chooses, unless the call is tied to the Duhem sandwich (:func:`default_model`).
     progress : callable, optional
         Called as ``progress(k, n)`` while a long run goes on.
+    workers : int, optional
+        Threads the model choice (``model="auto"``) runs its candidates' fits in: the cores,
+        at most :data:`~hystid.threads.MAX_WORKERS`, by default. The choice and the model do
+        not depend on it. A forced member is fitted in the calling thread.
     **settings
         Passed to the estimator's constructor (for example ``theta0``, ``P0``, ``epsilon``).
 
@@ -108,6 +113,16 @@ def identify(
                         f"{type(progress).__name__} {progress!r:.40}")
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if workers is not None:
+        from ..threads import worker_count
+        from .members import CHOICE_WORKERS
+
+        held = CHOICE_WORKERS.set(worker_count(workers))
+        try:
+            return identify(record, method, structure, model=model, progress=progress,
+                            **settings)
+        finally:
+            CHOICE_WORKERS.reset(held)
     from .output_jumps import CHECKING
     from .prepare import without_input_glitches
 

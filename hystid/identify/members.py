@@ -33,6 +33,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -286,6 +287,11 @@ MEMBERS: dict[str, Member] = {m.name: m for m in (
 #: ``mduhem`` member is fast, 1-2 s on stage A's 20 001 samples, but loses to ``pi-stage``
 #: there while counting fewer parameters, so the choice could take it within its margin).
 AUTO_CANDIDATES = ("duhem", "pi-stage")
+
+#: Threads :func:`select_member` runs its fits in when it is given none (None: the cores, at
+#: most :data:`~hystid.threads.MAX_WORKERS`); :func:`hystid.identify.identify`'s ``workers``
+#: sets it for the call.
+CHOICE_WORKERS: ContextVar[int | None] = ContextVar("CHOICE_WORKERS", default=None)
 
 #: Share of the excitation (after the leading rest) held out for the choice.
 HOLDOUT = 0.3
@@ -561,9 +567,9 @@ def select_member(
     progress : callable, optional
         Progress lines (its ``say`` method, when it has one, gets one line per step).
     workers : int, optional
-        Threads the candidates' fits (and a PI member's two whole-record fits) run in: the
-        cores, at most :data:`~hystid.threads.MAX_WORKERS`, by default. The choice and the
-        model do not depend on it.
+        Threads the candidates' fits (and a PI member's two whole-record fits) run in: by
+        default :data:`CHOICE_WORKERS` when set, else the cores, at most
+        :data:`~hystid.threads.MAX_WORKERS`. The choice and the model do not depend on it.
     **settings
         Passed to every batch fit (``offset``, ``skip``...).
 
@@ -587,6 +593,8 @@ def select_member(
     if short is not None:
         raise ValueError(f"{short}; a member can be fitted without the choice (model='duhem', "
                          "hystid identify --model duhem)")
+    if workers is None:
+        workers = CHOICE_WORKERS.get()
     k, stop, scored = _split(record, holdout)
     head = record[:k]
     rows, fits = [], {}
