@@ -12,8 +12,9 @@ PRBN, 50 Hz sine and triangle, seed 1).
 
 Then the on-line identifier's speed (:func:`throughput`): started on the training record, its
 samples per second over the first held-out record (``partial_fit``), the re-solves' share of
-that time, the warm-ups fitted again in it (the model continued from ``prbn_1`` predicts none
-of ``prbn_2``'s first samples: a re-warm, one call's work, and the rate without that call), and
+that time, the warm-ups fitted again in it (one call's work each, and the rate without that
+call; ``prbn_2``'s leading rest, where the sensor's zero moved, took one before such a chunk was
+left unchecked), the model's held-out RMS on the other records before and after it, and
 the time of each ``update()`` call over 3 000 samples (median, 99th percentile
 and worst: the re-solve runs in steps beside the recursion, and takes over at a chunk's
 boundary), with :data:`OFTEN` too, beside the Duhem on-line identifier on the same
@@ -124,9 +125,11 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
             before = getattr(est, "resolve_seconds_", 0.0)
             work0, n0 = getattr(est, "resolve_work_", 0.0), getattr(est, "n_resolves", 0)
             rewarms0 = getattr(est, "n_rewarms", 0)
+            before_rms = _others_rms(est.model, train, held[1:])
             t0 = time.perf_counter()
             est.partial_fit(held[0])
             seconds = time.perf_counter() - t0
+            after_rms = _others_rms(est.model, train, held[1:])
             rewarms = getattr(est, "n_rewarms", 0) - rewarms0
             # a warm-up fitted again in the run (its model predicted nothing) is one call's work
             rewarm_s = getattr(est, "warmup_seconds_", 0.0) if rewarms else 0.0
@@ -148,8 +151,15 @@ def throughput(train, held: list, calls: int = 3000) -> dict:
                          "resolve_work": work, "warmup_s": warmup, "choice_s": choice,
                          "update_median_us": float(np.median(times) * 1e6),
                          "update_p99_us": float(np.percentile(times, 99) * 1e6),
-                         "update_max_us": float(np.max(times) * 1e6)}
+                         "update_max_us": float(np.max(times) * 1e6),
+                         "held_out_nm_before": before_rms, "held_out_nm_after": after_rms}
     return out
+
+
+def _others_rms(model, train, others: list) -> list[float]:
+    """Held-out RMS (nm, zeroed on each record's rest) of an on-line model on the records
+    after the one it is continued on."""
+    return [1e3 * r["model"] for r in compare(model, train, others).rows]
 
 
 def render_speed(speed: dict) -> str:
@@ -174,7 +184,8 @@ def render_speed(speed: dict) -> str:
              "" if e.get("warmup_s") is None else f"{e['warmup_s']:.2f}",
              "" if e.get("choice_s") is None else f"{e['choice_s']:.2f}",
              f"{e['update_median_us']:.1f}",
-             f"{e['update_p99_us']:.0f}", f"{e['update_max_us']:,.0f}"]
+             f"{e['update_p99_us']:.0f}", f"{e['update_max_us']:,.0f}",
+             _nm_range(e.get("held_out_nm_before")), _nm_range(e.get("held_out_nm_after"))]
             for name, e in speed.items() if name != "fs"]
     return table(rows, ["on-line identifier", "samples/s (partial_fit)", "re-warms",
                         "samples/s without the re-warm's call",
@@ -182,7 +193,12 @@ def render_speed(speed: dict) -> str:
                         "work per re-solve [simulated samples]", "warm-up fit [s]",
                         "choice of start [s]",
                         "update() median [us]", "update() 99th percentile [us]",
-                        "update() worst [us]"])
+                        "update() worst [us]", "held out before [nm]",
+                        "held out after [nm]"])
+
+
+def _nm_range(values: list[float] | None) -> str:
+    return "" if not values else " / ".join(f"{v:.0f}" for v in values)
 
 
 def render(payload: dict) -> str:
