@@ -28,7 +28,6 @@ from scipy import signal
 from hystid.baselines import compare
 from hystid.identify import identify
 from hystid.identify.pi_online import PIStageOnline
-from hystid.identify.pi_online_warmup import REWARM_RATIO
 from hystid.pi import pi_thresholds
 from hystid.records import Record
 from hystid.testing import Linear, MaxwellSlip, SandwichStage, continuous_linear
@@ -103,27 +102,6 @@ def test_a_warm_up_that_predicts_nothing_is_fitted_again_and_said():
     # the chunk after the warm-up fitted again is predicted (half the spread or more before)
     e = result.info["prediction_errors"][6000:8000]
     assert np.sqrt(np.mean(e ** 2)) < 0.1 * np.std(train.y[6000:8000])
-
-
-def test_a_rest_whose_level_moved_is_not_taken_for_a_warm_up_that_predicts_nothing():
-    """A stage brought to rest after the warm-up, its sensor's zero moved there (as between
-    two records of measured stage A): the rest's chunks carry no excitation, their error is a
-    level; the warm-up is not fitted again (it was, in one call, before), and the excited
-    chunks after the rest are still checked."""
-    rng = np.random.default_rng(5)
-    stage = creep_stage()
-    x = noise(rng, 8000, 300.0)
-    u = np.r_[np.zeros(1000), x, np.full(6000, x[-1]), noise(rng, 6000, 300.0, x[-1], 2.0)]
-    y = stage.simulate(u)["y"] + 1e-3 * rng.standard_normal(len(u))
-    make = lambda: PIStageOnline(pi_thresholds(u, 20), fs=FS, warmup=2000)  # noqa: E731
-    first = make()
-    quiet(first.fit, Record(u[:4000], y[:4000], FS, name="the warm-up"))
-    y[9000:] += 2 * REWARM_RATIO * first._warm_rms  # the zero moved during the rest
-    est = make()
-    quiet(est.fit, Record(u, y, FS, name="noise, rest, noise"))
-    assert est._warm_rms == first._warm_rms  # the same warm-up
-    assert est.n_rewarms == 0
-    assert np.isfinite(est.theta).all()
 
 
 def test_samples_left_out_are_run_but_not_learned_from():

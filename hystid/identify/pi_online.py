@@ -85,6 +85,7 @@ bounded for a bounded input: a larger input cannot make the model diverge.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -494,7 +495,10 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         self._P = np.eye(npar) * self.P0
         self._st = np.zeros((_STATE_ROWS, n + 1))  # the branches, and the drift's clock
         self._open = np.empty((2, self._every))  # the open chunk: u, y (normalised) ..
-        self._n_open = 0  # .. its samples so far
+        self._n_open = 0  # .. its samples so far, and those at rest (_at_rest)
+        self._chunk_rest = 0
+        self._still = np.array([np.inf, 0.0])  # where the input stands, and for how long
+        self._band: float | None = None  # how far it may move and stand still (_at_rest)
         self._chunks: list[tuple[np.ndarray, np.ndarray]] = []  # the window's whole chunks
         self._wstate = np.zeros((_STATE_ROWS, n + 1))  # the branches at the window's start
         self._arrival: tuple[np.ndarray, np.ndarray] | None = None  # estimate, information
@@ -621,10 +625,15 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
 
     def _kernel(self, un, yn, yhat, err, kept) -> None:
         """The compiled recursion over normalised samples (estimate, covariance and branches
-        updated in place)."""
-        _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
-             self.structure.n_poly, un, yn, self._st, True, self._no_rows, yhat, err, kept,
-             self._nslope)
+        updated in place); the samples at rest (:meth:`_at_rest`) are run, not learned from."""
+        rest = self._at_rest(un)
+        edges = ((0, 1) if len(un) == 1 else
+                 (0, *(np.flatnonzero(rest[1:] != rest[:-1]) + 1).tolist(), len(un)))
+        for a, b in itertools.pairwise(edges):  # runs of samples that learn or not
+            _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
+                 self.structure.n_poly, un[a:b], yn[a:b], self._st, not rest[a],
+                 self._no_rows, yhat[a:b], err[a:b], kept[a:b] if len(kept) else kept,
+                 self._nslope)
 
     def _book(self, un, yn, yhat, err) -> bool:
         """The samples the recursion ran kept in the open chunk and fed to the running

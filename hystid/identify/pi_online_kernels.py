@@ -209,3 +209,17 @@ def _run(phi, P, s2, lam, max_step, r, npoly, u, y, st, learn, J, yhat, err, kep
                 _rpem_step(phi, P, psi, e, s2, lam, max_step, nslope, n, Pg, old)
         if track:
             kept[k, :] = phi
+
+
+@njit(cache=True)
+def still_mask(u, still, band, hold, out):
+    """Which samples of ``u`` find the stage at rest: the input has stayed within ``band`` of
+    an anchor for more than ``hold`` samples. ``still`` holds the anchor and the count so far
+    (updated in place, carried from call to call); ``out`` receives the mask."""
+    for k in range(u.shape[0]):
+        if abs(u[k] - still[0]) > band:
+            still[0] = u[k]
+            still[1] = 0.0
+        else:
+            still[1] += 1.0
+        out[k] = still[1] > hold

@@ -134,7 +134,7 @@ class WarmUp:
         u, y = un * self._su + (self._u0 or 0.0), yn * self._sy + self._y0
         self._rest = [tuple(row) for row in self._kept_rest]
         self._buffer = list(zip(u.tolist(), y.tolist(), strict=True))
-        self._chunks, self._n_open, self._job = [], 0, None
+        self._chunks, self._n_open, self._chunk_rest, self._job = [], 0, 0, None
         self.n_rewarms += 1
         self._warm_start()
 
@@ -170,6 +170,7 @@ class WarmUp:
                                                 offset=in_motion or bool(swing), drift=in_motion,
                                                 swing=swing)
         self._su, self._sy, self._rn = su, sy, self.thresholds / su
+        self._band = None  # the rest's band follows the thresholds' scale
         self._swing = swing / su
         self._to_record = _scale_weights(np.ones(n + 5), self.structure, sy, su)
         phi = stage_from_theta(fit.theta, n)
