@@ -101,7 +101,7 @@ from .pi_batch import (
     drift_note,
 )
 from .pi_online_arrival import ARRIVAL_DECAY, ArrivalAndDrift
-from .pi_online_horizon import MovingHorizon
+from .pi_online_horizon import REST_BAND, MovingHorizon
 from .pi_online_kernels import _STATE_ROWS, _run, _slope, _theta_rows
 from .pi_online_warmup import _REST_KEPT, WarmUp
 from .pi_stage_coordinates import (
@@ -593,7 +593,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         """Rest and warm-up samples from index ``i``; returns the next index."""
         if self._u0 is None:
             self._u0 = float(u[i])
-        tol = 1e-6 * max(float(self.thresholds[-1]), 1e-300)
+        tol = REST_BAND * max(float(self.thresholds[-1]), 1e-300)
         if self.excited_at is None and abs(u[i] - self._u0) <= tol:
             self._rest = (self._rest + [(float(u[i]), float(y[i]))])[-_REST_KEPT:]
         else:
@@ -627,7 +627,7 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         """The compiled recursion over normalised samples (estimate, covariance and branches
         updated in place); the samples at rest (:meth:`_at_rest`) are run, not learned from."""
         rest = self._at_rest(un)
-        edges = ((0, 1) if len(un) == 1 else
+        edges = ((0, 1) if len(un) == 1 else  # update(): no search for runs
                  (0, *(np.flatnonzero(rest[1:] != rest[:-1]) + 1).tolist(), len(un)))
         for a, b in itertools.pairwise(edges):  # runs of samples that learn or not
             _run(self._phi, self._P, 1.0, self.forgetting, self.max_step, self._rn,
@@ -663,8 +663,8 @@ class PIStageOnline(WarmUp, MovingHorizon, ArrivalAndDrift, Estimator):
         warm-up."""
         u, _, name = record_signals(record, self.fs)
         self.reset()
-        moved = np.flatnonzero(np.abs(u - u[0]) > 1e-6 * max(float(self.thresholds[-1]),
-                                                              1e-300))
+        moved = np.flatnonzero(np.abs(u - u[0]) > REST_BAND * max(float(self.thresholds[-1]),
+                                                                  1e-300))
         first = moved[0] if len(moved) else len(u)
         out = sum(max(0, min(b, len(u)) - max(a, first)) for a, b in self.left_out)
         if len(u) - first - out <= self.warmup:

@@ -46,9 +46,6 @@ class MovingHorizon:
     """The window and the re-solves of :class:`~hystid.identify.pi_online.PIStageOnline` (a
     mixin: the state is the identifier's)."""
 
-    _one_rest = np.ones(1, dtype=np.bool_)  # one sample's mask, at rest or not (read only)
-    _one_moving = np.zeros(1, dtype=np.bool_)
-
     def _keep(self) -> int:
         return max(1, self._span // self._every)
 
@@ -58,7 +55,7 @@ class MovingHorizon:
         re-solve is launched (one that moves nothing when the chunk found the stage at rest,
         :data:`REST_SHARE`)."""
         self._chunks.append((self._open[0].copy(), self._open[1].copy()))
-        at_rest = self._chunk_rest >= REST_SHARE * self._n_open
+        at_rest = self._chunk_at_rest()
         self._n_open, self._chunk_rest = 0, 0
         recursion = self._phi.copy()
         if self._job is not None:
@@ -71,19 +68,16 @@ class MovingHorizon:
         stage at rest (:data:`REST_HOLD`); counted in the open chunk."""
         if self._band is None:  # the leading rest's tolerance, normalised
             self._band = REST_BAND * max(float(self._rn[-1]), 1e-300)
-        if len(un) == 1:  # update(): the same rule without a compiled call
-            still, u = self._still, float(un[0])
-            if abs(u - still[0]) > self._band:
-                still[0], still[1] = u, 0.0
-            else:
-                still[1] += 1.0
-            rest = self._one_rest if still[1] > REST_HOLD else self._one_moving
-        else:
-            rest = np.empty(len(un), dtype=np.bool_)
-            still_mask(np.ascontiguousarray(un, dtype=float), self._still, self._band,
-                       REST_HOLD, rest)
+        rest = np.empty(len(un), dtype=np.bool_)
+        still_mask(np.ascontiguousarray(un, dtype=float), self._still, self._band, REST_HOLD,
+                   rest)
         self._chunk_rest += int(np.count_nonzero(rest))
         return rest
+
+    def _chunk_at_rest(self) -> bool:
+        """Whether the open chunk found the stage at rest: :data:`REST_SHARE` of its samples
+        or more (:meth:`_at_rest`)."""
+        return self._n_open > 0 and self._chunk_rest >= REST_SHARE * self._n_open
 
     def _simulate(self, phi: np.ndarray, st0: np.ndarray, u: np.ndarray,
                   y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -97,8 +97,13 @@ class WarmUp:
         prediction errors above :data:`REWARM_RATIO` times the warm-up fit's residual and
         above :data:`REWARM_SPREAD` of the output's spread over the chunk; checked only
         while every excited sample is still in the window (a warm-up can be fitted again),
-        and only on a chunk whose input moves at least one play besides the first
-        (:meth:`_chunk_at_rest`)."""
+        and not on a chunk that found the stage at rest
+        (:meth:`~hystid.identify.pi_online_horizon.MovingHorizon._chunk_at_rest`): its error
+        is a level, not a model that predicts nothing. Continued from measured stage A's
+        ``prbn_1`` onto ``prbn_2`` (1 s at rest, the sensor's zero moved by 35 nm), the rest's
+        first chunk was 37x the warm-up's residual and 26x the output's spread there, and the
+        warm-up was fitted again in one call of 0.56 s; an excited chunk that follows is still
+        checked."""
         if self._kept_rest is None or not self._chunk_n or self._chunk_at_rest():
             return False
         rms = math.sqrt(self._chunk_sq / self._chunk_n)
@@ -112,19 +117,6 @@ class WarmUp:
                 f"{rms * self._sy / max(self._warm_rms, 1e-300):.0f}x the warm-up fit's "
                 f"residual): the warm-up was fitted again on every excited sample so far")
         return bad
-
-    def _chunk_at_rest(self) -> bool:
-        """Whether the open chunk's input travels less than the smallest positive threshold:
-        a stage at rest (or dithering) there, whose output's spread is the sensor's noise. An
-        error over such a chunk is a level, not a model that predicts nothing: continued from
-        measured stage A's ``prbn_1`` onto ``prbn_2`` (1 s at rest, the sensor's zero moved by
-        35 nm), the rest's first chunk was 37x the warm-up's residual and 26x the output's
-        spread there, and the warm-up was fitted again in one call of 0.56 s; an excited chunk
-        that follows is still checked."""
-        un = self._open[0, :self._n_open]
-        un = un[np.isfinite(un)]
-        positive = self._rn[self._rn > 0]
-        return bool(un.size) and bool(positive.size) and float(np.ptp(un)) < float(positive.min())
 
     def _rewarm(self) -> None:
         """Fit the warm-up again on the rest kept and every excited sample so far (all still
