@@ -27,6 +27,7 @@ from scipy.signal import lfilter, lfiltic
 
 from .poly import roots_inside
 from .records import Record
+from .signals import kept_samples
 
 __all__ = ["BaselineComparison", "LinearModel", "StaticLine", "baseline_orders", "compare",
            "centring_input", "repeat_floor", "simulate_from_rest", "starts_in_motion"]
@@ -56,13 +57,15 @@ class StaticLine:
     offset: float
 
     @classmethod
-    def fit(cls, record: Record) -> StaticLine:
+    def fit(cls, record: Record, left_out: Sequence[tuple[int, int]] = ()) -> StaticLine:
         """Least-squares line through the record's ``(u, y)`` points.
 
         Parameters
         ----------
         record : Record
             Identification record.
+        left_out : sequence of (int, int)
+            Spans ``[first, stop)`` of samples left out of the fit.
 
         Returns
         -------
@@ -70,10 +73,12 @@ class StaticLine:
         """
         # about the input's mean and in its spread: with u and y near 1e12 an unscaled
         # solve dropped the column of ones (an offset of -4e-16 where it is -7.2e11)
-        mu = float(np.mean(record.u))
-        su = float(np.std(record.u)) or 1.0
-        A = np.column_stack([(record.u - mu) / su, np.ones(record.n)])
-        (a, b), *_ = np.linalg.lstsq(A, record.y, rcond=None)
+        kept = kept_samples(record.n, left_out)
+        u, y = record.u[kept], record.y[kept]
+        mu = float(np.mean(u))
+        su = float(np.std(u)) or 1.0
+        A = np.column_stack([(u - mu) / su, np.ones(len(u))])
+        (a, b), *_ = np.linalg.lstsq(A, y, rcond=None)
         k = a / su
         return cls(float(k), float(b - k * mu))
 
@@ -115,7 +120,8 @@ class LinearModel:
     offset: float
 
     @classmethod
-    def fit(cls, record: Record, na: int, nb: int, q: int, max_nfev: int = 200) -> LinearModel:
+    def fit(cls, record: Record, na: int, nb: int, q: int, max_nfev: int = 200,
+            left_out: Sequence[tuple[int, int]] = ()) -> LinearModel:
         """Output-error fit from an ARX start.
 
         Parameters
@@ -128,18 +134,23 @@ class LinearModel:
             Delay in samples.
         max_nfev : int
             Evaluations of the output-error polish.
+        left_out : sequence of (int, int)
+            Spans ``[first, stop)`` of samples simulated but left out of the fit.
 
         Returns
         -------
         LinearModel
         """
+        kept = kept_samples(record.n, left_out)
         u0 = float(record.u[0])
         v, y = record.u - u0, record.y
         scale_v = max(float(np.std(v)), 1e-300)
-        scale_y = max(float(np.std(y)), 1e-300)
+        scale_y = max(float(np.std(y[kept])), 1e-300)
         vn, yn = v / scale_v, (y - y[0]) / scale_y
         lag = max(na, q + nb, 1)
         rows = np.arange(lag, len(yn))
+        for i in range(lag + 1):  # rows whose output and past outputs were all kept
+            rows = rows[kept[rows - i]]
         phi = ([-yn[rows - i] for i in range(1, na + 1)]
                + [vn[rows - q - j] for j in range(nb + 1)] + [np.ones(len(rows))])
         coef = np.linalg.lstsq(np.column_stack(phi), yn[rows], rcond=None)[0]
@@ -153,9 +164,9 @@ class LinearModel:
         def residual(p):
             # a trial whose filter runs away (not finite, or beyond any scale of the
             # normalised output) costs the same large constant: its sum of squares stays finite
-            r = simulate(p) - yn
+            r = (simulate(p) - yn)[kept]
             ok = np.all(np.isfinite(r)) and np.max(np.abs(r), initial=0.0) < _RUNAWAY
-            return r if ok else np.full_like(yn, _RUNAWAY)
+            return r if ok else np.full(len(r), _RUNAWAY)
 
         p0 = np.r_[a[1:], b, c]
         cost0 = np.sum(residual(p0) ** 2)

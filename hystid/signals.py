@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["finite_number", "finite_signal"]
+__all__ = ["finite_number", "finite_signal", "kept_samples"]
 
 
 def finite_signal(
@@ -119,3 +119,40 @@ def finite_number(value: Any, argname: str, *, error: Callable[..., Exception] =
     if not math.isfinite(v):
         raise error(f"{argname}: expected a finite number, got {value!r}")
     return v
+
+
+def kept_samples(n: int, left_out: Sequence[tuple[int, int]], argname: str = "left_out",
+                 ) -> np.ndarray:
+    """Which of ``n`` samples a fit learns from when the spans ``left_out`` are left out.
+
+    Parameters
+    ----------
+    n : int
+        Number of samples.
+    left_out : sequence of (int, int)
+        Spans ``[first, stop)`` of sample indices, ``0 <= first < stop <= n``.
+    argname : str
+        Name of the option in messages.
+
+    Returns
+    -------
+    ndarray of bool
+        ``True`` where a sample is kept.
+
+    Raises
+    ------
+    ValueError
+        Naming ``argname`` and the span, for a span that is not two integers inside the samples.
+    """
+    kept = np.ones(n, bool)
+    for span in left_out:
+        try:
+            first, stop = (int(v) for v in span)
+            whole = all(int(v) == v for v in span)
+        except (TypeError, ValueError):
+            whole = False
+        if not whole or not 0 <= first < stop <= n:
+            raise ValueError(f"{argname}: expected spans (first, stop) of sample indices with "
+                             f"0 <= first < stop <= {n}, got {span!r}")
+        kept[first:stop] = False
+    return kept

@@ -504,7 +504,7 @@ def _identify(args: argparse.Namespace) -> int:
 
 def _print_choice(selection: dict | None, unit: str) -> None:
     """The member choice of ``--model auto``: every candidate and baseline on the held-out
-    end of the identification record."""
+    block of the identification record."""
     if not selection:
         return
     rows = [[c["member"], str(c["n_params"]), f"{c['heldout_rms']:.4g} {unit}",
@@ -512,8 +512,8 @@ def _print_choice(selection: dict | None, unit: str) -> None:
             for c in selection["candidates"]]
     rows += [[b.replace("_", " "), "", f"{v:.4g} {unit}", "baseline"]
              for b, v in selection["baselines"].items()]
-    print(f"\nmodel choice (held-out samples {selection['holdout_from']}.."
-          f"{selection['holdout_to'] - 1} of the identification record; a richer member must "
+    print(f"\nmodel choice (samples {selection['holdout_from']}..{selection['holdout_to'] - 1} "
+          "of the identification record held out, fitted without them; a richer member must "
           f"be {100 * selection['margin']:.0f} % better):")
     print(table(rows, ["member", "parameters", "held-out RMS", ""]))
     for c in selection["candidates"]:

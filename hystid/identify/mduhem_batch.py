@@ -15,7 +15,7 @@ in ``log alpha_j`` bounded by condition (8) over the training envelope.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -353,6 +353,7 @@ def fit_mduhem_output_error(
     theta0: np.ndarray | None = None,
     offset: bool = True,
     skip: int | None = None,
+    left_out: Sequence[tuple[int, int]] = (),
     max_nfev: int = 100,
     tol: float = 1e-8,
     name: str = "identified multi-Duhem sandwich",
@@ -394,6 +395,9 @@ def fit_mduhem_output_error(
     skip : int, optional
         Leading samples simulated but left out of the cost; by default none for a record that
         starts at rest, else until the input has swept its range.
+    left_out : sequence of (int, int)
+        Spans ``[first, stop)`` of samples simulated but left out of the cost (the model
+        choice's held-out block).
     max_nfev : int
         Evaluations of each polish.
     tol : float
@@ -428,7 +432,7 @@ def fit_mduhem_output_error(
                          f"multi-Duhem fit (expected at least {need}: {SAMPLES_PER_PARAMETER} "
                          f"per parameter)")
     say = say or (lambda line: None)
-    prep = prepare(record, skip=skip)
+    prep = prepare(record, skip=skip, left_out=left_out)
     if not offset:
         prep.y_ref, prep.yn = 0.0, record.y / prep.y_scale
     su, sy = prep.u_scale, prep.y_scale

@@ -8,7 +8,7 @@ places the model back in the record's units.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -536,6 +536,7 @@ def fit_pi_output_error(
     offset: bool = True,
     drift: bool | None = None,
     skip: int | None = None,
+    left_out: Sequence[tuple[int, int]] = (),
     max_nfev: int = 200,
     tol: float = 1e-8,
     name: str = "identified PI sandwich",
@@ -594,6 +595,9 @@ def fit_pi_output_error(
     skip : int, optional
         Leading samples simulated but left out of the cost; by default none for a record that
         starts at rest, else until the input has swept its range.
+    left_out : sequence of (int, int)
+        Spans ``[first, stop)`` of samples simulated but left out of the cost (the model
+        choice's held-out block).
     max_nfev : int
         Maximum number of residual evaluations.
     tol : float
@@ -624,7 +628,7 @@ def fit_pi_output_error(
         raise ValueError("drift: a drift is estimated beside the offset; pass offset=True or "
                          "drift=False")
     held = _given_swing(rest_swing)
-    prep = prepare(record, skip=skip)
+    prep = prepare(record, skip=skip, left_out=left_out)
     if held and not prep.at_rest:
         prep.notes = list(prep.notes) + [
             f"rest_swing: the swing given ({held:.4g}) is the state at a rest; record "

@@ -28,6 +28,7 @@ the output's level at rest.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,6 +37,7 @@ from ..errors import IdentificationDataError
 from ..operating import Envelope
 from ..records import Record
 from ..records_checks import burst_spans, one_rate_note, record_warnings
+from ..signals import kept_samples
 
 __all__ = ["IdentificationDataError", "Prepared", "bad_samples", "burn_in", "check_excitation",
            "held_out_from", "input_glitches", "prepare", "rest_level", "scales",
@@ -88,6 +90,9 @@ class Prepared:
         The input envelope over the fitted samples (record units).
     notes : list of str
         What was found and done (outliers, saturation, not at rest, a wrapped last sample).
+    held : ndarray of bool or None
+        Samples left out at the caller's request (``left_out``: a held-out block), which no
+        step of a fit may read; None when there are none.
     """
 
     record: Record
@@ -102,6 +107,7 @@ class Prepared:
     skip: int
     envelope: Envelope
     notes: list[str] = field(default_factory=list)
+    held: np.ndarray | None = None
 
     @property
     def fitted(self) -> slice:
@@ -517,7 +523,8 @@ def _check_scales(record: Record, u_scale: float) -> None:
             "scale with its powers; give the record in other units)")
 
 
-def prepare(record: Record, *, skip: int | None = None) -> Prepared:
+def prepare(record: Record, *, skip: int | None = None,
+            left_out: Sequence[tuple[int, int]] = ()) -> Prepared:
     """Run the preparation steps of this module on a record.
 
     Parameters
@@ -526,6 +533,9 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
         The record as it comes.
     skip : int, optional
         Leading samples to leave out of the cost; by default :func:`burn_in`'s choice.
+    left_out : sequence of (int, int)
+        Spans ``[first, stop)`` of samples simulated but left out of the cost (a block held
+        out to score the fit on, as the model choice does: :mod:`hystid.identify.members`).
 
     Returns
     -------
@@ -540,7 +550,8 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
     check_excitation(record)
     u, y = record.u, record.y
     u_rest, at_rest, n_lead = rest_level(u)
-    u_scale, y_med, y_scale = scales(u, y, u_rest)
+    kept = kept_samples(len(u), left_out)
+    u_scale, y_med, y_scale = scales(u, y[kept], u_rest)
     _check_scales(record, u_scale)
     steps = _input_steps(u)
     jumps = [(j, n) for j, n, size in steps if size > JUMP_SLEWS]
@@ -583,7 +594,9 @@ def prepare(record: Record, *, skip: int | None = None) -> Prepared:
         raise IdentificationDataError(
             f"record {record.name!r}: only {int(weight.sum())} of {len(u)} samples are usable "
             f"({'; '.join(notes)}){swapped}")
+    weight &= kept
     prep = Prepared(record, u_rest, u_scale, y_ref, y_scale, (u - u_rest) / u_scale,
                     (y - y_ref) / y_scale, weight, at_rest, skip, Envelope.of(u[:1]), notes)
     prep.envelope = Envelope.of(u[prep.fitted], from_rest=at_rest)
+    prep.held = None if kept.all() else ~kept
     return prep
