@@ -56,6 +56,15 @@ def test_the_block_sits_in_the_middle_of_the_excitation(look_alike):
     assert len(scored) == stop - first and scored.all()
 
 
+def test_a_record_in_motion_keeps_its_end_held_out():
+    from hystid.testing import crop_start
+
+    rec = crop_start(stage_a_like(seed=3), 1.2)  # cut mid-motion, after the rest
+    first, stop, _ = _block(rec, HOLDOUT)
+    end = quiet(prepare, rec).fitted.stop
+    assert stop == end and first == held_out_from(rec.u, HOLDOUT, end)
+
+
 @pytest.mark.parametrize("name", ["duhem", "pi-stage"])
 def test_a_fit_does_not_learn_from_the_samples_left_out(look_alike, name):
     rec = look_alike

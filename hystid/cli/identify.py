@@ -2,7 +2,7 @@
 
 ``hystid identify REC [--val VAL] [--model auto|duhem|pi|pi-stage] [--method M] [--out DIR]
 [--history H.csv] [--json] ...`` fits the member of the model family asked for (by default the
-simplest one that no richer member beats on the record's held-out end), validates it on
+simplest one that no richer member beats on a block held out in the record), validates it on
 ``--val`` or on the held-out end of the record against a static line and a linear model, and
 prints the parameters and figures (or, with ``--json``, one JSON object). ``--out`` receives
 ``report.json``, ``model.json`` and the figures, all of them or none.
@@ -84,7 +84,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--units", type=units_arg, metavar="u=V,y=um", help=UNITS_HELP)
     p.add_argument("--model", choices=("auto", *MODEL_NAMES), default=None,
                    help="member of the model family (default: auto, the simplest member that "
-                   "no richer one beats on the record's held-out end; with --method online "
+                   "no richer one beats on a block held out in the record; with --method online "
                    "chosen as for the batch fit, then identified on-line; duhem when "
                    "--structure, --history or --method eria/ekf is given)")
     p.add_argument("--method", choices=("eria", "online", "ekf", "batch"), default=None,

@@ -309,7 +309,7 @@ def _online_auto(record: Record, progress: Callable[[int, int], None] | None,
                  settings: dict) -> IdentificationResult:
     """``model="auto"`` on-line: the member chosen as for the batch fit
     (:func:`~hystid.identify.members.select_member` on the record: the structure is chosen
-    off-line, on the record's held-out end), then identified on-line over the whole record
+    off-line, on the record's held-out block), then identified on-line over the whole record
     (its parameters estimated sample by sample from the record's start).
 
     It chose on the record's first half before. On measured stage A trained on a triangle

@@ -1,12 +1,13 @@
 """Whether a record determines its model: candidates that agree on it, compared elsewhere.
 
-The member choice (:func:`hystid.identify.members.select_member`) scores every candidate on the
-held-out end of the record, which repeats the record's own pattern of reversals. Two candidates
+The member choice (:func:`hystid.identify.members.select_member`) scores every candidate on a
+block held out in the record, which repeats the record's own pattern of reversals. Two candidates
 can agree there and differ widely on an input with other reversals inside the same range: the
 record then does not determine the model, whichever is chosen. Measured on stage A
 (``../shared/data/real/stageA/``, ``python benchmarks/bench_stage_a.py --train tri50_1``):
-identified on a triangle record the Duhem sandwich is 62 nm off that record's held-out end and
-``pi-stage`` 70, and off the PRBN records 453-455 nm and 75-76.
+identified on a triangle record the Duhem sandwich was 62 nm off that record's held-out end
+(the choice's part until 2026-11) and ``pi-stage`` 70, and off the PRBN records 453-455 nm and
+75-76.
 
 :func:`probe_input` draws such an input (random levels inside the record's input range, each
 reached by a ramp and held, seeded); :func:`disagreement` is the RMS difference of two models'
