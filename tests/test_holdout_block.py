@@ -9,11 +9,11 @@ their end (the end held out scored extrapolation there).
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import quiet
 
 from hystid.baselines import LinearModel, StaticLine, compare
 from hystid.identify import identify
@@ -23,12 +23,6 @@ from hystid.records import load_record
 from hystid.testing import stage_a_like
 
 STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
-
-
-def quiet(fn, *args, **kwargs):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return fn(*args, **kwargs)
 
 
 def spoiled(rec, first, stop):

@@ -19,10 +19,10 @@ forms. What went wrong before, each measured on the code before the change:
   before the choice, and the slow-branch start's weights fit its blocks.
 """
 
-import warnings
 
 import numpy as np
 import pytest
+from conftest import quiet
 from scipy import signal
 
 from hystid.baselines import compare
@@ -69,12 +69,6 @@ def creep_records(seconds: float, seed: int = 1) -> tuple[Record, list[Record]]:
     held = [record(stage, np.r_[np.zeros(1000), np.linspace(0.0, tri[0], 200), tri], rng, "tri"),
             record(stage, np.r_[np.zeros(1000), noise(rng, n, 100.0)], rng, "slow noise")]
     return train, held
-
-
-def quiet(fn, *args, **kwargs):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return fn(*args, **kwargs)
 
 
 def test_a_creep_slower_than_the_warm_up_is_identified_on_line_as_in_the_batch_fit():

@@ -8,11 +8,11 @@ mode, not the model's form) and, where present, measured stage A.
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import quiet
 
 from hystid.baselines import compare
 from hystid.identify.members import member
@@ -20,12 +20,6 @@ from hystid.records import Record, load_record
 from hystid.testing import stage_a_like
 
 STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
-
-
-def quiet(fn, *args, **kwargs):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return fn(*args, **kwargs)
 
 
 def test_a_long_rest_after_the_excitation_leaves_the_on_line_model_as_good():

@@ -8,11 +8,11 @@ not a member's form) and, where present, measured stage A.
 from __future__ import annotations
 
 import threading
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import quiet
 
 from hystid.baselines import compare
 from hystid.identify import pi_batch
@@ -22,12 +22,6 @@ from hystid.testing import stage_a_like
 from hystid.threads import run_side_by_side, worker_count
 
 STAGE_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "stageA"
-
-
-def quiet(fn, *args, **kwargs):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return fn(*args, **kwargs)
 
 
 def test_worker_count_takes_whole_numbers_and_names_the_option():

@@ -139,10 +139,12 @@ def linear_start(
     if len(y) <= lag + na + nb + 2:
         return None
     width = na + nb + 1 + int(with_offset)
-    seen = np.ones(len(y), bool) if observed is None else np.asarray(observed, bool)
-    used = seen.copy()
-    for i in range(1, na + 1):  # the row of y(k) regresses on y(k - 1) .. y(k - na)
-        used[i:] &= seen[:-i]
+    used = None
+    if observed is not None:  # the row of y(k) regresses on y(k - 1) .. y(k - na)
+        seen = np.asarray(observed, bool)
+        used = seen.copy()
+        for i in range(1, na + 1):
+            used[i:] &= seen[:-i]
     qr_rows = _RunningQR(width + 1)  # [phi | y] reduced block by block: memory of one block
     for a in range(lag, len(y), SENS_WINDOW):
         b = min(len(y), a + SENS_WINDOW)
@@ -154,7 +156,8 @@ def linear_start(
         if with_offset:
             phi[:, width - 1] = 1.0
         phi[:, width] = y[a:b]
-        phi[~used[a:b]] = 0.0  # a zero row adds nothing to the triangle
+        if used is not None:
+            phi[~used[a:b]] = 0.0  # a zero row adds nothing to the triangle
     tri = qr_rows.triangle()
     coef = np.linalg.lstsq(tri[:width, :width], tri[:width, width], rcond=None)[0]
     constant = coef[-1] if with_offset else 0.0
