@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextvars
 import os
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
@@ -17,7 +18,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-__all__ = ["MAX_WORKERS", "side_by_side", "run_side_by_side", "worker_count"]
+__all__ = ["MAX_WORKERS", "Cancelled", "cancellable", "check_cancelled", "side_by_side",
+           "run_side_by_side", "worker_count"]
 
 #: Most threads taken by default. A round of refits or a model choice holds a handful of fits;
 #: more threads than that gain little.
@@ -102,3 +104,56 @@ def run_side_by_side(calls: Sequence[Callable[[], T]], workers: int | None = Non
         # each call sees the caller's context variables (a fit inside another's knows it is)
         futures = [jobs.submit(contextvars.copy_context().run, call) for call in calls]
         return [f.result() for f in futures]
+
+
+class Cancelled(BaseException):
+    """Raised inside a fit started by :func:`cancellable` once its event is set; a
+    ``BaseException``, so that no ``except Exception`` on the way swallows it."""
+
+
+#: The event that cancels the fits of the current context (set by :func:`cancellable`).
+_CANCEL: contextvars.ContextVar[threading.Event | None] = contextvars.ContextVar(
+    "_CANCEL", default=None)
+
+
+def check_cancelled() -> None:
+    """Raise :class:`Cancelled` when the current context's fit was cancelled; a fit's
+    evaluation calls it, so a cancelled fit ends within one evaluation.
+
+    Raises
+    ------
+    Cancelled
+        When the event given to :func:`cancellable` is set.
+    """
+    event = _CANCEL.get()
+    if event is not None and event.is_set():
+        raise Cancelled
+
+
+def cancellable(call: Callable[[], T], event: threading.Event) -> Callable[[], T | None]:
+    """``call`` made to stop once ``event`` is set: it returns None then.
+
+    A fit started ahead of the decision that needs it (the model choice's whole-record fit of a
+    member that may not be chosen) runs this way, and is cancelled when it is not needed.
+
+    Parameters
+    ----------
+    call : callable
+        A function of no argument whose work calls :func:`check_cancelled`.
+    event : threading.Event
+        Set to cancel.
+
+    Returns
+    -------
+    callable
+        Of no argument: ``call()``, or None when cancelled.
+    """
+    def run() -> T | None:
+        token = _CANCEL.set(event)
+        try:
+            return call()
+        except Cancelled:
+            return None
+        finally:
+            _CANCEL.reset(token)
+    return run

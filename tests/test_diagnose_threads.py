@@ -145,3 +145,49 @@ def test_progress_is_called_from_the_calling_thread_only():
     assert seen == {threading.get_ident()}
     assert any("own drift" in line for line in lines)
     assert any("refitting" in line for line in lines)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_members_start_beside_the_nominal_fit_when_there_are_threads_to_spare(workers):
+    """The member fits do not depend on the nominal model: on two threads they start before
+    the nominal fit, which runs in the calling thread; on one they queue behind the first
+    round's refits. The diagnosis is the same (``test_one_thread_two_or_four...``)."""
+    train, val = _records(None, None, None, seed=4)
+    lines: list[str] = []
+    diagnose(train, val, members=("pi-stage",), workers=workers, progress=lines.append)
+    member = next(i for i, line in enumerate(lines) if "fitting the pi-stage member" in line)
+    nominal = next(i for i, line in enumerate(lines) if "identifying the nominal" in line)
+    assert (member < nominal) == (workers > 1)
+
+
+def test_an_error_in_the_nominal_fit_does_not_wait_for_the_members(monkeypatch):
+    """The nominal fit fails while a member is fitted beside it: the member's fit is cancelled
+    at its next evaluation and the error reaches the caller (not after the member's fit)."""
+    import threading
+
+    import hystid.diagnose.diagnosis as diagnosis
+    from hystid.threads import Cancelled, check_cancelled
+
+    started, ended = threading.Event(), []
+
+    def crawling(name, record):
+        started.set()
+        try:
+            for _ in range(30_000):  # 60 s unless cancelled
+                check_cancelled()
+                threading.Event().wait(0.002)
+        except Cancelled:
+            ended.append("cancelled")
+            raise
+        ended.append("ran to its end")
+
+    def failing(*args, **kwargs):
+        started.wait(30)
+        raise RuntimeError("nominal fit broke")
+
+    monkeypatch.setattr(diagnosis, "fit_member", crawling)
+    monkeypatch.setattr(diagnosis, "_identify", failing)
+    train, val = _records(None, None, None, seed=4)
+    with pytest.raises(RuntimeError, match="nominal fit broke"):
+        diagnose(train, val, members=("pi-stage",), workers=2, progress=False)
+    assert ended == ["cancelled"]

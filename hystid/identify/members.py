@@ -31,10 +31,12 @@ from its fit without the block.
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from contextvars import ContextVar
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextvars import ContextVar, copy_context
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,7 +47,7 @@ from ..mduhem import MultiDuhemStructure
 from ..model import Structure
 from ..pi import PIStructure
 from ..records import Record
-from ..threads import run_side_by_side
+from ..threads import cancellable, run_side_by_side, side_by_side, worker_count
 from .result import IdentificationResult
 
 __all__ = ["AUTO_CANDIDATES", "MEMBERS", "Member", "choice_shortfall", "member", "select_member"]
@@ -414,7 +416,8 @@ def _heldout_rms(model: Any, record: Record, k: int, stop: int, scored: np.ndarr
 
 
 def _whole_fit(name: str, record: Record, block_fit: IdentificationResult,
-               settings: dict, workers: int | None = None) -> IdentificationResult:
+               settings: dict, workers: int | None = None, ahead: _AheadFits | None = None,
+               ) -> IdentificationResult:
     """A member fitted on the whole record; a PI member twice, started from its fit without the
     held-out block and from its own starts, keeping the fit with the lower residual (the same
     cost on the same samples).
@@ -424,24 +427,76 @@ def _whole_fit(name: str, record: Record, block_fit: IdentificationResult,
     of its excitation (the choice's part until 2026-11)
     put ``pi-stage``'s slow pole at 0.9993 or 0.9964 instead of 0.99987, and the whole fit
     from there left 51 or 50 nm of residual where a fit from the member's own starts leaves
-    26-27 (73-107 nm held out on the other five records against 25-36). The two fits run side
-    by side in ``workers`` threads (:func:`~hystid.threads.run_side_by_side`).
+    26-27 (73-107 nm held out on the other five records against 25-36). The fit from its own
+    starts is taken from ``ahead`` when it was started there (:class:`_AheadFits`); else the
+    two fits run side by side in ``workers`` threads (:func:`~hystid.threads.run_side_by_side`).
     """
+    own = ahead.result(name) if ahead is not None else None
     if MEMBERS[name].kind != "pi":
-        return MEMBERS[name].fit(record, **settings)
-    fits = run_side_by_side([
-        lambda: MEMBERS[name].fit(record, **{"theta0": block_fit.model.theta,
-                                             "max_nfev": REFIT_NFEV, **settings}),
-        lambda: MEMBERS[name].fit(record, **settings)], workers, "hystid-choice")
+        fit = own.result() if own is not None else None
+        return fit if fit is not None else MEMBERS[name].fit(record, **settings)
+    def from_block() -> IdentificationResult:
+        return MEMBERS[name].fit(record, **{"theta0": block_fit.model.theta,
+                                            "max_nfev": REFIT_NFEV, **settings})
+    if own is not None:
+        fits = [from_block(), own.result()]
+        if fits[1] is None:  # cancelled after all
+            fits[1] = MEMBERS[name].fit(record, **settings)
+    else:
+        fits = run_side_by_side([from_block, lambda: MEMBERS[name].fit(record, **settings)],
+                                workers, "hystid-choice")
     return min(fits, key=lambda r: r.info["rms_residual"])
 
 
+class _AheadFits:
+    """The whole-record fits of a choice's PI candidates from their own starts, started in the
+    choice's pool behind its block fits, before the choice is made: such a fit does not depend
+    on the block, and on two cores it runs while the block fits finish instead of after them
+    (on stage A's ``sine50_1`` the choice took 3.5x the Duhem fit's time, ``pi-stage``'s two
+    whole-record fits side by side half of it). The candidates not chosen are cancelled
+    (:func:`~hystid.threads.cancellable`); the fits and so the model are the same as without.
+
+    Parameters
+    ----------
+    jobs : ThreadPoolExecutor
+        The choice's pool.
+    members : list of Member
+        The candidates; the PI ones are started.
+    record : Record
+        The record.
+    settings : dict
+        The batch fits' settings.
+    """
+
+    def __init__(self, jobs: ThreadPoolExecutor, members: list[Member], record: Record,
+                 settings: dict) -> None:
+        self.events: dict[str, threading.Event] = {}
+        self.futures: dict[str, Future] = {}
+        for m in members:
+            if m.kind == "pi":
+                self.events[m.name] = event = threading.Event()
+                call = cancellable(lambda m=m: m.fit(record, **settings), event)
+                self.futures[m.name] = jobs.submit(copy_context().run, call)
+
+    def keep_only(self, name: str | None) -> None:
+        """Cancel every fit but ``name``'s (all of them with None)."""
+        for other, event in self.events.items():
+            if other != name:
+                event.set()
+
+    def result(self, name: str) -> Future | None:
+        """The future of ``name``'s fit, unless it was not started or was cancelled."""
+        event = self.events.get(name)
+        return None if event is None or event.is_set() else self.futures[name]
+
+
 def _block_fits(members: list[Member], record: Record, block: tuple[int, int], settings: dict,
-                progress: Callable[[int, int], None] | None, workers: int | None,
-                ) -> list[Any]:
+                progress: Callable[[int, int], None] | None, jobs: ThreadPoolExecutor,
+                ) -> list[Future]:
     """Each candidate fitted on the record with the held-out ``block`` left out of its cost,
-    with its own seconds, and last the linear baseline (third order) fitted alike, side by side
-    in threads (:func:`~hystid.threads.run_side_by_side`)."""
+    with its own seconds, and last the linear baseline (third order) fitted alike, submitted
+    to ``jobs`` (each in a copy of the caller's context, as
+    :func:`~hystid.threads.run_side_by_side` runs them)."""
     from ..baselines import LinearModel
 
     left_out = [*settings.get("left_out", ()), block]
@@ -455,15 +510,15 @@ def _block_fits(members: list[Member], record: Record, block: tuple[int, int], s
     for m in members:
         _say(progress, f"model choice: fitting {m.name} with samples {block[0]}..{block[1] - 1} "
              "held out")
-    return run_side_by_side([*(fit(m) for m in members),
-                             lambda: LinearModel.fit(record, 3, 3, 1, left_out=left_out)],
-                            workers, "hystid-choice")
+    return [jobs.submit(copy_context().run, call)
+            for call in (*(fit(m) for m in members),
+                         lambda: LinearModel.fit(record, 3, 3, 1, left_out=left_out))]
 
 
 def _rate_checked(record: Record, name: str, result: IdentificationResult, chosen: dict,
                   eligible: list[dict], fits: dict, settings: dict,
                   progress: Callable[[int, int], None] | None, workers: int | None = None,
-                  ) -> tuple[str, IdentificationResult, dict]:
+                  ahead: _AheadFits | None = None) -> tuple[str, IdentificationResult, dict]:
     """On a record at one rate: when the chosen member's whole-record fit moves with the rate
     (its fit without the block did not), the next eligible candidate by held-out RMS whose
     whole-record fit does not, if any; the chosen row records its whole fit's figure."""
@@ -477,7 +532,7 @@ def _rate_checked(record: Record, name: str, result: IdentificationResult, chose
             continue
         _say(progress, f"model choice: {name} fitted on the whole record moves with the rate "
              f"({chosen['rate_dependence_whole']:.2g}); trying {r['member']}")
-        other = _whole_fit(r["member"], record, fits[r["member"]], settings, workers)
+        other = _whole_fit(r["member"], record, fits[r["member"]], settings, workers, ahead)
         r["rate_dependence_whole"] = rate_dependence(other.model, record.u, record.y)
         if r["rate_dependence_whole"] <= RATE_LIMIT:
             chosen["left_out"] = (f"fitted on the whole record, its output moves by "
@@ -557,6 +612,30 @@ def _undetermined(record: Record, chosen: dict, rows: list[dict], fits: dict) ->
             "reversals (PRBN)")
 
 
+def _scored(members: list[Member], block_fits: list[tuple[IdentificationResult, float]],
+            linear: Any, record: Record, block: tuple[int, int, np.ndarray],
+            progress: Callable[[int, int], None] | None,
+            ) -> tuple[list[dict], dict[str, IdentificationResult], dict[str, float]]:
+    """The choice's table: a row per candidate with its held-out RMS on the block's scored
+    samples, the fits by name, and the static line's and the linear model's held-out RMS."""
+    from ..baselines import StaticLine
+
+    k, stop, scored = block
+    rows, fits = [], {}
+    for m, (fit, seconds) in zip(members, block_fits, strict=True):
+        fits[m.name] = fit
+        rows.append({"member": m.name, "what": m.what, "n_params": m.n_params,
+                     "heldout_rms": _heldout_rms(fit.model, record, k, stop, scored),
+                     "seconds": seconds})
+        _say(progress, f"model choice: {m.name} held-out RMS {rows[-1]['heldout_rms']:.4g} "
+             f"{record.units.get('y', '')} on samples {k}..{stop - 1}")
+    y = record.y[k:stop][scored]
+    line = StaticLine.fit(record, left_out=[(k, stop)])
+    baselines = {"static_line": line.predict(record.u)[k:stop][scored],
+                 "linear": linear.predict(record.u)[k:stop][scored]}
+    return rows, fits, {b: float(np.sqrt(np.mean((p - y) ** 2))) for b, p in baselines.items()}
+
+
 @one_blas_thread
 def select_member(
     record: Record,
@@ -583,7 +662,9 @@ def select_member(
     4. keep the simplest candidate (fewest parameters) whose held-out RMS is within
        ``1 + margin`` of the best;
     5. fit it on the whole record (a PI member from its fit without the block and from its
-       own starts, the lower residual kept: :func:`_whole_fit`);
+       own starts, the lower residual kept: :func:`_whole_fit`; on more than one thread the
+       fit from its own starts runs ahead of the choice, behind the block fits, and is
+       cancelled when another member is chosen: :class:`_AheadFits`);
     6. warn when a plausible candidate differs from the chosen one on an input with other
        reversals than the record's (:func:`_undetermined`).
 
@@ -615,7 +696,6 @@ def select_member(
         chosen one on other reversals by far more than the held-out block shows
         (:data:`DISAGREE`; :mod:`hystid.identify.agreement`).
     """
-    from ..baselines import StaticLine
 
     if not 0.0 < holdout <= 0.5:
         raise ValueError(f"holdout: expected a share in (0, 0.5], got {holdout!r}")
@@ -629,29 +709,29 @@ def select_member(
     if workers is None:
         workers = CHOICE_WORKERS.get()
     k, stop, scored = _block(record, holdout)
-    rows, fits = [], {}
-    *block_fits, linear = _block_fits(members, record, (k, stop), settings, progress, workers)
-    for m, (fit, seconds) in zip(members, block_fits, strict=True):
-        fits[m.name] = fit
-        rows.append({"member": m.name, "what": m.what, "n_params": m.n_params,
-                     "heldout_rms": _heldout_rms(fit.model, record, k, stop, scored),
-                     "seconds": seconds})
-        _say(progress, f"model choice: {m.name} held-out RMS {rows[-1]['heldout_rms']:.4g} "
-             f"{record.units.get('y', '')} on samples {k}..{stop - 1}")
-    y = record.y[k:stop][scored]
-    line = StaticLine.fit(record, left_out=[(k, stop)])
-    baselines = {"static_line": line.predict(record.u)[k:stop][scored],
-                 "linear": linear.predict(record.u)[k:stop][scored]}
-    baseline_rms = {b: float(np.sqrt(np.mean((p - y) ** 2))) for b, p in baselines.items()}
-    eligible = _rate_eligible(record, rows, fits, progress)
-    best = min(r["heldout_rms"] for r in eligible)
-    chosen = min((r for r in eligible if r["heldout_rms"] <= (1.0 + margin) * best),
-                 key=lambda r: r["n_params"])
-    for r in rows:
-        r["chosen"] = r is chosen
-    name = chosen["member"]
-    _say(progress, f"model choice: {name}; fitting it on the whole record")
-    result = _whole_fit(name, record, fits[name], settings, workers)
+    n_workers = worker_count(workers)
+    with side_by_side(n_workers, "hystid-choice") as jobs:
+        futures = _block_fits(members, record, (k, stop), settings, progress, jobs)
+        # on one thread a fit ahead would only delay the choice
+        ahead = _AheadFits(jobs, members, record, settings) if n_workers > 1 else None
+        try:
+            *block_fits, linear = (f.result() for f in futures)
+            rows, fits, baseline_rms = _scored(members, block_fits, linear, record,
+                                               (k, stop, scored), progress)
+            eligible = _rate_eligible(record, rows, fits, progress)
+            best = min(r["heldout_rms"] for r in eligible)
+            chosen = min((r for r in eligible if r["heldout_rms"] <= (1.0 + margin) * best),
+                         key=lambda r: r["n_params"])
+            for r in rows:
+                r["chosen"] = r is chosen
+            name = chosen["member"]
+            if ahead is not None:
+                ahead.keep_only(name)
+            _say(progress, f"model choice: {name}; fitting it on the whole record")
+            result = _whole_fit(name, record, fits[name], settings, workers, ahead)
+        finally:
+            if ahead is not None:
+                ahead.keep_only(None)  # on an error, no fit runs on behind it
     if "rate_dependence" in chosen:
         name, result, chosen = _rate_checked(record, name, result, chosen, eligible, fits,
                                              settings, progress, workers)

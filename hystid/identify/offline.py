@@ -20,6 +20,7 @@ from ..kernels import jacobian_block, sensitivities_into, simulate_into
 from ..model import DuhemSandwich, InitialCondition, Structure
 from ..operating import Envelope
 from ..records import Record
+from ..threads import check_cancelled
 from .constraints import Reflections, polynomial_groups
 from .prepare import Prepared, prepare
 from .result import IdentificationResult
@@ -420,6 +421,7 @@ class _OutputError:
 
     def evaluate(self, z: np.ndarray) -> dict[str, Any]:
         """The compressed residuals and Jacobian at ``z`` (cached for the last ``z``)."""
+        check_cancelled()  # a fit started ahead of a decision that no longer needs it
         if "z" in self._cache and np.array_equal(self._cache["z"], z):
             return self._cache
         theta, dtheta, y0, e0 = self._split(z)

@@ -17,6 +17,7 @@ from scipy.optimize import least_squares
 from ..model import Structure
 from ..pi import N_OPERATORS, PISandwich, PIStructure
 from ..records import Record
+from ..threads import check_cancelled
 from ..thresholds import RULES
 from .constraints import Reflections
 from .offline import SCREEN_NFEV, linear_start, triangle_of
@@ -429,6 +430,7 @@ class _PIOutputError:
     def evaluate(self, z: np.ndarray) -> dict[str, Any]:
         """Residuals and Jacobian at ``z``, folded (:func:`_folded`), and the data residuals
         (``data``, unfolded); cached for the last ``z``."""
+        check_cancelled()  # a fit started ahead of a decision that no longer needs it
         if self._cache.get("z") is None or not np.array_equal(self._cache["z"], z):
             theta, dtheta = self.rp.to_theta(z[: self.n])
             with np.errstate(over="ignore", invalid="ignore"):
