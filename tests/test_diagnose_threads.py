@@ -191,3 +191,16 @@ def test_an_error_in_the_nominal_fit_does_not_wait_for_the_members(monkeypatch):
     with pytest.raises(RuntimeError, match="nominal fit broke"):
         diagnose(train, val, members=("pi-stage",), workers=2, progress=False)
     assert ended == ["cancelled"]
+
+
+def test_the_nominal_fit_says_how_far_it_is():
+    """The nominal fit (a minute or more on a long measured record) is not silent: a line as
+    each of its starts is screened and polished, between the diagnosis' own lines."""
+    train, val = _records(None, None, None, seed=4)
+    lines: list[str] = []
+    diagnose(train, val, max_rounds=1, progress=lines.append)
+    first = next(i for i, line in enumerate(lines) if "identifying the nominal" in line)
+    last = next(i for i, line in enumerate(lines) if line.startswith("nominal model:"))
+    inside = lines[first + 1:last]
+    assert any(line.startswith("batch fit of") and "start 1 of" in line for line in inside)
+    assert any("polishing the best start" in line for line in inside)

@@ -374,7 +374,7 @@ def _nominal_stage(split: _Split, model: DuhemSandwich | None, structure: Struct
         say("identifying the nominal sandwich (hystid.identify, batch: offset and rest level "
             "estimated)")
         jumps: list[dict] = []
-        nominal = _identify(tr, structure, jumps)
+        nominal = _identify(tr, structure, jumps, say)
         if nominal.u_rest != 0.0:
             u_rest = nominal.u_rest
             tr, vds, t0s, held = split.at(u_rest)

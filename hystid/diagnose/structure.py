@@ -85,7 +85,8 @@ def head(data: FitData, n: int) -> FitData:
 
 
 def identify_nominal(tr: FitData, structure: Structure | None,
-                     jumps: list[dict] | None = None) -> DuhemSandwich:
+                     jumps: list[dict] | None = None,
+                     say: Callable[[str], None] | None = None) -> DuhemSandwich:
     """The nominal identification: :func:`hystid.identify.identify` (batch) on the train part,
     which places the model at the record's rest level and sensor offset.
 
@@ -101,6 +102,9 @@ def identify_nominal(tr: FitData, structure: Structure | None,
     jumps : list, optional
         Receives the step of the measured output the identification found and took off
         (:mod:`hystid.identify.output_jumps`), if any.
+    say : callable, optional
+        Gets a progress line as each of the fit's starts is screened and polished (the
+        fit's ``say``).
 
     Returns
     -------
@@ -108,7 +112,8 @@ def identify_nominal(tr: FitData, structure: Structure | None,
         The identified model, named ``nominal sandwich``.
     """
     rec = Record(tr.u, tr.y, tr.fs, name="train")
-    result = identify(rec, "batch", structure, model="duhem")
+    result = identify(rec, "batch", structure, model="duhem",
+                      **({"say": say} if say is not None else {}))
     if jumps is not None and "output_jump" in result.info:
         jumps.append(result.info["output_jump"])
     model = result.model
