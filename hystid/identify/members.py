@@ -431,13 +431,12 @@ def _whole_fit(name: str, record: Record, block_fit: IdentificationResult,
     starts is taken from ``ahead`` when it was started there (:class:`_AheadFits`); else the
     two fits run side by side in ``workers`` threads (:func:`~hystid.threads.run_side_by_side`).
     """
-    own = ahead.result(name) if ahead is not None else None
     if MEMBERS[name].kind != "pi":
-        fit = own.result() if own is not None else None
-        return fit if fit is not None else MEMBERS[name].fit(record, **settings)
+        return MEMBERS[name].fit(record, **settings)
     def from_block() -> IdentificationResult:
         return MEMBERS[name].fit(record, **{"theta0": block_fit.model.theta,
                                             "max_nfev": REFIT_NFEV, **settings})
+    own = ahead.result(name) if ahead is not None else None
     if own is not None:
         fits = [from_block(), own.result()]
         if fits[1] is None:  # cancelled after all
