@@ -15,6 +15,8 @@ on under their old names (``from hystid.records import RecordError`` still works
 * :class:`OptionError` (ValueError) -- a command-line value, :mod:`hystid.options`;
 * :class:`CommandError` (Exception) -- an input the ``hystid`` command refuses,
   :mod:`hystid.cli`;
+* :class:`Cancelled` (BaseException) -- a fit started ahead of a decision that no longer needs
+  it, stopped inside :func:`hystid.threads.cancellable` (it never reaches a caller);
 * :class:`AdmissibilityWarning` (RuntimeWarning) -- a model used outside what it was
   identified for;
 * :class:`CompensationWarning` (UserWarning) -- a compensator that had to approximate,
@@ -25,9 +27,9 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["AdmissibilityWarning", "CommandError", "CompensationWarning", "DiagnosisError",
-           "FleetError", "IdentificationDataError", "ModelFileError", "OptionError",
-           "OutputError", "RecordError"]
+__all__ = ["AdmissibilityWarning", "Cancelled", "CommandError", "CompensationWarning",
+           "DiagnosisError", "FleetError", "IdentificationDataError", "ModelFileError",
+           "OptionError", "OutputError", "RecordError"]
 
 
 # --------------------------------------------------------------------------- data
@@ -157,6 +159,13 @@ class CommandError(Exception):
     Raised by the steps of a command (:mod:`hystid.cli`) on an input it refuses, before its
     work where it can; the command's runner prints ``hystid COMMAND: error: MESSAGE`` and
     returns :data:`hystid.cli.support.EXIT_BAD_INPUT`.
+    """
+
+
+class Cancelled(BaseException):
+    """Raised inside a fit started by :func:`hystid.threads.cancellable` once its event is set
+    (:func:`hystid.threads.check_cancelled`), and caught there: the fit returns None. A
+    ``BaseException``, so that no ``except Exception`` on the way swallows it.
     """
 
 

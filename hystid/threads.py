@@ -18,6 +18,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from .errors import Cancelled
+
 __all__ = ["MAX_WORKERS", "Cancelled", "cancellable", "check_cancelled", "side_by_side",
            "run_side_by_side", "worker_count"]
 
@@ -104,11 +106,6 @@ def run_side_by_side(calls: Sequence[Callable[[], T]], workers: int | None = Non
         # each call sees the caller's context variables (a fit inside another's knows it is)
         futures = [jobs.submit(contextvars.copy_context().run, call) for call in calls]
         return [f.result() for f in futures]
-
-
-class Cancelled(BaseException):
-    """Raised inside a fit started by :func:`cancellable` once its event is set; a
-    ``BaseException``, so that no ``except Exception`` on the way swallows it."""
 
 
 #: The event that cancels the fits of the current context (set by :func:`cancellable`).
